@@ -1,0 +1,153 @@
+"""Compare two Results quantity by quantity.
+
+For each column both Results have, the error is e(t) = |a(t) − b(t)| (angles
+modulo 2π), and the check is ``max e ≤ atol + rtol·scale`` where ``scale`` is the
+peak magnitude of that quantity over the run (the larger of the two engines'),
+and ``atol = floor·group_scale`` guards quantities that are identically zero:
+``group_scale`` is the peak over all quantities of the same kind (all point
+positions, all angular velocities, ...), ``floor`` defaults to 1e-12 (round-off).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .result import Result
+
+# field -> (group, human name)
+_GROUP = {
+    "theta": ("angle", "angle"),
+    "omega": ("angular velocity", "angular velocity"),
+    "alpha": ("angular acceleration", "angular acceleration"),
+    "x": ("position", "x"),
+    "y": ("position", "y"),
+    "s": ("position", "displacement"),
+    "vx": ("velocity", "vx"),
+    "vy": ("velocity", "vy"),
+    "v": ("velocity", "velocity"),
+    "ax": ("acceleration", "ax"),
+    "ay": ("acceleration", "ay"),
+    "a": ("acceleration", "acceleration"),
+}
+
+
+@dataclass(frozen=True)
+class QuantityError:
+    """Errors of one quantity (column) between two engines."""
+
+    column: str
+    group: str
+    max_abs: float
+    scale: float
+    rel: float  # max_abs / scale (inf if scale is 0 and max_abs > 0)
+    rms: float
+    t_at_max: float
+    tol: float  # allowed max_abs
+    passed: bool
+
+
+@dataclass
+class Comparison:
+    """All quantity errors between ``engine_a`` and reference ``engine_b``."""
+
+    mechanism: str
+    engine_a: str
+    engine_b: str
+    rtol: float
+    errors: list[QuantityError]
+
+    @property
+    def passed(self) -> bool:
+        return all(e.passed for e in self.errors)
+
+    @property
+    def failures(self) -> list[QuantityError]:
+        return [e for e in self.errors if not e.passed]
+
+    def worst(self, group: str | None = None) -> QuantityError | None:
+        errs = [e for e in self.errors if group is None or e.group == group]
+        return max(errs, key=lambda e: e.max_abs / e.tol if e.tol > 0 else math.inf, default=None)
+
+    def max_rel_by_group(self) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for e in self.errors:
+            out[e.group] = max(out.get(e.group, 0.0), e.rel)
+        return out
+
+    def describe(self, e: QuantityError) -> str:
+        return (
+            f"{self.mechanism}: {self.engine_a} vs {self.engine_b}: {e.column} off by {e.max_abs:.3g} "
+            f"at t = {e.t_at_max:.6g} s ({e.rel:.3g} of its peak {e.scale:.3g}; allowed {e.tol:.3g})"
+        )
+
+    def message(self, limit: int = 8) -> str:
+        fails = sorted(self.failures, key=lambda e: -e.max_abs / max(e.tol, 1e-300))
+        lines = [self.describe(e) for e in fails[:limit]]
+        if len(fails) > limit:
+            lines.append(f"... and {len(fails) - limit} more")
+        return "\n".join(lines) if lines else f"{self.mechanism}: {self.engine_a} vs {self.engine_b}: all within tolerance"
+
+
+def _field(col: str) -> str:
+    return col.rsplit(".", 1)[1]
+
+
+def compare(
+    a: Result,
+    b: Result,
+    rtol: float | dict[str, float],
+    *,
+    floor: float = 1e-12,
+    columns: list[str] | None = None,
+) -> Comparison:
+    """Compare ``a`` against reference ``b`` on their shared columns.
+
+    ``rtol`` is one number or a dict by group (``"position"``, ``"velocity"``,
+    ``"acceleration"``, ``"angle"``, ``"angular velocity"``, ``"angular acceleration"``).
+    The sample times must agree (to 1e-9 of the run's length).
+    """
+    if len(a.t) != len(b.t) or (len(a.t) and not np.allclose(a.t, b.t, rtol=0, atol=1e-9 * max(1.0, np.ptp(b.t)))):
+        raise ValueError(f"{a.engine} and {b.engine} were sampled at different times ({len(a.t)} vs {len(b.t)} samples)")
+    cols = columns if columns is not None else [c for c in b.columns if c in a.columns and _field(c) in _GROUP]
+    peaks = {c: float(max(np.max(np.abs(a[c]), initial=0.0), np.max(np.abs(b[c]), initial=0.0))) for c in cols}
+    group_scale: dict[str, float] = {}
+    for c in cols:
+        g = _GROUP[_field(c)][0]
+        group_scale[g] = max(group_scale.get(g, 0.0), peaks[c])
+    errors = []
+    for c in cols:
+        g = _GROUP[_field(c)][0]
+        d = np.asarray(a[c], float) - np.asarray(b[c], float)
+        if g == "angle":
+            d = (d + math.pi) % (2 * math.pi) - math.pi
+        e = np.abs(d)
+        e = np.where(np.isfinite(e), e, np.inf)
+        k = int(np.argmax(e)) if len(e) else 0
+        mx = float(e[k]) if len(e) else 0.0
+        r = rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol
+        tol = floor * group_scale[g] + r * peaks[c]
+        rel = mx / peaks[c] if peaks[c] > 0 else (0.0 if mx == 0 else math.inf)
+        rms = float(np.sqrt(np.mean(d * d))) if len(d) else 0.0
+        errors.append(QuantityError(c, g, mx, peaks[c], rel, rms, float(b.t[k]) if len(b.t) else 0.0, tol, mx <= tol))
+    return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol if isinstance(rtol, float) else 0.0, errors)
+
+
+def assert_histories_close(
+    a: Result,
+    b: Result,
+    rtol: float | dict[str, float],
+    *,
+    floor: float = 1e-12,
+    columns: list[str] | None = None,
+    min_columns: int = 1,
+) -> Comparison:
+    """Raise AssertionError naming the quantity, the time and how far off, if any column fails."""
+    cmp = compare(a, b, rtol, floor=floor, columns=columns)
+    if len(cmp.errors) < min_columns:
+        raise AssertionError(f"{a.engine} vs {b.engine}: only {len(cmp.errors)} shared quantities to compare")
+    if not cmp.passed:
+        raise AssertionError(cmp.message())
+    return cmp

@@ -1,0 +1,726 @@
+"""The mechanism description: plain, immutable data read from a TOML file.
+
+Conventions (see README "Mechanism file"):
+
+* Lengths in the file's units (SI by default), angles in radians, CCW positive from +x.
+* Joint coordinates describe the assembly at t = 0.
+* A *body* is a rigid part: the ground, every link, and one block per slider.
+  A joint named by k bodies is a revolute pin of order k − 1.
+* A link's θ is the direction from its first to its second listed joint; a
+  one-joint link that guides a slider takes that slider's axis as its θ
+  direction; a slider block's θ is its axis direction.
+* A slider's s is the signed distance of its joint along the axis from the
+  guide's origin (world origin for ground, the guide's first joint otherwise).
+
+Everything here describes the input; nothing here solves the motion, so every
+engine (vloop and the validators) reads the same :class:`Mechanism`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import MechanismError
+
+MAX_SAMPLES = 10_000_000  # beyond this a time grid is refused (memory, not maths)
+COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
+
+
+@dataclass(frozen=True)
+class Link:
+    """A rigid link. ``length`` is an optional stated length (binary links only)."""
+
+    name: str
+    joints: tuple[str, ...]
+    ground: bool = False
+    length: float | None = None
+
+
+@dataclass(frozen=True)
+class Slider:
+    """A block carrying pin ``joint`` that slides along ``axis`` (unit, world, t = 0) of ``guide``."""
+
+    name: str
+    joint: str
+    guide: str
+    axis: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Point:
+    """A tracer point fixed to ``link`` (a link or a slider block), at ``at`` when t = 0."""
+
+    name: str
+    link: str
+    at: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A tabulated input: times ``t`` and values ``x`` (θ [rad] or s), optional rates."""
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray | None = None
+    a: np.ndarray | None = None
+    source: str = "inline"
+
+
+@dataclass(frozen=True)
+class Driver:
+    """One input of the mechanism.
+
+    ``kind == "crank"``: ``target`` is a link turned about ``pivot`` (its first
+    joint); the input is the link's absolute θ.
+    ``kind == "slider"``: ``target`` is a slider; the input is its s.
+    Without a profile: x(t) = x0 + v0·t + a0·t²/2 (t from 0, the coordinates' instant).
+    """
+
+    kind: str
+    target: str
+    x0: float
+    v0: float = 0.0
+    a0: float = 0.0
+    pivot: str | None = None
+    profile: Profile | None = None
+    entry: str = "drivers"
+
+    @property
+    def symbol(self) -> str:
+        return f"θ_{self.target}" if self.kind == "crank" else f"s_{self.target}"
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body as every engine sees it.
+
+    ``origin`` is the world position of the body frame origin at t = 0 and
+    ``theta0`` the frame's angle at t = 0; ``local`` maps each joint/point on the
+    body to its coordinates in the body frame. For a link the frame origin is its
+    first joint and the x axis points to its second (θ convention above); for the
+    ground the frame is the world frame; for a block, origin at its joint and x
+    along the slider axis.
+    """
+
+    name: str
+    kind: str  # "ground" | "link" | "block"
+    joints: tuple[str, ...]
+    origin: tuple[float, float]
+    theta0: float
+    local: dict[str, tuple[float, float]]
+    guide: str | None = None  # blocks: the guide body
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A planar linkage as described by its file. Immutable; engines read it."""
+
+    name: str
+    joints: dict[str, tuple[float, float]]
+    links: dict[str, Link]
+    sliders: dict[str, Slider]
+    points: dict[str, Point]
+    drivers: tuple[Driver, ...]
+    times: np.ndarray
+    title: str = ""
+    units: str = "m"
+    source: str = ""
+    options: dict[str, Any] = field(default_factory=dict)
+
+    # ----- derived views (pure functions of the description) -----
+    @property
+    def ground(self) -> str:
+        return next(n for n, lk in self.links.items() if lk.ground)
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        """Ground first, then links in file order, then slider blocks."""
+        return (self.ground, *(n for n, lk in self.links.items() if not lk.ground), *self.sliders)
+
+    @property
+    def moving_links(self) -> tuple[str, ...]:
+        """Every body with a θ in the output: moving links then slider blocks."""
+        return self.body_names[1:]
+
+    @property
+    def tracked_points(self) -> tuple[str, ...]:
+        """Every joint and tracer point (output order: joints, then points)."""
+        return (*self.joints, *self.points)
+
+    def bodies_at(self, joint: str) -> tuple[str, ...]:
+        """Bodies that name ``joint`` (a slider block names its own joint)."""
+        out = [n for n, lk in self.links.items() if joint in lk.joints]
+        out += [s.name for s in self.sliders.values() if s.joint == joint]
+        return tuple(out)
+
+    def body_of_point(self, name: str) -> str:
+        """The body that carries a joint/point for position purposes (first naming body)."""
+        if name in self.points:
+            return self.points[name].link
+        return self.bodies_at(name)[0]
+
+    def pin_order(self, joint: str) -> int:
+        return max(len(self.bodies_at(joint)) - 1, 0)
+
+    def gruebler(self) -> tuple[int, int, int]:
+        """(L, J, M): bodies incl. ground, full joints (pins of order k count k, sliders 1), mobility."""
+        n_bodies = len(self.body_names)
+        n_joints = sum(self.pin_order(j) for j in self.joints) + len(self.sliders)
+        return n_bodies, n_joints, 3 * (n_bodies - 1) - 2 * n_joints
+
+    def bodies(self) -> dict[str, Body]:
+        """Body frames and local joint coordinates (stated binary-link lengths applied)."""
+        return _bodies(self)
+
+    @property
+    def scale(self) -> float:
+        """A length scale: the largest distance between any two joints/points at t = 0."""
+        pts = np.array([*self.joints.values(), *(p.at for p in self.points.values())], float)
+        if len(pts) < 2:
+            return 1.0
+        span = np.ptp(pts, axis=0)
+        return float(max(math.hypot(*span), 1e-300))
+
+
+# ---------------------------------------------------------------- bodies
+
+
+def _angle(v: tuple[float, float]) -> float:
+    return math.atan2(v[1], v[0]) % (2 * math.pi)
+
+
+def _bodies(m: Mechanism) -> dict[str, Body]:
+    out: dict[str, Body] = {}
+    guided: dict[str, list[Slider]] = {}
+    for s in m.sliders.values():
+        guided.setdefault(s.guide, []).append(s)
+
+    def pos(name: str) -> tuple[float, float]:
+        return m.points[name].at if name in m.points else m.joints[name]
+
+    def on_body(body: str, joints: tuple[str, ...]) -> tuple[str, ...]:
+        return joints + tuple(p.name for p in m.points.values() if p.link == body)
+
+    for name, lk in m.links.items():
+        members = on_body(name, lk.joints)
+        if lk.ground:
+            out[name] = Body(name, "ground", lk.joints, (0.0, 0.0), 0.0, {j: pos(j) for j in members})
+            continue
+        o = pos(lk.joints[0])
+        if len(lk.joints) >= 2:
+            p1 = pos(lk.joints[1])
+            th = _angle((p1[0] - o[0], p1[1] - o[1]))
+        else:
+            th = _angle(guided[name][0].axis)
+        c, s = math.cos(th), math.sin(th)
+        local = {}
+        for j in members:
+            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            local[j] = (c * dx + s * dy, -s * dx + c * dy)
+        if len(lk.joints) >= 2:  # the x axis points at the second joint by definition
+            local[lk.joints[1]] = (lk.length if lk.length is not None else math.dist(o, pos(lk.joints[1])), 0.0)
+        out[name] = Body(name, "link", lk.joints, o, th, local)
+    for name, sl in m.sliders.items():
+        o = pos(sl.joint)
+        th = _angle(sl.axis)
+        c, s = math.cos(th), math.sin(th)
+        local = {}
+        for j in on_body(name, (sl.joint,)):
+            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            local[j] = (c * dx + s * dy, -s * dx + c * dy)
+        out[name] = Body(name, "block", (sl.joint,), o, th, local, guide=sl.guide)
+    return out
+
+
+# ---------------------------------------------------------------- loading
+
+_TOP_KEYS = {"name", "title", "units", "joints", "links", "sliders", "points", "drivers", "time", "solver"}
+
+
+class _Problems:
+    """Collects every problem found in one validation stage, raised as one message."""
+
+    def __init__(self, where: str) -> None:
+        self.where = where
+        self.items: list[tuple[str, str]] = []
+
+    def add(self, entry: str, msg: str) -> None:
+        self.items.append((entry, msg))
+
+    def raise_if_any(self) -> None:
+        if self.items:
+            entry = self.items[0][0]
+            text = "; ".join(f"[{e}] {m}" for e, m in self.items)
+            raise MechanismError(f"{self.where}: {text}", entry=entry)
+
+
+def _finite_number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _xy(value: Any, entry: str, probs: _Problems) -> tuple[float, float] | None:
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ):
+        probs.add(entry, f"expected a pair of numbers [x, y], got {value!r}")
+        return None
+    if not all(math.isfinite(v) for v in value):
+        probs.add(entry, f"non-finite coordinate {value!r}")
+        return None
+    return float(value[0]), float(value[1])
+
+
+def _number(table: dict, key: str, entry: str, probs: _Problems, default: float | None = None) -> float | None:
+    if key not in table:
+        return default
+    v = table[key]
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        probs.add(entry, f"'{key}' must be a number, got {v!r}")
+        return default
+    if not math.isfinite(v):
+        probs.add(entry, f"'{key}' is not finite ({v!r})")
+        return default
+    return float(v)
+
+
+def _check_keys(table: dict, allowed: set[str], entry: str, probs: _Problems) -> None:
+    for k in table:
+        if k not in allowed:
+            probs.add(entry, f"unknown key '{k}' (allowed: {', '.join(sorted(allowed))})")
+
+
+def load(path: str | Path) -> Mechanism:
+    """Read and validate a mechanism file. Raises :class:`MechanismError` on any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MechanismError(f"{path}: cannot read file ({exc.strerror or exc})", entry=str(path)) from None
+    except UnicodeDecodeError:
+        raise MechanismError(f"{path}: not a UTF-8 text file", entry=str(path)) from None
+    return loads(text, source=str(path), base_dir=path.parent)
+
+
+def loads(text: str, *, source: str = "<string>", base_dir: str | Path | None = None) -> Mechanism:
+    """Parse and validate a mechanism from TOML text (see :func:`load`)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MechanismError(f"{source}: TOML syntax error: {exc}", entry="toml") from None
+    return from_dict(data, source=source, base_dir=base_dir)
+
+
+def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None = None) -> Mechanism:
+    """Build and validate a Mechanism from the parsed TOML structure."""
+    base = Path(base_dir) if base_dir is not None else Path.cwd()
+    probs = _Problems(source)
+    if not isinstance(data, dict):
+        raise MechanismError(f"{source}: expected a TOML table at top level")
+    _check_keys(data, _TOP_KEYS, "file", probs)
+
+    name = data.get("name", Path(source).stem if source not in ("<string>", "<dict>") else "mechanism")
+    if not isinstance(name, str) or not name:
+        probs.add("name", "must be a non-empty string")
+        name = "mechanism"
+    title = data.get("title", "")
+    units = data.get("units", "m")
+    for key, val in (("title", title), ("units", units)):
+        if not isinstance(val, str):
+            probs.add(key, "must be a string")
+
+    # --- joints
+    joints: dict[str, tuple[float, float]] = {}
+    raw_joints = data.get("joints")
+    if not isinstance(raw_joints, dict) or not raw_joints:
+        probs.add("joints", "missing or empty: give every pin/slider point as NAME = [x, y]")
+        raw_joints = {}
+    for jn, val in raw_joints.items():
+        xy = _xy(val, f"joints.{jn}", probs)
+        if xy is not None:
+            joints[jn] = xy
+
+    # --- links
+    links: dict[str, Link] = {}
+    raw_links = data.get("links")
+    if not isinstance(raw_links, dict) or not raw_links:
+        probs.add("links", "missing or empty: give each link as NAME = { joints = [...] }")
+        raw_links = {}
+    for ln, val in raw_links.items():
+        entry = f"links.{ln}"
+        if isinstance(val, list):  # shorthand NAME = ["A", "B"]
+            val = {"joints": val}
+        if not isinstance(val, dict):
+            probs.add(entry, f"expected a table {{ joints = [...] }}, got {val!r}")
+            continue
+        _check_keys(val, {"joints", "ground", "length"}, entry, probs)
+        jl = val.get("joints", [])
+        if not isinstance(jl, list) or not all(isinstance(j, str) for j in jl):
+            probs.add(entry, "'joints' must be a list of joint names")
+            continue
+        if not jl:
+            probs.add(entry, "has no joints")
+            continue
+        if len(set(jl)) != len(jl):
+            dup = sorted({j for j in jl if jl.count(j) > 1})
+            probs.add(entry, f"names joint {', '.join(dup)} twice")
+            continue
+        for j in jl:
+            if j not in raw_joints:
+                probs.add(entry, f"unknown joint '{j}' (known: {', '.join(raw_joints) or 'none'})")
+        ground = val.get("ground", False)
+        if not isinstance(ground, bool):
+            probs.add(entry, "'ground' must be true or false")
+            ground = False
+        length = _number(val, "length", entry, probs)
+        if length is not None:
+            if len(jl) != 2:
+                probs.add(entry, "'length' is only for binary links (two joints)")
+                length = None
+            elif length <= 0:
+                probs.add(entry, f"'length' must be positive, got {length}")
+                length = None
+        links[ln] = Link(ln, tuple(jl), ground, length)
+    grounds = [n for n, lk in links.items() if lk.ground]
+    if links and not grounds:
+        probs.add("links", "no ground link: mark the frame with ground = true")
+    elif len(grounds) > 1:
+        probs.add("links", f"more than one ground link ({', '.join(grounds)}): list every fixed joint on one ground")
+    ground_name = grounds[0] if grounds else None
+
+    # --- sliders
+    sliders: dict[str, Slider] = {}
+    raw_sliders = data.get("sliders", {})
+    if not isinstance(raw_sliders, dict):
+        probs.add("sliders", "must be a table of NAME = { joint, guide, axis }")
+        raw_sliders = {}
+    for sn, val in raw_sliders.items():
+        entry = f"sliders.{sn}"
+        if not isinstance(val, dict):
+            probs.add(entry, f"expected a table {{ joint, guide, axis }}, got {val!r}")
+            continue
+        _check_keys(val, {"joint", "guide", "axis"}, entry, probs)
+        if sn in links:
+            probs.add(entry, f"duplicate name: '{sn}' is also a link (a slider's name is its block's name)")
+            continue
+        j = val.get("joint")
+        if not isinstance(j, str) or j not in raw_joints:
+            probs.add(entry, f"unknown joint {j!r}" if isinstance(j, str) else "missing 'joint'")
+            continue
+        guide = val.get("guide", "ground")
+        if guide == "ground" and ground_name is not None:
+            guide = ground_name
+        if not isinstance(guide, str) or guide not in links:
+            probs.add(entry, f"unknown guide link {guide!r} (a guide is a link or 'ground')")
+            continue
+        if j in links[guide].joints:
+            probs.add(entry, f"the guide '{guide}' names the slider's joint '{j}': a block cannot be pinned to its own guide")
+            continue
+        ax = _xy(val.get("axis"), f"{entry}.axis", probs)
+        if ax is None:
+            continue
+        norm = math.hypot(*ax)
+        if norm < 1e-12:
+            probs.add(entry, "axis has zero length")
+            continue
+        sliders[sn] = Slider(sn, j, guide, (ax[0] / norm, ax[1] / norm))
+
+    # --- points
+    points: dict[str, Point] = {}
+    raw_points = data.get("points", {})
+    if not isinstance(raw_points, dict):
+        probs.add("points", "must be a table of NAME = { link, at }")
+        raw_points = {}
+    for pn, val in raw_points.items():
+        entry = f"points.{pn}"
+        if not isinstance(val, dict):
+            probs.add(entry, f"expected a table {{ link, at }}, got {val!r}")
+            continue
+        _check_keys(val, {"link", "at"}, entry, probs)
+        if pn in raw_joints:
+            probs.add(entry, f"duplicate name: '{pn}' is also a joint")
+            continue
+        lk = val.get("link")
+        if not isinstance(lk, str) or (lk not in links and lk not in raw_sliders):
+            probs.add(entry, f"unknown link {lk!r}")
+            continue
+        at = _xy(val.get("at"), f"{entry}.at", probs)
+        if at is not None:
+            points[pn] = Point(pn, lk, at)
+
+    probs.raise_if_any()
+
+    # --- topology checks
+    proto = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    _check_topology(proto, probs)
+    probs.raise_if_any()
+
+    # --- drivers, time
+    drivers = _load_drivers(data.get("drivers"), proto, base, probs)
+    probs.raise_if_any()
+    times = _load_time(data.get("time"), drivers, probs)
+    options = _load_solver(data.get("solver", {}), probs)
+    probs.raise_if_any()
+    times.flags.writeable = False
+
+    mech = Mechanism(name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options)
+    L, J, M = mech.gruebler()
+    if M != len(drivers):
+        if M <= 0:
+            meaning = (
+                "it is a rigid structure" if M == 0 else f"it is over-constrained by {-M} (a statically indeterminate structure)"
+            )
+            hint = "it cannot move: check the joints and sliders"
+        else:
+            meaning = f"it has {M} independent degree{'s' if M > 1 else ''} of freedom"
+            hint = f"give exactly {M} driver{'s' if M > 1 else ''}" if len(drivers) < M else "remove a driver"
+        raise MechanismError(
+            f"{source}: [drivers] mobility mismatch: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, "
+            f"so {meaning}, but {len(drivers)} driver{'s are' if len(drivers) != 1 else ' is'} given; {hint}",
+            entry="drivers",
+        )
+    return mech
+
+
+def _check_topology(m: Mechanism, probs: _Problems) -> None:
+    scale = m.scale
+    named = {j for lk in m.links.values() for j in lk.joints} | {s.joint for s in m.sliders.values()}
+    for j in m.joints:
+        if j not in named:
+            probs.add(f"joints.{j}", "is named by no link or slider")
+    for lk in m.links.values():
+        pts = [m.joints[j] for j in lk.joints]
+        for i in range(len(pts)):
+            for k in range(i + 1, len(pts)):
+                if math.dist(pts[i], pts[k]) <= COINCIDENT_TOL * scale:
+                    probs.add(
+                        f"links.{lk.name}",
+                        f"joints {lk.joints[i]} and {lk.joints[k]} coincide (zero-length link)",
+                    )
+        if not lk.ground and len(lk.joints) == 1 and not any(s.guide == lk.name for s in m.sliders.values()):
+            probs.add(
+                f"links.{lk.name}",
+                "has a single joint: a moving link needs two (add its tip as a joint) unless it guides a slider",
+            )
+    if probs.items:
+        return
+    # connectivity: bodies joined by pins (shared joints) and slider pairs
+    parent = {b: b for b in m.body_names}
+
+    def find(b: str) -> str:
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        return b
+
+    for j in m.joints:
+        bs = m.bodies_at(j)
+        for b in bs[1:]:
+            parent[find(b)] = find(bs[0])
+    for s in m.sliders.values():
+        parent[find(s.name)] = find(s.guide)
+    g = find(m.ground)
+    loose = [b for b in m.body_names if find(b) != g]
+    if loose:
+        probs.add("links", f"disconnected mechanism: {', '.join(loose)} not connected to the ground '{m.ground}'")
+
+
+def _read_profile(spec: Any, cols: tuple[str, str, str, str], entry: str, base: Path, probs: _Problems) -> Profile | None:
+    """A profile from an inline table of arrays or a CSV file with a header row."""
+    tcol, xcol, vcol, acol = cols
+    if isinstance(spec, str):
+        path = base / spec
+        try:
+            arr = np.genfromtxt(path, delimiter=",", names=True, dtype=float, encoding="utf-8")
+        except (OSError, ValueError) as exc:
+            probs.add(entry, f"cannot read profile '{spec}': {exc}")
+            return None
+        if arr.dtype.names is None or arr.ndim != 1 or arr.size < 2:
+            probs.add(entry, f"profile '{spec}' needs a header row and at least two data rows")
+            return None
+        table = {n.strip().lower(): np.atleast_1d(arr[n]) for n in arr.dtype.names}
+        source = str(spec)
+    elif isinstance(spec, dict):
+        table = {}
+        for k, v in spec.items():
+            if not isinstance(v, list) or not all(_finite_number(x) for x in v):
+                probs.add(entry, f"profile column '{k}' must be a list of finite numbers")
+                return None
+            table[k.lower()] = np.asarray(v, float)
+        source = "inline"
+    else:
+        probs.add(entry, "'profile' must be a CSV file name or a table of columns")
+        return None
+    if tcol not in table or xcol not in table:
+        probs.add(entry, f"profile needs columns '{tcol}' and '{xcol}' (has {', '.join(table)})")
+        return None
+    t = table[tcol]
+    n = len(t)
+    for k in (tcol, xcol, vcol, acol):
+        if k in table and (len(table[k]) != n or not np.all(np.isfinite(table[k]))):
+            probs.add(entry, f"profile column '{k}' has missing or non-finite values")
+            return None
+    if n < 2:
+        probs.add(entry, "profile needs at least two rows")
+        return None
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        probs.add(entry, f"profile time is not strictly increasing (row {k + 1}: t = {t[k]:g} after {t[k - 1]:g})")
+        return None
+    return Profile(t, table[xcol], table.get(vcol), table.get(acol), source)
+
+
+def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[Driver]:
+    if raw is None:
+        probs.add("drivers", "missing: give at least one [[drivers]] entry (a crank or a driven slider)")
+        return []
+    if isinstance(raw, dict):
+        raw = [raw]
+    if not isinstance(raw, list):
+        probs.add("drivers", "must be an array of tables [[drivers]]")
+        return []
+    bodies = m.bodies() if not probs.items else {}
+    out: list[Driver] = []
+    seen: set[str] = set()
+    for i, d in enumerate(raw):
+        entry = f"drivers[{i}]"
+        if not isinstance(d, dict):
+            probs.add(entry, "must be a table")
+            continue
+        if "link" in d:
+            _check_keys(d, {"link", "pivot", "omega", "alpha", "theta0", "profile"}, entry, probs)
+            ln = d["link"]
+            entry = f"drivers[{i}] (link {ln})"
+            if ln in m.sliders:
+                probs.add(entry, f"'{ln}' is a slider block, which cannot turn relative to its guide; drive it with slider = '{ln}'")
+                continue
+            if ln not in m.links:
+                probs.add(entry, f"unknown link '{ln}'")
+                continue
+            if m.links[ln].ground:
+                probs.add(entry, f"'{ln}' is the ground, which cannot be driven")
+                continue
+            lk = m.links[ln]
+            pivot = d.get("pivot", lk.joints[0])
+            if pivot not in lk.joints:
+                probs.add(entry, f"pivot '{pivot}' is not a joint of link '{ln}'")
+                continue
+            if pivot != lk.joints[0]:
+                probs.add(entry, f"pivot '{pivot}' must be the first joint listed for link '{ln}' (its θ is measured from it)")
+                continue
+            theta_coords = bodies[ln].theta0
+            x0 = _number(d, "theta0", entry, probs, theta_coords)
+            v0 = _number(d, "omega", entry, probs, 0.0)
+            a0 = _number(d, "alpha", entry, probs, 0.0)
+            prof = None
+            if "profile" in d:
+                prof = _read_profile(d["profile"], ("t", "theta", "omega", "alpha"), entry, base, probs)
+                x0 = float(prof.x[0]) if prof is not None else x0
+            key = f"link:{ln}"
+            drv = Driver("crank", ln, x0, v0, a0, pivot, prof, entry)
+        elif "slider" in d:
+            _check_keys(d, {"slider", "s0", "v", "a", "profile"}, entry, probs)
+            sn = d["slider"]
+            entry = f"drivers[{i}] (slider {sn})"
+            if sn not in m.sliders:
+                probs.add(entry, f"unknown slider '{sn}'")
+                continue
+            sl = m.sliders[sn]
+            gb = bodies[sl.guide]
+            p = m.joints[sl.joint]
+            s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
+            x0 = _number(d, "s0", entry, probs, s_coords)
+            v0 = _number(d, "v", entry, probs, 0.0)
+            a0 = _number(d, "a", entry, probs, 0.0)
+            prof = None
+            if "profile" in d:
+                prof = _read_profile(d["profile"], ("t", "s", "v", "a"), entry, base, probs)
+                x0 = float(prof.x[0]) if prof is not None else x0
+            key = f"slider:{sn}"
+            drv = Driver("slider", sn, x0, v0, a0, None, prof, entry)
+        else:
+            probs.add(entry, "needs 'link' (a crank) or 'slider' (a linear actuator)")
+            continue
+        if key in seen:
+            probs.add(entry, f"{drv.target} is driven twice")
+            continue
+        seen.add(key)
+        out.append(drv)
+    return out
+
+
+def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
+    if raw is None:
+        profs = [d.profile for d in drivers if d.profile is not None]
+        if profs:
+            return np.array(profs[0].t, float)
+        probs.add("time", "missing: give [time] start, stop, step (or times = [...])")
+        return np.zeros(1)
+    if not isinstance(raw, dict):
+        probs.add("time", "must be a table")
+        return np.zeros(1)
+    _check_keys(raw, {"start", "stop", "step", "times"}, "time", probs)
+    if "times" in raw:
+        ts = raw["times"]
+        if not isinstance(ts, list) or not ts or not all(_finite_number(x) for x in ts):
+            probs.add("time", "'times' must be a non-empty list of finite numbers")
+            return np.zeros(1)
+        t = np.asarray(ts, float)
+        if np.any(np.diff(t) <= 0):
+            probs.add("time", "'times' must be strictly increasing")
+        if len(t) > MAX_SAMPLES:
+            probs.add("time", f"{len(t)} samples is more than the limit of {MAX_SAMPLES}")
+        return t
+    start = _number(raw, "start", "time", probs, 0.0)
+    stop = _number(raw, "stop", "time", probs)
+    step = _number(raw, "step", "time", probs)
+    if stop is None or step is None:
+        if not probs.items:
+            probs.add("time", "needs 'stop' and 'step' (or 'times')")
+        return np.zeros(1)
+    if step <= 0:
+        probs.add("time", f"step must be positive, got {step:g}")
+        return np.zeros(1)
+    if stop < start:
+        probs.add("time", f"stop ({stop:g}) is before start ({start:g})")
+        return np.zeros(1)
+    n = math.floor((stop - start) / step + 0.5) + 1
+    if n > MAX_SAMPLES:
+        probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {n:,} samples, more than the limit of {MAX_SAMPLES:,}")
+        return np.zeros(1)
+    return start + step * np.arange(n)
+
+
+_SOLVER_KEYS = {"method", "tol", "max_iter", "assembly_tolerance"}
+
+
+def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
+    if not isinstance(raw, dict):
+        probs.add("solver", "must be a table")
+        return {}
+    _check_keys(raw, _SOLVER_KEYS, "solver", probs)
+    out: dict[str, Any] = {}
+    if "method" in raw:
+        if raw["method"] not in ("auto", "newton"):
+            probs.add("solver", "method must be 'auto' or 'newton'")
+        else:
+            out["method"] = raw["method"]
+    for k in ("tol", "assembly_tolerance"):
+        v = _number(raw, k, "solver", probs)
+        if v is not None:
+            if v <= 0:
+                probs.add("solver", f"{k} must be positive")
+            out[k] = v
+    if "max_iter" in raw:
+        if not isinstance(raw["max_iter"], int) or raw["max_iter"] < 1:
+            probs.add("solver", "max_iter must be a positive integer")
+        else:
+            out["max_iter"] = raw["max_iter"]
+    return out

@@ -1,0 +1,135 @@
+"""The Result every engine returns: time histories of links, joints/points and sliders.
+
+Columns follow the output contract: ``t``; ``LINK.theta|omega|alpha`` [rad, rad/s,
+rad/s²] (θ continuous, unwrapped); ``POINT.x|y|vx|vy|ax|ay``; ``SLIDER.s|v|a``.
+An engine may leave out quantities it does not compute (e.g. a closed form that
+only gives some links); comparison works on the columns two Results share.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+LINK_FIELDS = ("theta", "omega", "alpha")
+POINT_FIELDS = ("x", "y", "vx", "vy", "ax", "ay")
+SLIDER_FIELDS = ("s", "v", "a")
+
+
+@dataclass
+class Result:
+    """Histories of one run. ``columns`` maps ``NAME.field`` to an array over ``t``.
+
+    ``health`` holds per-sample diagnostics when the engine keeps them
+    (vloop: ``residual`` — loop-closure residual relative to the mechanism size,
+    ``cond`` — Jacobian condition number, ``branch`` — assembly-branch signature).
+    """
+
+    mechanism: str
+    engine: str
+    t: np.ndarray
+    columns: dict[str, np.ndarray]
+    health: dict[str, np.ndarray] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    # ----- construction helpers
+    @classmethod
+    def from_arrays(
+        cls,
+        mechanism: str,
+        engine: str,
+        t: np.ndarray,
+        *,
+        links: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
+        points: dict[str, tuple[np.ndarray, ...]] | None = None,
+        sliders: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
+        **kw: Any,
+    ) -> Result:
+        """Build from per-entity tuples: links (θ, ω, α); points (x, y, vx, vy, ax, ay); sliders (s, v, a)."""
+        cols: dict[str, np.ndarray] = {}
+        for group, names in ((links, LINK_FIELDS), (points, POINT_FIELDS), (sliders, SLIDER_FIELDS)):
+            for ent, arrays in (group or {}).items():
+                for f, a in zip(names, arrays, strict=True):
+                    cols[f"{ent}.{f}"] = np.asarray(a, float)
+        return cls(mechanism, engine, np.asarray(t, float), cols, **kw)
+
+    # ----- access
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if key == "t":
+            return self.t
+        return self.columns[key]
+
+    def __contains__(self, key: str) -> bool:
+        return key == "t" or key in self.columns
+
+    def _group(self, name: str, fields: tuple[str, ...], kind: str) -> SimpleNamespace:
+        if f"{name}.{fields[0]}" not in self.columns:
+            raise KeyError(f"no {kind} '{name}' in this result")
+        return SimpleNamespace(**{f: self.columns[f"{name}.{f}"] for f in fields})
+
+    def link(self, name: str) -> SimpleNamespace:
+        """θ, ω, α of a link or slider block (``.theta``, ``.omega``, ``.alpha``)."""
+        return self._group(name, LINK_FIELDS, "link")
+
+    def point(self, name: str) -> SimpleNamespace:
+        """Position, velocity, acceleration of a joint or tracer point (``.x .y .vx .vy .ax .ay``)."""
+        return self._group(name, POINT_FIELDS, "joint or point")
+
+    joint = point
+
+    def slider(self, name: str) -> SimpleNamespace:
+        """s, v, a of a slider along its axis."""
+        return self._group(name, SLIDER_FIELDS, "slider")
+
+    def names(self, kind: str) -> list[str]:
+        """Entity names of a kind: ``"link"``, ``"point"`` or ``"slider"``, in column order."""
+        first = {"link": "theta", "point": "x", "slider": "s"}[kind]
+        return [c.rsplit(".", 1)[0] for c in self.columns if c.rsplit(".", 1)[1] == first]
+
+    def head(self, n: int) -> Result:
+        """The first ``n`` samples (used to keep the rows solved before a failure)."""
+        return Result(
+            self.mechanism,
+            self.engine,
+            self.t[:n],
+            {k: v[:n] for k, v in self.columns.items()},
+            {k: v[:n] for k, v in self.health.items()},
+            dict(self.meta),
+        )
+
+    # ----- export
+    def to_csv(self, path: str | Path, *, health: bool = False) -> None:
+        """Write one row per sample: ``t`` then the columns (``%.17g``, full precision)."""
+        names = ["t", *self.columns]
+        data = [self.t, *self.columns.values()]
+        if health:
+            names += [f"health.{k}" for k in self.health]
+            data += list(self.health.values())
+        arr = np.column_stack(data) if len(self.t) else np.zeros((0, len(names)))
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savetxt(path, arr, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+
+    def to_dataframe(self) -> Any:
+        """A pandas DataFrame indexed by nothing, with a ``t`` column first."""
+        import pandas as pd
+
+        return pd.DataFrame({"t": self.t, **self.columns})
+
+    @classmethod
+    def read_csv(cls, path: str | Path, *, mechanism: str = "", engine: str = "csv") -> Result:
+        """Read a CSV written by :meth:`to_csv` (health columns go back to ``health``)."""
+        with open(path, encoding="utf-8") as fh:
+            header = fh.readline().strip().split(",")
+        arr = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        cols = {h: arr[:, i] for i, h in enumerate(header)}
+        t = cols.pop("t")
+        health = {k[7:]: cols.pop(k) for k in list(cols) if k.startswith("health.")}
+        return cls(mechanism, engine, t, cols, health)
