@@ -24,16 +24,16 @@ __all__ = [
     "MotionError",
     "Result",
     "VloopError",
+    "__version__",
     "compile",
     "from_dict",
     "load",
     "loads",
     "solve",
-    "__version__",
 ]
 
 
-def compile(mechanism: Mechanism) -> Any:  # noqa: A001 - the verb of the data flow
+def compile(mechanism: Mechanism) -> Any:
     """Build the immutable LoopSystem (graph, loops, unknowns, blocks) of a mechanism."""
     from .loops import compile_system
 

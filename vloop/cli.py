@@ -1,0 +1,174 @@
+"""Command line: ``vloop run|loops|info FILE``.
+
+Exit codes: 0 success; 2 bad input or a motion that cannot be completed (one line
+on stderr, no traceback; ``run`` still writes every row solved before the failure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import VloopError
+
+
+def _fail(msg: str) -> int:
+    print(f"vloop: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .loops import compile_system
+    from .mechanism import load
+    from .solver import solve
+
+    mech = load(args.file)
+    out = Path(args.out) if args.out else Path("out") / mech.name
+    system = compile_system(mech, args.method)
+    try:
+        result = solve(system)
+    except VloopError as exc:
+        partial = exc.partial
+        if partial is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            partial.to_csv(out / "results.csv")
+            partial.to_csv(out / "health.csv", health=True)
+            if args.plot:
+                from .plots import plot_result
+
+                plot_result(mech, partial, out)
+            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'})")
+        raise
+    out.mkdir(parents=True, exist_ok=True)
+    result.to_csv(out / "results.csv")
+    result.to_csv(out / "health.csv", health=True)
+    files = [out / "results.csv", out / "health.csv"]
+    if args.plot:
+        from .plots import plot_result
+
+        files += plot_result(mech, result, out)
+    asm = system.assembly
+    moved = f", t = 0 assembly moved joints by up to {asm['moved']:.3g} {mech.units}" if asm.get("moved", 0) > 0 else ""
+    print(
+        f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s, {len(system.loops)} loops, "
+        f"max closure {np.max(result.health['residual'], initial=0):.2g}, "
+        f"max condition {np.max(result.health['cond'], initial=1):.3g}{moved}"
+    )
+    print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def cmd_loops(args: argparse.Namespace) -> int:
+    from .equations import describe
+    from .loops import compile_system
+    from .mechanism import load
+
+    print(describe(compile_system(load(args.file)), latex=args.latex))
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from .equations import grashof
+    from .loops import compile_system, loop_jacobian
+    from .mechanism import load
+
+    mech = load(args.file)
+    system = compile_system(mech)
+    bodies = mech.bodies()
+    L, J, M = mech.gruebler()
+    print(f"{mech.name}: {mech.title}" if mech.title else mech.name)
+    print(f"  source: {mech.source}   units: {mech.units}")
+    print(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
+    for name, lk in mech.links.items():
+        b = bodies[name]
+        kind = "ground" if lk.ground else {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}.get(
+            len(lk.joints), f"{len(lk.joints)}-joint"
+        )
+        extra = ""
+        if len(lk.joints) == 2 and not lk.ground:
+            extra = f", length {b.local[lk.joints[1]][0]:.6g}"
+        print(f"  {name:12s} {kind:10s} joints {', '.join(lk.joints)}{extra}")
+    print(f"\njoints ({len(mech.joints)}):")
+    for j, (x, y) in mech.joints.items():
+        at = mech.bodies_at(j)
+        order = mech.pin_order(j)
+        what = f"pin of order {order} ({', '.join(at)})" if order else f"point of {at[0]}"
+        print(f"  {j:8s} ({x:.6g}, {y:.6g})  {what}")
+    if mech.sliders:
+        print(f"\nsliders ({len(mech.sliders)}):")
+        for s in mech.sliders.values():
+            inv = " (inverse slider)" if not mech.links[s.guide].ground else ""
+            print(f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g})")
+    if mech.points:
+        print(f"\npoints ({len(mech.points)}):")
+        for p in mech.points.values():
+            print(f"  {p.name:8s} on {p.link} at ({p.at[0]:.6g}, {p.at[1]:.6g})")
+    print("\ndrivers:")
+    for d in mech.drivers:
+        if d.profile is not None:
+            print(f"  {d.symbol}: profile {d.profile.source} ({len(d.profile.t)} rows)")
+        else:
+            unit = "rad" if d.kind == "crank" else mech.units
+            print(f"  {d.symbol}(t) = {d.x0:.6g} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}]")
+    unk = list(system.unknowns)
+    rank = (
+        int(np.linalg.matrix_rank(loop_jacobian(system, system.q0, list(range(len(system.loops))), unk)))
+        if unk
+        else 0
+    )
+    full = "full rank: the drivers fix the motion" if rank == len(unk) else "rank deficient"
+    print(
+        f"\nmobility: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, drivers: {len(mech.drivers)}; "
+        f"loop Jacobian at t = 0: rank {rank} of {len(unk)} unknowns ({full})"
+    )
+    print(f"loops: {len(system.loops)} (J - L + 1 = {J - L + 1})")
+    for lp in system.loops:
+        print(f"  loop {lp.index + 1}: {lp.label}")
+    print("solving order: " + " -> ".join(f"{[i + 1 for i in b.loops]} {b.kind}" for b in system.blocks))
+    for li, cls, (g, p1, c, p2) in grashof(system):
+        print(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
+    n = len(mech.times)
+    print(f"time: {n} samples, t = {mech.times[0]:g}..{mech.times[-1]:g} s")
+    if system.assembly.get("moved", 0) > 0:
+        print(f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
+    p.add_argument("--version", action="version", version=f"vloop {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="solve P/V/A over the file's time span and write results.csv (and plots)")
+    r.add_argument("file")
+    r.add_argument("--out", help="output folder (default: out/NAME)")
+    r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png")
+    r.add_argument("--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only")
+    r.set_defaults(func=cmd_run)
+    lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
+    lo.add_argument("file")
+    lo.add_argument("--latex", action="store_true", help="emit LaTeX")
+    lo.set_defaults(func=cmd_loops)
+    i = sub.add_parser("info", help="links, joints, pin orders, mobility, loops, Grashof class")
+    i.add_argument("file")
+    i.set_defaults(func=cmd_info)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        with np.errstate(all="ignore"):
+            return int(args.func(args))
+    except VloopError as exc:
+        return _fail(str(exc))
+    except KeyboardInterrupt:
+        return _fail("interrupted")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,487 @@
+"""Position, velocity and acceleration over time, block by block.
+
+State over the sample grid (rows = samples):
+
+* ``E[:, a] = e^{jθ_a}`` (unit complex) and ``TH[:, a]`` (unwrapped θ) per rotating
+  link, ``W``/``AL`` its ω/α; ``S``/``SD``/``SDD`` per slider. A last padding
+  column (E = 1, others 0) stands for "fixed" so terms index it with -1.
+* Term vectors ``z = (r + s)·cδ·E`` with cδ = e^{jδ}; velocities and
+  accelerations follow by differentiation:
+  ż = ṡ·e + jω·z,   z̈ = s̈·e + 2jṡω·e + (jα − ω²)·z,   e = cδ·E.
+
+Blocks are solved in the order of the block-triangular decomposition. One-loop
+dyads have closed forms evaluated for all samples at once (branch σ from the
+t = 0 assembly); other blocks use Newton–Raphson per sample with the analytic
+Jacobian, warm-started by the Taylor predictor x + ẋ·h + ẍ·h²/2 from the
+previous sample. Velocities and accelerations are the exact linear systems
+J·u̇ = −(known part of Σ ż), J·ü = −(known part of Σ z̈), solved for all samples
+at once (Cramer's rule for 2×2 blocks, batched ``numpy.linalg.solve`` otherwise).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .drivers import evaluate_all
+from .errors import MotionError
+from .loops import Block, LoopSystem, compile_system
+from .mechanism import Mechanism
+from .result import Result
+
+TOGGLE_COND = 1e12  # a block Jacobian this ill-conditioned is a toggle (singular)
+DEFAULT_TOL = 1e-12  # Newton stops when the step is below tol·(1 + |x|)
+DEFAULT_MAX_ITER = 30
+MAX_LEAD_IN = 100_000
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Im(conj(a)·b): the 2-D cross product of complex numbers seen as vectors."""
+    return a.real * b.imag - a.imag * b.real
+
+
+@dataclass
+class _Plan:
+    """Index data of one block (precomputed once per LoopSystem)."""
+
+    block: Block
+    terms: np.ndarray  # term ids of the block's loops
+    C: np.ndarray  # (m, n_terms_block) signs
+    ang: np.ndarray
+    sl: np.ndarray
+    r: np.ndarray
+    cd: np.ndarray
+    unk_ang: list[int]  # angle variables among the unknowns
+    unk_sl: list[int]  # slider indices among the unknowns
+    known: np.ndarray  # mask of terms independent of the unknowns
+    masks: list[np.ndarray]  # per unknown: the block terms it enters
+    # closed-form roles
+    on1: np.ndarray | None = None
+    on2: np.ndarray | None = None
+    slider_term: int = -1  # position of the unknown slider's term in ``terms``
+    slider_term2: int = -1
+
+
+def _plans(sys: LoopSystem) -> list[_Plan]:
+    plans = sys.cache.get("plans")
+    if plans is not None:
+        return plans
+    na = sys.n_angles
+    cd_all = np.exp(1j * sys.t_delta)
+    plans = []
+    for b in sys.blocks:
+        Cb = sys.C[list(b.loops)]
+        terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
+        Cb = Cb[:, terms]
+        ang, sl = sys.t_ang[terms], sys.t_sl[terms]
+        unk_ang = [v for v in b.unknowns if v < na]
+        unk_sl = [v - na for v in b.unknowns if v >= na]
+        depends = np.isin(ang, unk_ang) | np.isin(sl, unk_sl)
+        masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
+        p = _Plan(b, terms, Cb, ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, ~depends, masks)
+        if b.kind == "RRR":
+            p.on1, p.on2 = ang == unk_ang[0], ang == unk_ang[1]
+        elif b.kind in ("RRP", "RPR"):
+            p.on1 = ang == unk_ang[0]
+            p.slider_term = int(np.nonzero(sl == unk_sl[0])[0][0])
+        elif b.kind == "PP":
+            p.slider_term = int(np.nonzero(sl == unk_sl[0])[0][0])
+            p.slider_term2 = int(np.nonzero(sl == unk_sl[1])[0][0])
+        plans.append(p)
+    sys.cache["plans"] = plans
+    return plans
+
+
+class _State:
+    """Arrays over the sample grid; the last column of each is the 'fixed' padding."""
+
+    def __init__(self, n: int, na: int, ns: int) -> None:
+        self.E = np.ones((n, na + 1), complex)
+        self.TH = np.zeros((n, na))
+        self.W = np.zeros((n, na + 1))
+        self.AL = np.zeros((n, na + 1))
+        self.S = np.zeros((n, ns + 1))
+        self.SD = np.zeros((n, ns + 1))
+        self.SDD = np.zeros((n, ns + 1))
+
+    # term kinematics over rows ``k`` (a slice)
+    def e(self, k: slice, ang: np.ndarray, cd: np.ndarray) -> np.ndarray:
+        return cd * self.E[k][:, ang]
+
+    def z(self, k: slice, ang: np.ndarray, sl: np.ndarray, r: np.ndarray, cd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        e = cd * self.E[k][:, ang]
+        return (r + self.S[k][:, sl]) * e, e
+
+    def zdot(self, k: slice, ang: np.ndarray, sl: np.ndarray, z: np.ndarray, e: np.ndarray) -> np.ndarray:
+        return self.SD[k][:, sl] * e + 1j * self.W[k][:, ang] * z
+
+    def zddot(self, k: slice, ang: np.ndarray, sl: np.ndarray, z: np.ndarray, e: np.ndarray) -> np.ndarray:
+        w = self.W[k][:, ang]
+        sd = self.SD[k][:, sl]
+        return (self.SDD[k][:, sl] + 2j * sd * w) * e + (1j * self.AL[k][:, ang] - w * w) * z
+
+
+class _Failure(Exception):
+    def __init__(self, sample: int, loop: int, why: str) -> None:
+        self.sample, self.loop, self.why = sample, loop, why
+
+
+# ------------------------------------------------------------------ positions
+
+
+def _closed_form(p: _Plan, st: _State, k: slice, na: int) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form positions of a one-loop dyad for rows ``k``; returns (valid mask, discriminant)."""
+    b = p.block
+    mag = (p.r + st.S[k][:, p.sl]) * p.cd  # term vectors without their rotation
+    e = p.cd * st.E[k][:, p.ang]
+    g = p.C[0]
+    X = -(((mag * st.E[k][:, p.ang])[:, p.known]) @ g[p.known])
+    sig = b.sigma
+    if b.kind == "RRR":
+        # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
+        W1 = mag[:, p.on1] @ g[p.on1]
+        W2 = mag[:, p.on2] @ g[p.on2]
+        A2, B2 = W1.real**2 + W1.imag**2, W2.real**2 + W2.imag**2
+        D2 = X.real**2 + X.imag**2
+        k1 = 0.5 * (A2 + D2 - B2)
+        h2 = A2 * D2 - k1 * k1
+        ok = h2 >= 0
+        P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / np.where(D2 > 0, D2, 1.0)
+        _set_angle(st, k, p.unk_ang[0], P / W1)
+        _set_angle(st, k, p.unk_ang[1], (X - P) / W2)
+        return ok & (D2 > 0), h2 / np.maximum(A2 * D2, 1e-300)
+    if b.kind == "RRP":
+        # W1·E1 + s·U = X with U a known unit direction: project on U's normal
+        t = p.slider_term
+        U = g[t] * e[:, t]
+        W1 = mag[:, p.on1] @ g[p.on1]
+        Uc = np.conj(U)
+        XU, WU = X * Uc, W1 * Uc
+        A2 = WU.real**2 + WU.imag**2
+        y = XU.imag
+        h = A2 - y * y
+        ok = h >= 0
+        c = sig * np.sqrt(np.where(ok, h, 0.0))
+        _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
+        st.S[k, p.unk_sl[0]] = XU.real - c
+        return ok, h / np.maximum(A2, 1e-300)
+    if b.kind == "RPR":
+        # (W + s·c)·E = X with c a unit direction fixed to the same link: |W + s·c| = |X|
+        t = p.slider_term
+        a = p.unk_ang[0]
+        cdir = g[t] * p.cd[t]
+        others = p.on1.copy()
+        others[t] = False
+        W = mag[:, others] @ g[others]
+        bb = (W * np.conj(cdir)).real
+        disc = bb * bb - (W.real**2 + W.imag**2) + (X.real**2 + X.imag**2)
+        ok = disc >= 0
+        s = -bb + sig * np.sqrt(np.where(ok, disc, 0.0))
+        st.S[k, p.unk_sl[0]] = s
+        den = W + s * cdir
+        _set_angle(st, k, a, X / np.where(np.abs(den) > 0, den, 1.0))
+        return ok & (np.abs(den) > 0), disc / np.maximum(X.real**2 + X.imag**2, 1e-300)
+    # PP: s1·U1 + s2·U2 = X
+    U1 = g[p.slider_term] * e[:, p.slider_term]
+    U2 = g[p.slider_term2] * e[:, p.slider_term2]
+    det = cross(U1, U2)
+    ok = np.abs(det) > 1e-12
+    dd = np.where(ok, det, 1.0)
+    st.S[k, p.unk_sl[0]] = cross(X, U2) / dd
+    st.S[k, p.unk_sl[1]] = cross(U1, X) / dd
+    return ok, np.abs(det)
+
+
+def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
+    E = E / np.abs(E)
+    st.E[k, a] = E
+    # unwrap by accumulating the increments from the t = 0 assembly (row 0)
+    Ek = st.E[k, a]
+    inc = np.angle(Ek[1:] * np.conj(Ek[:-1]))
+    st.TH[k, a] = st.TH[0, a] + np.concatenate(([np.angle(Ek[0] * np.exp(-1j * st.TH[0, a]))], np.cumsum(inc)))
+
+
+def _newton_block(p: _Plan, st: _State, n: int, tg: np.ndarray, na: int, scale: float, tol: float, max_iter: int) -> None:
+    """Per-sample Newton with analytic Jacobian and a Taylor predictor; raises _Failure."""
+    b = p.block
+    nu = len(b.unknowns)
+    is_ang = np.array([v < na for v in b.unknowns])
+    col = [v if v < na else v - na for v in b.unknowns]
+    x = np.array([st.TH[0, c] if a else st.S[0, c] for a, c in zip(is_ang, col, strict=True)])
+    xd = np.zeros(nu)
+    xdd = np.zeros(nu)
+    sign0 = None
+    m = p.C.shape[0]
+    for k in range(n):
+        if k > 0:
+            h = tg[k] - tg[k - 1]
+            x = x + xd * h + 0.5 * xdd * h * h
+        row = slice(k, k + 1)
+        converged = False
+        for _ in range(max_iter):
+            for i in range(nu):
+                if is_ang[i]:
+                    st.TH[k, col[i]] = x[i]
+                    st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
+                else:
+                    st.S[k, col[i]] = x[i]
+            z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
+            F = p.C @ z[0]
+            J = _jacobian(p, z, e)[0]
+            try:
+                dx = np.linalg.solve(J, -np.concatenate([F.real, F.imag]))
+            except np.linalg.LinAlgError:
+                raise _Failure(k, b.loops[0], "the loop Jacobian is singular (a toggle)") from None
+            x = x + dx
+            if np.max(np.abs(dx)) <= tol * (1.0 + np.max(np.abs(x))):
+                converged = True
+                break
+        for i in range(nu):
+            if is_ang[i]:
+                st.TH[k, col[i]] = x[i]
+                st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
+            else:
+                st.S[k, col[i]] = x[i]
+        z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
+        res = np.max(np.abs(p.C @ z[0])) / scale
+        if not converged or not np.isfinite(res) or res > 1e-9:
+            worst = b.loops[int(np.argmax(np.abs(p.C @ z[0])))] if np.isfinite(res) else b.loops[0]
+            raise _Failure(k, worst, f"Newton did not converge (closure {res:.2g} of the mechanism size)")
+        J = _jacobian(p, z, e)
+        sgn = np.sign(np.linalg.det(J[0]))
+        if sign0 is None:
+            sign0 = sgn
+        elif sgn != sign0:
+            raise _Failure(k, b.loops[0], "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed")
+        if m and k + 1 < n:
+            xd = _rates(p, st, row, z, e, J, "v")[0]
+            _store(p, st, row, xd[None, :], "v", na)
+            xdd = _rates(p, st, row, z, e, J, "a")[0]
+            _store(p, st, row, np.zeros((1, nu)), "v", na)
+
+
+def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Real block Jacobians (rows, 2m, 2m) of [Re; Im] of the block's loops."""
+    cols = []
+    for v, mask in zip(p.block.unknowns, p.masks, strict=True):
+        d = (1j * z if v in p.unk_ang else e) * mask
+        cols.append(d @ p.C.T)  # (rows, m)
+    Jc = np.stack(cols, axis=-1)  # (rows, m, nu)
+    return np.concatenate([Jc.real, Jc.imag], axis=1)
+
+
+# ------------------------------------------------------------------ velocities / accelerations
+
+
+def _rates(p: _Plan, st: _State, k: slice, z: np.ndarray, e: np.ndarray, J: np.ndarray | None, what: str) -> np.ndarray:
+    """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``; unknown columns must be 0."""
+    rhs_terms = st.zdot(k, p.ang, p.sl, z, e) if what == "v" else st.zddot(k, p.ang, p.sl, z, e)
+    R = -(rhs_terms @ p.C.T)  # (rows, m) complex
+    if J is None and len(p.block.unknowns) == 2:
+        c1, c2 = _columns(p, z, e)
+        det = cross(c1, c2)
+        R0 = R[:, 0]
+        return np.stack([cross(R0, c2) / det, cross(c1, R0) / det], axis=1)
+    if J is None:
+        J = _jacobian(p, z, e)
+    rhs = np.concatenate([R.real, R.imag], axis=1)
+    return np.linalg.solve(J, rhs[..., None])[..., 0]
+
+
+def _columns(p: _Plan, z: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    g = p.C[0]
+    cols = []
+    for v, mask in zip(p.block.unknowns, p.masks, strict=True):
+        cols.append((1j * z[:, mask] if v in p.unk_ang else e[:, mask]) @ g[mask])
+    return cols[0], cols[1]
+
+
+def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int) -> None:
+    for i, v in enumerate(p.block.unknowns):
+        if v < na:
+            (st.W if what == "v" else st.AL)[k, v] = vals[:, i]
+        else:
+            (st.SD if what == "v" else st.SDD)[k, v - na] = vals[:, i]
+
+
+def _block_health(p: _Plan, z: np.ndarray, e: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Condition number (angle columns divided by the mechanism size) and det sign per row."""
+    if len(p.block.unknowns) == 2:
+        c1, c2 = _columns(p, z, e)
+        if p.block.unknowns[0] in p.unk_ang:
+            c1 = c1 / scale
+        if p.block.unknowns[1] in p.unk_ang:
+            c2 = c2 / scale
+        det = cross(c1, c2)
+        f2 = (c1.real**2 + c1.imag**2) + (c2.real**2 + c2.imag**2)
+        ad = np.abs(det)
+        root = np.sqrt(np.maximum(f2 * f2 - 4 * det * det, 0.0))
+        with np.errstate(divide="ignore"):
+            cond = np.where(ad > 0, (f2 + root) / (2 * np.where(ad > 0, ad, 1.0)), np.inf)
+        return cond, np.sign(det)
+    J = _jacobian(p, z, e)
+    colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
+    Js = J * colscale
+    return np.linalg.cond(Js), np.sign(np.linalg.det(J))
+
+
+# ------------------------------------------------------------------ driver
+
+
+def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **options: Any) -> Result:
+    """Solve P/V/A at ``times`` (default: the mechanism's). Raises MotionError with ``partial``."""
+    method = options.pop("method", None)
+    tol = float(options.pop("tol", DEFAULT_TOL))
+    max_iter = int(options.pop("max_iter", DEFAULT_MAX_ITER))
+    if options:
+        raise TypeError(f"unknown solver option(s): {', '.join(options)}")
+    if isinstance(mechanism, LoopSystem):
+        sys = mechanism
+        if method is not None and method != sys.method:
+            sys = compile_system(sys.mechanism, method)
+    else:
+        sys = compile_system(mechanism, method)
+    mech = sys.mechanism
+    tol = float(mech.options.get("tol", tol))
+    max_iter = int(mech.options.get("max_iter", max_iter))
+    times = np.asarray(mech.times if times is None else times, float)
+    if times.ndim != 1 or len(times) == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise MotionError("times must be a non-empty, finite, strictly increasing 1-D array", entry="time")
+
+    # internal grid: start at t = 0, the instant of the assembly, so branches and angles carry over
+    if times[0] == 0.0:
+        lead = np.zeros(0)
+    else:
+        h = (times[1] - times[0]) if len(times) > 1 else abs(times[0]) / 16
+        n_lead = int(min(MAX_LEAD_IN, max(1, math.ceil(abs(times[0]) / h))))
+        lead = np.linspace(0.0, times[0], n_lead + 1)[:-1]
+    tg = np.concatenate([lead, times])
+    off = len(lead)
+    n = len(tg)
+    na, ns = sys.n_angles, len(sys.slider_names)
+    st = _State(n, na, ns)
+    st.TH[0, :] = sys.q0[:na]
+    st.E[0, :na] = np.exp(1j * sys.q0[:na])
+    st.S[0, :ns] = sys.q0[na:]
+    scale = mech.scale
+
+    if mech.drivers:
+        X, XD, XDD = evaluate_all(mech, tg)
+        for j, v in enumerate(sys.drivers):
+            if v < na:
+                st.TH[:, v] = X[:, j]
+                st.E[:, v] = np.cos(X[:, j]) + 1j * np.sin(X[:, j])
+                st.W[:, v], st.AL[:, v] = XD[:, j], XDD[:, j]
+            else:
+                st.S[:, v - na], st.SD[:, v - na], st.SDD[:, v - na] = X[:, j], XD[:, j], XDD[:, j]
+    else:
+        X = np.zeros((n, 0))
+
+    n_ok = n
+    failure: _Failure | None = None
+    plans = _plans(sys)
+    conds = []
+    signs = []
+    for p in plans:
+        k = slice(0, n_ok)
+        if p.block.kind == "newton":
+            try:
+                _newton_block(p, st, n_ok, tg, na, scale, tol, max_iter)
+            except _Failure as f:
+                failure, n_ok = f, f.sample
+        else:
+            ok, _ = _closed_form(p, st, k, na)
+            if not ok.all():
+                bad = int(np.argmin(ok))
+                failure = _Failure(bad, p.block.loops[0], "the loop cannot close: the input is past a limit position")
+                n_ok = bad
+        k = slice(0, n_ok)
+        if n_ok == 0:
+            break
+        z, e = st.z(k, p.ang, p.sl, p.r, p.cd)
+        cond, sgn = _block_health(p, z, e, scale)
+        bad = np.nonzero((cond > TOGGLE_COND) | (sgn != sgn[0]))[0]
+        if len(bad):
+            failure = _Failure(int(bad[0]), p.block.loops[0], "the mechanism reaches a toggle (singular Jacobian)")
+            n_ok = int(bad[0])
+            k = slice(0, n_ok)
+            z, e = z[:n_ok], e[:n_ok]
+            cond, sgn = cond[:n_ok], sgn[:n_ok]
+        conds.append(cond)
+        signs.append(sgn)
+        if n_ok == 0:
+            break
+        J = None if len(p.block.unknowns) == 2 else _jacobian(p, z, e)
+        _store(p, st, k, _rates(p, st, k, z, e, J, "v"), "v", na)
+        _store(p, st, k, _rates(p, st, k, z, e, J, "a"), "a", na)
+
+    result = _result(sys, st, tg, n_ok, off, conds, signs)
+    if failure is not None:
+        raise _motion_error(sys, failure, tg, X, off, result)
+    return result
+
+
+def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, conds: list, signs: list) -> Result:
+    mech = sys.mechanism
+    k = slice(0, n_ok)
+    cd = np.exp(1j * sys.t_delta)
+    z, e = st.z(k, sys.t_ang, sys.t_sl, sys.t_r, cd)
+    zd = st.zdot(k, sys.t_ang, sys.t_sl, z, e)
+    zdd = st.zddot(k, sys.t_ang, sys.t_sl, z, e)
+    P, V, A = z @ sys.path, zd @ sys.path, zdd @ sys.path
+    cols: dict[str, np.ndarray] = {}
+    for name, a, offset in sys.link_outputs:
+        if a >= 0:
+            cols[f"{name}.theta"] = st.TH[k, a] + offset
+            cols[f"{name}.omega"] = st.W[k, a]
+            cols[f"{name}.alpha"] = st.AL[k, a]
+        else:
+            cols[f"{name}.theta"] = np.full(n_ok, offset % (2 * math.pi))
+            cols[f"{name}.omega"] = np.zeros(n_ok)
+            cols[f"{name}.alpha"] = np.zeros(n_ok)
+    for i, name in enumerate(sys.point_names):
+        cols[f"{name}.x"], cols[f"{name}.y"] = P[:, i].real, P[:, i].imag
+        cols[f"{name}.vx"], cols[f"{name}.vy"] = V[:, i].real, V[:, i].imag
+        cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
+    for i, name in enumerate(sys.slider_names):
+        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[k, i], st.SD[k, i], st.SDD[k, i]
+    residual = np.max(np.abs(z @ sys.C.T), axis=1) / mech.scale if len(sys.loops) else np.zeros(n_ok)
+    cond = np.max(np.stack([c[:n_ok] for c in conds]), axis=0) if conds else np.ones(n_ok)
+    branch = np.zeros(n_ok, np.int64)
+    for bit, s in enumerate(signs):
+        branch |= (s[:n_ok] > 0).astype(np.int64) << bit
+    sl = slice(off, None)
+    return Result(
+        mech.name,
+        "vloop",
+        tg[off:n_ok],
+        {c: v[sl] for c, v in cols.items()},
+        {"residual": residual[sl], "cond": cond[sl], "branch": branch[sl]},
+        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly},
+    )
+
+
+def _motion_error(sys: LoopSystem, f: _Failure, tg: np.ndarray, X: np.ndarray, off: int, partial: Result) -> MotionError:
+    mech = sys.mechanism
+    lp = sys.loops[f.loop]
+    t = float(tg[f.sample])
+    drv = ", ".join(
+        f"{d.symbol} = {X[f.sample, j]:.6g} {'rad' if d.kind == 'crank' else mech.units}" for j, d in enumerate(mech.drivers)
+    )
+    if f.sample >= off:
+        where = f"at t = {t:.6g} s (sample {f.sample - off} of {len(tg) - off})"
+        kept = f"{f.sample - off} earlier sample{'s' if f.sample - off != 1 else ''} kept"
+    else:
+        where = f"at t = {t:.6g} s, before the first requested time"
+        kept = "no sample kept"
+    return MotionError(
+        f"{mech.name}: cannot assemble {where}, {drv}: loop {lp.index + 1} ({lp.label}): {f.why}; {kept}",
+        entry=f"loop {lp.index + 1}",
+        time=t,
+        sample=f.sample - off,
+        driver_value=X[f.sample].tolist() if len(X) else None,
+        partial=partial,
+    )
