@@ -1,9 +1,9 @@
 """vloop — kinematics of planar linkages by automatic vector loops.
 
-    mech = vloop.load("mechanisms/eightbar.toml")
-    res = vloop.solve(mech)            # times default to the file's [time]
-    res.link("l3").theta, res.slider("l4").v, res.point("C").ay
-    res.to_csv("results.csv")
+mech = vloop.load("mechanisms/eightbar.toml")
+res = vloop.solve(mech)            # times default to the file's [time]
+res.link("l3").theta, res.slider("l4").v, res.point("C").ay
+res.to_csv("results.csv")
 """
 
 from __future__ import annotations

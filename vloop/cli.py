@@ -86,8 +86,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
     for name, lk in mech.links.items():
         b = bodies[name]
-        kind = "ground" if lk.ground else {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}.get(
-            len(lk.joints), f"{len(lk.joints)}-joint"
+        kind = (
+            "ground"
+            if lk.ground
+            else {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}.get(len(lk.joints), f"{len(lk.joints)}-joint")
         )
         extra = ""
         if len(lk.joints) == 2 and not lk.ground:
@@ -117,9 +119,7 @@ def cmd_info(args: argparse.Namespace) -> int:
             print(f"  {d.symbol}(t) = {d.x0:.6g} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}]")
     unk = list(system.unknowns)
     rank = (
-        int(np.linalg.matrix_rank(loop_jacobian(system, system.q0, list(range(len(system.loops))), unk)))
-        if unk
-        else 0
+        int(np.linalg.matrix_rank(loop_jacobian(system, system.q0, list(range(len(system.loops))), unk))) if unk else 0
     )
     full = "full rank: the drivers fix the motion" if rank == len(unk) else "rank deficient"
     print(
@@ -147,7 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("file")
     r.add_argument("--out", help="output folder (default: out/NAME)")
     r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png")
-    r.add_argument("--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only")
+    r.add_argument(
+        "--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only"
+    )
     r.set_defaults(func=cmd_run)
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     lo.add_argument("file")

@@ -88,7 +88,9 @@ class Comparison:
         lines = [self.describe(e) for e in fails[:limit]]
         if len(fails) > limit:
             lines.append(f"... and {len(fails) - limit} more")
-        return "\n".join(lines) if lines else f"{self.mechanism}: {self.engine_a} vs {self.engine_b}: all within tolerance"
+        return (
+            "\n".join(lines) if lines else f"{self.mechanism}: {self.engine_a} vs {self.engine_b}: all within tolerance"
+        )
 
 
 def _field(col: str) -> str:
@@ -110,7 +112,9 @@ def compare(
     The sample times must agree (to 1e-9 of the run's length).
     """
     if len(a.t) != len(b.t) or (len(a.t) and not np.allclose(a.t, b.t, rtol=0, atol=1e-9 * max(1.0, np.ptp(b.t)))):
-        raise ValueError(f"{a.engine} and {b.engine} were sampled at different times ({len(a.t)} vs {len(b.t)} samples)")
+        raise ValueError(
+            f"{a.engine} and {b.engine} were sampled at different times ({len(a.t)} vs {len(b.t)} samples)"
+        )
     cols = columns if columns is not None else [c for c in b.columns if c in a.columns and _field(c) in _GROUP]
     peaks = {c: float(max(np.max(np.abs(a[c]), initial=0.0), np.max(np.abs(b[c]), initial=0.0))) for c in cols}
     group_scale: dict[str, float] = {}

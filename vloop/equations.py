@@ -162,9 +162,12 @@ def grashof(sys: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, 
             cls = "special Grashof (change point)"
         elif s_ + l_ < pq:
             shortest = int(np.argmin([g, p1, c, p2]))
-            cls = {0: "Grashof double-crank", 1: "Grashof crank-rocker", 2: "Grashof double-rocker", 3: "Grashof rocker-crank"}[
-                shortest
-            ]
+            cls = {
+                0: "Grashof double-crank",
+                1: "Grashof crank-rocker",
+                2: "Grashof double-rocker",
+                3: "Grashof rocker-crank",
+            }[shortest]
         else:
             cls = "non-Grashof triple-rocker"
         out.append((lp.index, cls, (g, p1, c, p2)))

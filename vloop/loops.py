@@ -120,8 +120,8 @@ def term_values(sys: LoopSystem, q: np.ndarray) -> np.ndarray:
     """Complex term vectors z for variables ``q`` (shape (..., n_vars))."""
     q = np.asarray(q, float)
     na = sys.n_angles
-    phi = np.concatenate([q[..., :na], np.zeros(q.shape[:-1] + (1,))], axis=-1)
-    s = np.concatenate([q[..., na:], np.zeros(q.shape[:-1] + (1,))], axis=-1)
+    phi = np.concatenate([q[..., :na], np.zeros((*q.shape[:-1], 1))], axis=-1)
+    s = np.concatenate([q[..., na:], np.zeros((*q.shape[:-1], 1))], axis=-1)
     return (sys.t_r + s[..., sys.t_sl]) * np.exp(1j * (phi[..., sys.t_ang] + sys.t_delta))
 
 
@@ -258,7 +258,14 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
             if arr_sl[tid] >= 0:
                 variables.add(na + int(arr_sl[tid]))
         loops.append(
-            Loop(li, _loop_label(cyc, mech), tuple(cyc), tuple(int(t) for t in used), tuple(C[li, used]), tuple(sorted(variables)))
+            Loop(
+                li,
+                _loop_label(cyc, mech),
+                tuple(cyc),
+                tuple(int(t) for t in used),
+                tuple(C[li, used]),
+                tuple(sorted(variables)),
+            )
         )
 
     # --- point positions as sums of terms along a BFS tree from the world origin
@@ -377,7 +384,8 @@ def _assemble(sys: LoopSystem) -> tuple[np.ndarray, dict]:
         sv = np.linalg.svd(J, compute_uv=False)
         if sv[-1] < SINGULAR_RCOND * sv[0]:
             raise MechanismError(
-                f"{mech.source}: [joints] the loop Jacobian is singular at t = 0 (rank {int(np.sum(sv >= SINGULAR_RCOND * sv[0]))} "
+                f"{mech.source}: [joints] the loop Jacobian is singular at t = 0 "
+                f"(rank {int(np.sum(sv >= SINGULAR_RCOND * sv[0]))} "
                 f"of {len(unk)}): the mechanism is at a dead point or toggle at t = 0, or some of its constraints are "
                 f"redundant; Gruebler's count M = {mech.gruebler()[2]} does not see this",
                 entry="joints",

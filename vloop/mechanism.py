@@ -421,7 +421,9 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None
             probs.add(entry, f"unknown guide link {guide!r} (a guide is a link or 'ground')")
             continue
         if j in links[guide].joints:
-            probs.add(entry, f"the guide '{guide}' names the slider's joint '{j}': a block cannot be pinned to its own guide")
+            probs.add(
+                entry, f"the guide '{guide}' names the slider's joint '{j}': a block cannot be pinned to its own guide"
+            )
             continue
         ax = _xy(val.get("axis"), f"{entry}.axis", probs)
         if ax is None:
@@ -475,7 +477,9 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None
     if M != len(drivers):
         if M <= 0:
             meaning = (
-                "it is a rigid structure" if M == 0 else f"it is over-constrained by {-M} (a statically indeterminate structure)"
+                "it is a rigid structure"
+                if M == 0
+                else f"it is over-constrained by {-M} (a statically indeterminate structure)"
             )
             hint = "it cannot move: check the joints and sliders"
         else:
@@ -532,7 +536,9 @@ def _check_topology(m: Mechanism, probs: _Problems) -> None:
         probs.add("links", f"disconnected mechanism: {', '.join(loose)} not connected to the ground '{m.ground}'")
 
 
-def _read_profile(spec: Any, cols: tuple[str, str, str, str], entry: str, base: Path, probs: _Problems) -> Profile | None:
+def _read_profile(
+    spec: Any, cols: tuple[str, str, str, str], entry: str, base: Path, probs: _Problems
+) -> Profile | None:
     """A profile from an inline table of arrays or a CSV file with a header row."""
     tcol, xcol, vcol, acol = cols
     if isinstance(spec, str):
@@ -599,7 +605,10 @@ def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[
             ln = d["link"]
             entry = f"drivers[{i}] (link {ln})"
             if ln in m.sliders:
-                probs.add(entry, f"'{ln}' is a slider block, which cannot turn relative to its guide; drive it with slider = '{ln}'")
+                probs.add(
+                    entry,
+                    f"'{ln}' is a slider block, which cannot turn relative to its guide; drive it with slider = '{ln}'",
+                )
                 continue
             if ln not in m.links:
                 probs.add(entry, f"unknown link '{ln}'")
@@ -613,7 +622,9 @@ def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[
                 probs.add(entry, f"pivot '{pivot}' is not a joint of link '{ln}'")
                 continue
             if pivot != lk.joints[0]:
-                probs.add(entry, f"pivot '{pivot}' must be the first joint listed for link '{ln}' (its θ is measured from it)")
+                probs.add(
+                    entry, f"pivot '{pivot}' must be the first joint listed for link '{ln}' (its θ is measured from it)"
+                )
                 continue
             theta_coords = bodies[ln].theta0
             x0 = _number(d, "theta0", entry, probs, theta_coords)
@@ -693,7 +704,10 @@ def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
         return np.zeros(1)
     n = math.floor((stop - start) / step + 0.5) + 1
     if n > MAX_SAMPLES:
-        probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {n:,} samples, more than the limit of {MAX_SAMPLES:,}")
+        probs.add(
+            "time",
+            f"step {step:g} over [{start:g}, {stop:g}] gives {n:,} samples, more than the limit of {MAX_SAMPLES:,}",
+        )
         return np.zeros(1)
     return start + step * np.arange(n)
 

@@ -8,7 +8,14 @@ from .mechanism import Mechanism
 from .result import Result
 
 
-def _figure(result: Result, names: list[str], fields: tuple[str, str, str], ylabels: tuple[str, str, str], title: str, path: Path) -> Path:
+def _figure(
+    result: Result,
+    names: list[str],
+    fields: tuple[str, str, str],
+    ylabels: tuple[str, str, str],
+    title: str,
+    path: Path,
+) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -75,7 +82,9 @@ def plot_result(mech: Mechanism, result: Result, out_dir: str | Path) -> list[Pa
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    ax.set_title(f"{mech.title or mech.name}\npaths of joints and points (mechanism at t = {result.t[0]:g} s)", fontsize=10)
+    ax.set_title(
+        f"{mech.title or mech.name}\npaths of joints and points (mechanism at t = {result.t[0]:g} s)", fontsize=10
+    )
     ax.set_xlabel(f"x [{mech.units}]")
     ax.set_ylabel(f"y [{mech.units}]")
     fig.tight_layout()

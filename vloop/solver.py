@@ -111,7 +111,9 @@ class _State:
     def e(self, k: slice, ang: np.ndarray, cd: np.ndarray) -> np.ndarray:
         return cd * self.E[k][:, ang]
 
-    def z(self, k: slice, ang: np.ndarray, sl: np.ndarray, r: np.ndarray, cd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def z(
+        self, k: slice, ang: np.ndarray, sl: np.ndarray, r: np.ndarray, cd: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         e = cd * self.E[k][:, ang]
         return (r + self.S[k][:, sl]) * e, e
 
@@ -204,7 +206,9 @@ def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
     st.TH[k, a] = st.TH[0, a] + np.concatenate(([np.angle(Ek[0] * np.exp(-1j * st.TH[0, a]))], np.cumsum(inc)))
 
 
-def _newton_block(p: _Plan, st: _State, n: int, tg: np.ndarray, na: int, scale: float, tol: float, max_iter: int) -> None:
+def _newton_block(
+    p: _Plan, st: _State, n: int, tg: np.ndarray, na: int, scale: float, tol: float, max_iter: int
+) -> None:
     """Per-sample Newton with analytic Jacobian and a Taylor predictor; raises _Failure."""
     b = p.block
     nu = len(b.unknowns)
@@ -255,7 +259,9 @@ def _newton_block(p: _Plan, st: _State, n: int, tg: np.ndarray, na: int, scale: 
         if sign0 is None:
             sign0 = sgn
         elif sgn != sign0:
-            raise _Failure(k, b.loops[0], "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed")
+            raise _Failure(
+                k, b.loops[0], "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed"
+            )
         if m and k + 1 < n:
             xd = _rates(p, st, row, z, e, J, "v")[0]
             _store(p, st, row, xd[None, :], "v", na)
@@ -464,12 +470,15 @@ def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, co
     )
 
 
-def _motion_error(sys: LoopSystem, f: _Failure, tg: np.ndarray, X: np.ndarray, off: int, partial: Result) -> MotionError:
+def _motion_error(
+    sys: LoopSystem, f: _Failure, tg: np.ndarray, X: np.ndarray, off: int, partial: Result
+) -> MotionError:
     mech = sys.mechanism
     lp = sys.loops[f.loop]
     t = float(tg[f.sample])
     drv = ", ".join(
-        f"{d.symbol} = {X[f.sample, j]:.6g} {'rad' if d.kind == 'crank' else mech.units}" for j, d in enumerate(mech.drivers)
+        f"{d.symbol} = {X[f.sample, j]:.6g} {'rad' if d.kind == 'crank' else mech.units}"
+        for j, d in enumerate(mech.drivers)
     )
     if f.sample >= off:
         where = f"at t = {t:.6g} s (sample {f.sample - off} of {len(tg) - off})"
