@@ -337,6 +337,108 @@ def _block_health(p: _Plan, z: np.ndarray, e: np.ndarray, scale: float) -> tuple
 # ------------------------------------------------------------------ driver
 
 
+def _run_blocks(
+    sys: LoopSystem, st: _State, tg: np.ndarray, n: int, scale: float, tol: float, max_iter: int
+) -> tuple[int, _Failure | None, list[np.ndarray], list[np.ndarray]]:
+    """Solve every block in order on rows 0..n-1 (row 0 must be an assembled configuration).
+
+    Returns the number of rows solved, the first failure (or None), and each
+    block's condition numbers and Jacobian determinant signs.
+    """
+    na = sys.n_angles
+    n_ok = n
+    failure: _Failure | None = None
+    conds: list[np.ndarray] = []
+    signs: list[np.ndarray] = []
+    for p in _plans(sys):
+        k = slice(0, n_ok)
+        if p.block.kind == "newton":
+            try:
+                _newton_block(p, st, n_ok, tg, na, scale, tol, max_iter)
+            except _Failure as f:
+                failure, n_ok = f, f.sample
+        else:
+            ok, _ = _closed_form(p, st, k, na)
+            if not ok.all():
+                bad = int(np.argmin(ok))
+                failure = _Failure(bad, p.block.loops[0], "the loop cannot close: the input is past a limit position")
+                n_ok = bad
+        k = slice(0, n_ok)
+        if n_ok == 0:
+            break
+        z, e = st.z(k, p.ang, p.sl, p.r, p.cd)
+        cond, sgn = _block_health(p, z, e, scale)
+        bad = np.nonzero((cond > TOGGLE_COND) | (sgn != sgn[0]))[0]
+        if len(bad):
+            failure = _Failure(int(bad[0]), p.block.loops[0], "the mechanism reaches a toggle (singular Jacobian)")
+            n_ok = int(bad[0])
+            k = slice(0, n_ok)
+            z, e = z[:n_ok], e[:n_ok]
+            cond, sgn = cond[:n_ok], sgn[:n_ok]
+        conds.append(cond)
+        signs.append(sgn)
+        if n_ok == 0:
+            break
+        J = None if len(p.block.unknowns) == 2 else _jacobian(p, z, e)
+        _store(p, st, k, _rates(p, st, k, z, e, J, "v"), "v", na)
+        _store(p, st, k, _rates(p, st, k, z, e, J, "a"), "a", na)
+    return n_ok, failure, conds, signs
+
+
+LIMIT_RTOL = 1e-12  # the limit is located to this fraction of the drivers' range over the run
+
+
+def _locate_failure(
+    sys: LoopSystem, st: _State, tg: np.ndarray, k: int, X: np.ndarray, scale: float, tol: float, max_iter: int
+) -> tuple[float, np.ndarray]:
+    """Bisect between the last solved sample k−1 and the failing sample k for the last assemblable
+    time (a limit position or toggle). Returns (time, driver values there)."""
+    mech = sys.mechanism
+    na, ns = sys.n_angles, len(sys.slider_names)
+    span = np.ptp(X, axis=0) if X.size else np.zeros(0)
+    span = np.where(span > 0, span, 1.0)
+    base = _State(1, na, ns)
+    for name in ("E", "TH", "S"):
+        getattr(base, name)[0] = getattr(st, name)[k - 1]
+    lo, hi = float(tg[k - 1]), float(tg[k])
+    x_lo = X[k - 1] if X.size else np.zeros(0)
+    x_hi = X[k] if X.size else np.zeros(0)
+    for _ in range(200):
+        if X.size and np.all(np.abs(x_hi - x_lo) <= LIMIT_RTOL * span):
+            break
+        if hi - lo <= 4 * np.spacing(max(abs(hi), 1.0)):
+            break
+        mid = 0.5 * (lo + hi)
+        trial = _State(2, na, ns)
+        for name in ("E", "TH", "S"):
+            getattr(trial, name)[0] = getattr(base, name)[0]
+        grid = np.array([lo, mid])
+        xm = np.zeros(0)
+        if mech.drivers:
+            Xd, XD, XDD = evaluate_all(mech, grid)
+            _impose_drivers(sys, trial, Xd, XD, XDD)
+            xm = Xd[1]
+        n_ok, *_ = _run_blocks(sys, trial, grid, 2, scale, tol, max_iter)
+        if n_ok == 2:
+            lo, x_lo = mid, xm
+            for name in ("E", "TH", "S"):
+                getattr(base, name)[0] = getattr(trial, name)[1]
+        else:
+            hi, x_hi = mid, xm
+    return lo, x_lo
+
+
+def _impose_drivers(sys: LoopSystem, st: _State, X: np.ndarray, XD: np.ndarray, XDD: np.ndarray) -> None:
+    na = sys.n_angles
+    for j, v in enumerate(sys.drivers):
+        if v < na:
+            st.TH[:, v] = X[:, j]
+            st.E[:, v] = np.cos(X[:, j]) + 1j * np.sin(X[:, j])
+            st.W[:, v], st.AL[:, v] = XD[:, j], XDD[:, j]
+        else:
+            st.S[:, v - na], st.SD[:, v - na], st.SDD[:, v - na] = X[:, j], XD[:, j], XDD[:, j]
+
+
 def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **options: Any) -> Result:
     """Solve P/V/A at ``times`` (default: the mechanism's). Raises MotionError with ``partial``."""
     method = options.pop("method", None)
@@ -376,57 +478,17 @@ def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **
 
     if mech.drivers:
         X, XD, XDD = evaluate_all(mech, tg)
-        for j, v in enumerate(sys.drivers):
-            if v < na:
-                st.TH[:, v] = X[:, j]
-                st.E[:, v] = np.cos(X[:, j]) + 1j * np.sin(X[:, j])
-                st.W[:, v], st.AL[:, v] = XD[:, j], XDD[:, j]
-            else:
-                st.S[:, v - na], st.SD[:, v - na], st.SDD[:, v - na] = X[:, j], XD[:, j], XDD[:, j]
+        _impose_drivers(sys, st, X, XD, XDD)
     else:
         X = np.zeros((n, 0))
 
-    n_ok = n
-    failure: _Failure | None = None
-    plans = _plans(sys)
-    conds = []
-    signs = []
-    for p in plans:
-        k = slice(0, n_ok)
-        if p.block.kind == "newton":
-            try:
-                _newton_block(p, st, n_ok, tg, na, scale, tol, max_iter)
-            except _Failure as f:
-                failure, n_ok = f, f.sample
-        else:
-            ok, _ = _closed_form(p, st, k, na)
-            if not ok.all():
-                bad = int(np.argmin(ok))
-                failure = _Failure(bad, p.block.loops[0], "the loop cannot close: the input is past a limit position")
-                n_ok = bad
-        k = slice(0, n_ok)
-        if n_ok == 0:
-            break
-        z, e = st.z(k, p.ang, p.sl, p.r, p.cd)
-        cond, sgn = _block_health(p, z, e, scale)
-        bad = np.nonzero((cond > TOGGLE_COND) | (sgn != sgn[0]))[0]
-        if len(bad):
-            failure = _Failure(int(bad[0]), p.block.loops[0], "the mechanism reaches a toggle (singular Jacobian)")
-            n_ok = int(bad[0])
-            k = slice(0, n_ok)
-            z, e = z[:n_ok], e[:n_ok]
-            cond, sgn = cond[:n_ok], sgn[:n_ok]
-        conds.append(cond)
-        signs.append(sgn)
-        if n_ok == 0:
-            break
-        J = None if len(p.block.unknowns) == 2 else _jacobian(p, z, e)
-        _store(p, st, k, _rates(p, st, k, z, e, J, "v"), "v", na)
-        _store(p, st, k, _rates(p, st, k, z, e, J, "a"), "a", na)
-
+    n_ok, failure, conds, signs = _run_blocks(sys, st, tg, n, scale, tol, max_iter)
+    limit = None
+    if failure is not None and failure.sample > 0:
+        limit = _locate_failure(sys, st, tg, failure.sample, X, scale, tol, max_iter)
     result = _result(sys, st, tg, n_ok, off, conds, signs)
     if failure is not None:
-        raise _motion_error(sys, failure, tg, X, off, result)
+        raise _motion_error(sys, failure, tg, X, off, result, limit)
     return result
 
 
@@ -471,7 +533,13 @@ def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, co
 
 
 def _motion_error(
-    sys: LoopSystem, f: _Failure, tg: np.ndarray, X: np.ndarray, off: int, partial: Result
+    sys: LoopSystem,
+    f: _Failure,
+    tg: np.ndarray,
+    X: np.ndarray,
+    off: int,
+    partial: Result,
+    limit: tuple[float, np.ndarray] | None = None,
 ) -> MotionError:
     mech = sys.mechanism
     lp = sys.loops[f.loop]
@@ -486,11 +554,21 @@ def _motion_error(
     else:
         where = f"at t = {t:.6g} s, before the first requested time"
         kept = "no sample kept"
-    return MotionError(
-        f"{mech.name}: cannot assemble {where}, {drv}: loop {lp.index + 1} ({lp.label}): {f.why}; {kept}",
+    lim = ""
+    if limit is not None:
+        vals = ", ".join(
+            f"{d.symbol} = {limit[1][j]:.10g} {'rad' if d.kind == 'crank' else mech.units}"
+            for j, d in enumerate(mech.drivers)
+        )
+        lim = f" (last assembled at t = {limit[0]:.10g} s, {vals})"
+    err = MotionError(
+        f"{mech.name}: cannot assemble {where}, {drv}: loop {lp.index + 1} ({lp.label}): {f.why}{lim}; {kept}",
         entry=f"loop {lp.index + 1}",
         time=t,
         sample=f.sample - off,
         driver_value=X[f.sample].tolist() if len(X) else None,
         partial=partial,
     )
+    err.limit_time = limit[0] if limit is not None else None
+    err.limit_value = limit[1].tolist() if limit is not None else None
+    return err
