@@ -17,6 +17,8 @@ import numpy as np
 
 from .result import Result
 
+ZERO_FLOOR = 1e-9  # a quantity whose peak is below this fraction of its group's peak is "identically zero"
+
 # field -> (group, human name)
 _GROUP = {
     "theta": ("angle", "angle"),
@@ -42,7 +44,7 @@ class QuantityError:
     group: str
     max_abs: float
     scale: float
-    rel: float  # max_abs / scale (inf if scale is 0 and max_abs > 0)
+    rel: float  # max_abs / max(scale, ZERO_FLOOR·group peak)
     rms: float
     t_at_max: float
     tol: float  # allowed max_abs
@@ -133,7 +135,9 @@ def compare(
         mx = float(e[k]) if len(e) else 0.0
         r = rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol
         tol = floor * group_scale[g] + r * peaks[c]
-        rel = mx / peaks[c] if peaks[c] > 0 else (0.0 if mx == 0 else math.inf)
+        # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
+        ref = max(peaks[c], ZERO_FLOOR * group_scale[g])
+        rel = mx / ref if ref > 0 else (0.0 if mx == 0 else math.inf)
         rms = float(np.sqrt(np.mean(d * d))) if len(d) else 0.0
         errors.append(QuantityError(c, g, mx, peaks[c], rel, rms, float(b.t[k]) if len(b.t) else 0.0, tol, mx <= tol))
     return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol if isinstance(rtol, float) else 0.0, errors)

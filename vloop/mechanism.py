@@ -632,6 +632,9 @@ def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[
             a0 = _number(d, "alpha", entry, probs, 0.0)
             prof = None
             if "profile" in d:
+                for k in ("theta0", "omega", "alpha"):
+                    if k in d:
+                        probs.add(entry, f"'{k}' and 'profile' both given: the profile sets the motion")
                 prof = _read_profile(d["profile"], ("t", "theta", "omega", "alpha"), entry, base, probs)
                 x0 = float(prof.x[0]) if prof is not None else x0
             key = f"link:{ln}"
@@ -652,6 +655,9 @@ def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[
             a0 = _number(d, "a", entry, probs, 0.0)
             prof = None
             if "profile" in d:
+                for k in ("s0", "v", "a"):
+                    if k in d:
+                        probs.add(entry, f"'{k}' and 'profile' both given: the profile sets the motion")
                 prof = _read_profile(d["profile"], ("t", "s", "v", "a"), entry, base, probs)
                 x0 = float(prof.x[0]) if prof is not None else x0
             key = f"slider:{sn}"
@@ -702,7 +708,7 @@ def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
     if stop < start:
         probs.add("time", f"stop ({stop:g}) is before start ({start:g})")
         return np.zeros(1)
-    n = math.floor((stop - start) / step + 0.5) + 1
+    n = math.floor((stop - start) / step + 1e-9) + 1  # up to and including stop, never past it
     if n > MAX_SAMPLES:
         probs.add(
             "time",

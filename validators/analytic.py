@@ -1,0 +1,51 @@
+"""Pick the hand-derived closed form that applies to a mechanism.
+
+Each closed-form module (``analytic_eightbar``, ``analytic_slider_crank``,
+``analytic_fourbar``) exposes ``applies(mech)``, which inspects the structure
+(bodies, pins, sliders, the driver, slider axes) rather than names, and
+``solve(mech, times=None) -> Result`` (engine ``"analytic"``; the closed form
+used is in ``result.meta["closed_form"]``). None of them shares code with
+vloop's loop equations or solver.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+import numpy as np
+
+from vloop.mechanism import Mechanism
+from vloop.result import Result
+
+from . import analytic_eightbar, analytic_fourbar, analytic_slider_crank
+from .analytic_common import LimitPositionError
+
+CLOSED_FORMS: tuple[ModuleType, ...] = (analytic_eightbar, analytic_slider_crank, analytic_fourbar)
+
+__all__ = ["CLOSED_FORMS", "LimitPositionError", "available", "closed_form_for", "solve"]
+
+
+def closed_form_for(mech: Mechanism) -> ModuleType | None:
+    """The closed-form module whose structure matches ``mech``, or None."""
+    return next((m for m in CLOSED_FORMS if m.applies(mech)), None)
+
+
+def available(mech: Mechanism) -> bool:
+    """True if one of the closed forms applies to ``mech``."""
+    return closed_form_for(mech) is not None
+
+
+def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
+    """Closed-form kinematics over ``times`` (default: the file's [time]).
+
+    Raises ValueError if no closed form applies, and LimitPositionError (a
+    ValueError) if the motion leaves the mechanism's assembly range.
+    """
+    mod = closed_form_for(mech)
+    if mod is None:
+        names = ", ".join(m.NAME for m in CLOSED_FORMS)
+        raise ValueError(
+            f"{mech.name}: no closed form applies (known structures: {names}; each needs exactly one crank driver "
+            "and ground-guided sliders)"
+        )
+    return mod.solve(mech, times)

@@ -1,0 +1,174 @@
+"""Closed-form kinematics of the offset slider-crank (either assembly branch).
+
+Topology (checked by :func:`applies`, names are free): ground pivot O2, crank
+O2A (length a, driven: θ2, ω2, α2), connecting rod AB (length b), block at B
+sliding on a ground-fixed line through B's t = 0 position with unit axis
+u = e^{jφ} (any direction; "horizontal" is φ = 0 or π); n = j·u is the line's
+normal. The offset e = (B0 − O2)·n is the line's signed distance from the
+crank pivot, η(t) = (A − B0)·n the crank pin's signed distance from the line.
+
+Loop equation (complex numbers, world frame; L0 = B0 a point of the line,
+s the block's displacement, s = u·B as in the file's convention):
+
+    O2 + a·e^{jθ2} + b·e^{jθ3} = B = L0 + (s − u·L0)·u.
+
+Positions. Project on n (the component across the line): with ψ = θ3 − φ,
+
+    (A − L0)·n + b·sin ψ = 0     ⇒   sin ψ = −η / b,
+    cos ψ = σ·√(1 − sin²ψ),         σ = sign((B0 − A0)·u) from the t = 0 coordinates,
+
+so θ3 = φ + atan2(sin ψ, cos ψ); projecting on u, s = u·A + b·cos ψ. The block
+cannot be assembled where η² ≥ b² (the rod can no longer reach the line).
+For u = (1, 0), L0 = (c0, e), O2 = 0 this is the textbook a·sin θ2 + b·sin θ3 = e,
+s = a·cos θ2 + b·cos θ3.
+
+Velocities (differentiate once; ż_A = j·ω2·a·e^{jθ2}, η̇ = ż_A·n):
+
+    b·cos ψ·ω3 = −η̇               ⇒  ω3 = −η̇ / (b·cos ψ),
+    ṡ = u·ż_A − b·sin ψ·ω3.
+
+Accelerations (differentiate again; z̈_A = (jα2 − ω2²)·a·e^{jθ2}, η̈ = z̈_A·n):
+
+    b·cos ψ·α3 − b·sin ψ·ω3² = −η̈  ⇒  α3 = (b·sin ψ·ω3² − η̈) / (b·cos ψ),
+    s̈ = u·z̈_A − b·cos ψ·ω3² − b·sin ψ·α3.
+
+Joints: A from the crank, B = A + b·e^{jθ3} (and its derivatives), other
+points by rigid-body transport. Units: the file's lengths, s, rad/s, rad/s².
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vloop.mechanism import Mechanism
+from vloop.result import Result
+
+from .analytic_common import (
+    Assembly,
+    branch_sign,
+    check_assembly,
+    crank_driver,
+    driver_input,
+    evaluation_times,
+    member_vector,
+    other_body,
+    pins,
+    pins_of,
+)
+
+NAME = "slider_crank"
+
+
+@dataclass(frozen=True)
+class Roles:
+    """Which bodies and joints play which part in the slider-crank."""
+
+    ground: str
+    crank: str
+    rod: str
+    block: str
+    O2: str
+    A: str
+    B: str
+
+
+def roles(mech: Mechanism) -> Roles | None:
+    """Identify the slider-crank structure, or None if the mechanism is not one."""
+    drv = crank_driver(mech)
+    if drv is None or len(mech.links) != 3 or len(mech.sliders) != 1:
+        return None
+    block, sl = next(iter(mech.sliders.items()))
+    g, crank, o2 = mech.ground, drv.target, drv.pivot
+    pm = pins(mech)
+    if sl.guide != g or len(pm) != 3 or any(len(bs) != 2 for bs in pm.values()):
+        return None
+    if pins_of(mech, g) != {o2} or o2 not in pm or set(pm[o2]) != {g, crank}:
+        return None
+    cp = pins_of(mech, crank) - {o2}
+    if len(cp) != 1:
+        return None
+    a = cp.pop()
+    rod = other_body(pm[a], crank)
+    if rod is None or rod not in mech.links or pins_of(mech, rod) != {a, sl.joint}:
+        return None
+    if set(pm[sl.joint]) != {rod, block}:
+        return None
+    return Roles(g, crank, rod, block, o2, a, sl.joint)
+
+
+def applies(mech: Mechanism) -> bool:
+    """True for a crank-driven slider-crank: ground–crank–rod–block on a ground-fixed line."""
+    return roles(mech) is not None
+
+
+def rrp_dyad(
+    zA: tuple[np.ndarray, np.ndarray, np.ndarray], b: float, L0: complex, u: complex, sigma: float
+) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Rod AB of length b whose end B slides on the line L0 + λ·u (module docstring).
+
+    Returns (ok, (θ3, ω3, α3), (s, ṡ, s̈)) with θ3 the direction A→B (not unwrapped)
+    and s = u·B; ``ok`` is False where the line is out of reach (η² ≥ b²).
+    """
+    z, zd, zdd = zA
+    n = 1j * u
+    eta = (np.conj(n) * (z - L0)).real
+    etad = (np.conj(n) * zd).real
+    etadd = (np.conj(n) * zdd).real
+    sin_psi = -eta / b
+    disc = 1.0 - sin_psi * sin_psi
+    ok = disc > 0.0
+    cos_psi = sigma * np.sqrt(np.where(ok, disc, 1.0))
+    om3 = -etad / (b * cos_psi)
+    al3 = (b * sin_psi * om3 * om3 - etadd) / (b * cos_psi)
+    th3 = np.angle(u) + np.arctan2(sin_psi, cos_psi)
+    s = (np.conj(u) * z).real + b * cos_psi
+    sd = (np.conj(u) * zd).real - b * sin_psi * om3
+    sdd = (np.conj(u) * zdd).real - b * cos_psi * om3 * om3 - b * sin_psi * al3
+    return ok, (th3, om3, al3), (s, sd, sdd)
+
+
+def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
+    """Closed-form positions, velocities and accelerations of an offset slider-crank.
+
+    Raises LimitPositionError (a ValueError) at the first sample the rod cannot
+    reach the sliding line, with the samples before it in ``.partial``.
+    """
+    r = roles(mech)
+    if r is None:
+        raise ValueError(f"{mech.name}: not a crank-driven slider-crank (ground, crank, rod, block on a ground line)")
+    drv = mech.drivers[0]
+    bodies = mech.bodies()
+    a, beta2 = member_vector(bodies[r.crank], r.O2, r.A)
+    b, _ = member_vector(bodies[r.rod], r.A, r.B)
+    sl = mech.sliders[r.block]
+    u = complex(*sl.axis)
+    L0 = complex(*mech.joints[r.B])
+    zA0, zB0 = complex(*mech.joints[r.A]), complex(*mech.joints[r.B])
+    sigma = branch_sign((np.conj(u) * (zB0 - zA0)).real, f"{mech.name}: rod {r.rod} perpendicular to the line")
+
+    t, inserted, anchor = evaluation_times(mech, times)
+    th2, om2, al2 = driver_input(drv, t)
+    asm = Assembly(mech, t, inserted, anchor)
+    zO2 = asm.fixed(r.O2)
+    rA = a * np.exp(1j * (th2 + beta2))  # O2→A
+    zA = (zO2 + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
+    ok, (th3, om3, al3), _ = rrp_dyad(zA, b, L0, u, sigma)
+    check_assembly(
+        ok,
+        mech=mech,
+        t=t,
+        inserted=inserted,
+        theta_in=th2,
+        what=lambda k: f"rod {r.rod} (b = {b:g}) cannot reach the line of slider {r.block}",
+        limit=None,
+        resolve=lambda tt: solve(mech, tt),
+    )
+    rB = b * np.exp(1j * th3)
+    asm.set_angle(r.crank, th2, om2, al2)
+    asm.set_from_vector(r.rod, r.A, r.B, th3, om3, al3)
+    asm.set_point(r.A, *zA)
+    asm.set_point(r.B, zA[0] + rB, zA[1] + 1j * om3 * rB, zA[2] + (1j * al3 - om3 * om3) * rB)
+    offset = float((np.conj(1j * u) * (L0 - zO2)).real)
+    return asm.result(NAME, {"branch": int(sigma), "a": a, "b": b, "offset": offset})
