@@ -58,6 +58,9 @@ class _Plan:
     unk_sl: list[int]  # slider indices among the unknowns
     known: np.ndarray  # mask of terms independent of the unknowns
     masks: list[np.ndarray]  # per unknown: the block terms it enters
+    Ct: np.ndarray  # C.T as complex: complex @ complex matmuls are far faster than complex @ float
+    known_idx: np.ndarray  # indices of the known terms
+    g_known: np.ndarray  # their signs (complex), loop 0
     # closed-form roles
     on1: np.ndarray | None = None
     on2: np.ndarray | None = None
@@ -81,7 +84,11 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
         unk_sl = [v - na for v in b.unknowns if v >= na]
         depends = np.isin(ang, unk_ang) | np.isin(sl, unk_sl)
         masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
-        p = _Plan(b, terms, Cb, ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, ~depends, masks)
+        known_idx = np.nonzero(~depends)[0]
+        p = _Plan(
+            b, terms, Cb, ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, ~depends, masks,
+            Cb.T.astype(complex), known_idx, Cb[0, known_idx].astype(complex),
+        )  # fmt: skip
         if b.kind == "RRR":
             p.on1, p.on2 = ang == unk_ang[0], ang == unk_ang[1]
         elif b.kind in ("RRP", "RPR"):
@@ -93,6 +100,14 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
         plans.append(p)
     sys.cache["plans"] = plans
     return plans
+
+
+def _system_matrices(sys: LoopSystem) -> tuple[np.ndarray, np.ndarray]:
+    """Complex copies of the point-path and loop matrices (cached)."""
+    if "path" not in sys.cache:
+        sys.cache["path"] = sys.path.astype(complex)
+        sys.cache["Ct"] = sys.C.T.astype(complex)
+    return sys.cache["path"], sys.cache["Ct"]
 
 
 class _State:
@@ -139,8 +154,8 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int) -> tuple[np.ndarray, n
     b = p.block
     mag = (p.r + st.S[k][:, p.sl]) * p.cd  # term vectors without their rotation
     e = p.cd * st.E[k][:, p.ang]
-    g = p.C[0]
-    X = -(((mag * st.E[k][:, p.ang])[:, p.known]) @ g[p.known])
+    g = p.Ct[:, 0]
+    X = -((mag[:, p.known_idx] * st.E[k][:, p.ang[p.known_idx]]) @ p.g_known)
     sig = b.sigma
     if b.kind == "RRR":
         # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
@@ -274,7 +289,7 @@ def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
     cols = []
     for v, mask in zip(p.block.unknowns, p.masks, strict=True):
         d = (1j * z if v in p.unk_ang else e) * mask
-        cols.append(d @ p.C.T)  # (rows, m)
+        cols.append(d @ p.Ct)  # (rows, m)
     Jc = np.stack(cols, axis=-1)  # (rows, m, nu)
     return np.concatenate([Jc.real, Jc.imag], axis=1)
 
@@ -285,7 +300,7 @@ def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
 def _rates(p: _Plan, st: _State, k: slice, z: np.ndarray, e: np.ndarray, J: np.ndarray | None, what: str) -> np.ndarray:
     """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``; unknown columns must be 0."""
     rhs_terms = st.zdot(k, p.ang, p.sl, z, e) if what == "v" else st.zddot(k, p.ang, p.sl, z, e)
-    R = -(rhs_terms @ p.C.T)  # (rows, m) complex
+    R = -(rhs_terms @ p.Ct)  # (rows, m) complex
     if J is None and len(p.block.unknowns) == 2:
         c1, c2 = _columns(p, z, e)
         det = cross(c1, c2)
@@ -298,7 +313,7 @@ def _rates(p: _Plan, st: _State, k: slice, z: np.ndarray, e: np.ndarray, J: np.n
 
 
 def _columns(p: _Plan, z: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    g = p.C[0]
+    g = p.Ct[:, 0]
     cols = []
     for v, mask in zip(p.block.unknowns, p.masks, strict=True):
         cols.append((1j * z[:, mask] if v in p.unk_ang else e[:, mask]) @ g[mask])
@@ -499,7 +514,8 @@ def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, co
     z, e = st.z(k, sys.t_ang, sys.t_sl, sys.t_r, cd)
     zd = st.zdot(k, sys.t_ang, sys.t_sl, z, e)
     zdd = st.zddot(k, sys.t_ang, sys.t_sl, z, e)
-    P, V, A = z @ sys.path, zd @ sys.path, zdd @ sys.path
+    path, Ct = _system_matrices(sys)
+    P, V, A = z @ path, zd @ path, zdd @ path
     cols: dict[str, np.ndarray] = {}
     for name, a, offset in sys.link_outputs:
         if a >= 0:
@@ -516,7 +532,7 @@ def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, co
         cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
     for i, name in enumerate(sys.slider_names):
         cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[k, i], st.SD[k, i], st.SDD[k, i]
-    residual = np.max(np.abs(z @ sys.C.T), axis=1) / mech.scale if len(sys.loops) else np.zeros(n_ok)
+    residual = np.max(np.abs(z @ Ct), axis=1) / mech.scale if len(sys.loops) else np.zeros(n_ok)
     cond = np.max(np.stack([c[:n_ok] for c in conds]), axis=0) if conds else np.ones(n_ok)
     branch = np.zeros(n_ok, np.int64)
     for bit, s in enumerate(signs):
