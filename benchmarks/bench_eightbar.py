@@ -58,7 +58,7 @@ def paper_fsolve(t: np.ndarray) -> dict[str, np.ndarray]:
         pos[k] = guess
 
     def velocity(x, k):
-        th3, c, th5, kk, th7, g = pos[k]
+        th3, _, th5, _, th7, _ = pos[k]
         w3, cd, w5, kd, w7, gd = x
         l1 = 1j * A_ * w2[k] * e(1j * th2[k]) + 1j * B_ * w3 * e(1j * th3) + cd * e(1j * np.pi)
         l2 = 1j * D_ * w5 * e(1j * th5) + kd * e(1.5j * np.pi) - cd * e(1j * np.pi)
@@ -71,8 +71,8 @@ def paper_fsolve(t: np.ndarray) -> dict[str, np.ndarray]:
         vel[k] = guess
 
     def acceleration(x, k):
-        th3, c, th5, kk, th7, g = pos[k]
-        w3, cd, w5, kd, w7, gd = vel[k]
+        th3, _, th5, _, th7, _ = pos[k]
+        w3, _, w5, _, w7, _ = vel[k]
         a3, cdd, a5, kdd, a7, gdd = x
         l1 = (
             (1j * ALPHA2 - w2[k] ** 2) * A_ * e(1j * th2[k])
@@ -139,9 +139,7 @@ def main(argv: list[str] | None = None) -> int:
             ("(b) closed form, numpy", t_c),
             ("(a) paper: fsolve per step", t_f),
         ):
-            print(
-                f"{n:>7} {label:<34} {tt * 1e3:>9.3f}ms {n / tt:>12,.0f} {tt / t_c:>14.2f}x {tt / t_v:>12.1f}x"
-            )
+            print(f"{n:>7} {label:<34} {tt * 1e3:>9.3f}ms {n / tt:>12,.0f} {tt / t_c:>14.2f}x {tt / t_v:>12.1f}x")
         print()
     return 0
 
