@@ -206,7 +206,8 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
             if node == ref[bname]:
                 continue
             r = math.hypot(lx, ly)
-            tid = add_term(ang, -1, r, math.atan2(ly, lx) + off, f"{ref[bname][1]}→{m} ({bname})")
+            start = _origin_name(mech) if ref[bname][1] == ORIGIN else ref[bname][1]
+            tid = add_term(ang, -1, r, math.atan2(ly, lx) + off, f"{start}→{m} ({bname})")
             G.add_edge(ref[bname], node, terms=((tid, 1.0),), start=ref[bname], kind="link")
     for j in mech.joints:
         at = mech.bodies_at(j)
@@ -323,10 +324,15 @@ def _ordered_cycle(G: nx.Graph, nodes: list, order: dict) -> list:
     return nodes
 
 
+def _origin_name(mech: Mechanism) -> str:
+    """The world origin's display name: a ground joint placed there, else "O"."""
+    at_origin = [j for j in mech.links[mech.ground].joints if mech.joints[j] == (0.0, 0.0)]
+    return at_origin[0] if at_origin else "O"
+
+
 def _loop_label(cyc: list, mech: Mechanism) -> str:
     """Joint names along the loop; the world origin takes the name of a ground joint placed there."""
-    at_origin = [j for j in mech.links[mech.ground].joints if mech.joints[j] == (0.0, 0.0)]
-    origin = at_origin[0] if at_origin else "O"
+    origin = _origin_name(mech)
     names: list[str] = []
     for _, j in cyc:
         n = origin if j == ORIGIN else j

@@ -234,6 +234,8 @@ def _newton_block(
     xdd = np.zeros(nu)
     sign0 = None
     m = p.C.shape[0]
+    colscale = np.where(is_ang, 1.0 / scale, 1.0)  # unit-free condition number, as in _block_health
+    cond_first = cond_last = 1.0
     for k in range(n):
         if k > 0:
             h = tg[k] - tg[k - 1]
@@ -268,8 +270,17 @@ def _newton_block(
         res = np.max(np.abs(p.C @ z[0])) / scale
         if not converged or not np.isfinite(res) or res > 1e-9:
             worst = b.loops[int(np.argmax(np.abs(p.C @ z[0])))] if np.isfinite(res) else b.loops[0]
-            raise _Failure(k, worst, f"Newton did not converge (closure {res:.2g} of the mechanism size)")
+            why = f"Newton did not converge (closure {res:.2g} of the mechanism size)"
+            if k > 0 and cond_last > 10 * cond_first:
+                why += (
+                    f"; the Jacobian's condition number grew from {cond_first:.3g} to {cond_last:.3g}: "
+                    "a limit position or toggle is reached"
+                )
+            raise _Failure(k, worst, why)
         J = _jacobian(p, z, e)
+        cond_last = float(np.linalg.cond(J[0] * colscale))
+        if k == 0:
+            cond_first = cond_last
         sgn = np.sign(np.linalg.det(J[0]))
         if sign0 is None:
             sign0 = sgn
