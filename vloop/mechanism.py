@@ -180,7 +180,7 @@ class Mechanism:
 
     @property
     def scale(self) -> float:
-        """A length scale: the largest distance between any two joints/points at t = 0."""
+        """A length scale: the diagonal of the bounding box of all joints/points at t = 0."""
         pts = np.array([*self.joints.values(), *(p.at for p in self.points.values())], float)
         if len(pts) < 2:
             return 1.0

@@ -44,6 +44,74 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class _Sum:
+    """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small matrix products:
+    rigid vectors by the angle that turns them (G, constant), vectors fixed to the ground (c0),
+    slider vectors on the ground (Hf: only s varies) and slider vectors on moving guides.
+    Evaluated for positions, velocities or accelerations from the state arrays."""
+
+    c0: np.ndarray  # (K,): the rigid vectors fixed to the ground
+    avars: np.ndarray  # angle columns turning rigid vectors
+    G: np.ndarray  # (len(avars), K): Σ M·r·e^{jδ} of the rigid vectors turning with each angle
+    f_sl: np.ndarray  # sliders along ground lines ...
+    f_r: np.ndarray
+    Hf: np.ndarray  # (n, K): M·e^{jδ}
+    s_ang: np.ndarray  # slider vectors on moving guides: angle, slider, r, e^{jδ}, M
+    s_sl: np.ndarray
+    s_r: np.ndarray
+    s_cd: np.ndarray
+    Ms: np.ndarray
+
+    @classmethod
+    def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
+        ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
+        cd = np.exp(1j * sys.t_delta[terms])
+        M = M.astype(complex).reshape(len(terms), -1)
+        rigid = sl < 0
+        fixed = rigid & (ang < 0)
+        c0 = ((r * cd)[fixed][:, None] * M[fixed]).sum(0)
+        avars = np.unique(ang[rigid & (ang >= 0)])
+        G = np.array([((r * cd)[rigid & (ang == a)][:, None] * M[rigid & (ang == a)]).sum(0) for a in avars])
+        G = G.reshape(len(avars), M.shape[1])
+        f = ~rigid & (ang < 0)
+        mv = ~rigid & (ang >= 0)
+        return cls(c0, avars, G, sl[f], r[f], cd[f][:, None] * M[f], ang[mv], sl[mv], r[mv], cd[mv], M[mv])
+
+    def pos(self, st: _State, k: slice) -> np.ndarray:
+        out = st.E[k][:, self.avars] @ self.G + self.c0
+        if len(self.f_sl):
+            out += (self.f_r + st.S[k][:, self.f_sl]) @ self.Hf
+        if len(self.s_sl):
+            es = self.s_cd * st.E[k][:, self.s_ang]
+            out += ((self.s_r + st.S[k][:, self.s_sl]) * es) @ self.Ms
+        return out
+
+    def vel(self, st: _State, k: slice) -> np.ndarray:
+        out = 1j * ((st.W[k][:, self.avars] * st.E[k][:, self.avars]) @ self.G)
+        if len(self.f_sl):
+            out += st.SD[k][:, self.f_sl] @ self.Hf
+        if len(self.s_sl):
+            es = self.s_cd * st.E[k][:, self.s_ang]
+            ms = self.s_r + st.S[k][:, self.s_sl]
+            out += ((st.SD[k][:, self.s_sl] + 1j * st.W[k][:, self.s_ang] * ms) * es) @ self.Ms
+        return out
+
+    def acc(self, st: _State, k: slice) -> np.ndarray:
+        w = st.W[k][:, self.avars]
+        out = ((1j * st.AL[k][:, self.avars] - w * w) * st.E[k][:, self.avars]) @ self.G
+        if len(self.f_sl):
+            out += st.SDD[k][:, self.f_sl] @ self.Hf
+        if len(self.s_sl):
+            es = self.s_cd * st.E[k][:, self.s_ang]
+            ms = self.s_r + st.S[k][:, self.s_sl]
+            ws = st.W[k][:, self.s_ang]
+            sd = st.SD[k][:, self.s_sl]
+            coriolis = 2j * sd * ws  # a slider on a rotating guide
+            out += ((st.SDD[k][:, self.s_sl] + coriolis + (1j * st.AL[k][:, self.s_ang] - ws * ws) * ms) * es) @ self.Ms
+        return out
+
+
+@dataclass
 class _Plan:
     """Index data of one block (precomputed once per LoopSystem)."""
 
@@ -61,6 +129,13 @@ class _Plan:
     Ct: np.ndarray  # C.T as complex: complex @ complex matmuls are far faster than complex @ float
     known_idx: np.ndarray  # indices of the known terms
     g_known: np.ndarray  # their signs (complex), loop 0
+    total: _Sum | None = None  # Σ over the block's loops (K = m)
+    known_sum: _Sum | None = None  # Σ over the vectors independent of the unknowns
+    # per unknown angle a: W_a(t) = const + Σ coef·s (the block's vectors turning with a, unrotated)
+    w_const: dict[int, complex] | None = None
+    w_sl: dict[int, list[tuple[int, complex]]] | None = None
+    # per unknown slider i: its vector's direction U = coef·E[:, ang]
+    u_dir: dict[int, tuple[int, complex]] | None = None
     # closed-form roles
     on1: np.ndarray | None = None
     on2: np.ndarray | None = None
@@ -89,6 +164,17 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
             b, terms, Cb, ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, ~depends, masks,
             Cb.T.astype(complex), known_idx, Cb[0, known_idx].astype(complex),
         )  # fmt: skip
+        p.total = _Sum.build(sys, terms, Cb.T)
+        p.known_sum = _Sum.build(sys, terms[known_idx], Cb.T[known_idx])
+        g = Cb[0]
+        p.w_const, p.w_sl, p.u_dir = {}, {}, {}
+        for a in unk_ang:
+            on = np.nonzero(ang == a)[0]
+            p.w_const[a] = complex(sum(g[t] * sys.t_r[terms[t]] * cd_all[terms[t]] for t in on))
+            p.w_sl[a] = [(int(sl[t]), complex(g[t] * cd_all[terms[t]])) for t in on if sl[t] >= 0]
+        for i in unk_sl:
+            t = int(np.nonzero(sl == i)[0][0])
+            p.u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
         if b.kind == "RRR":
             p.on1, p.on2 = ang == unk_ang[0], ang == unk_ang[1]
         elif b.kind in ("RRP", "RPR"):
@@ -102,12 +188,12 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
     return plans
 
 
-def _system_matrices(sys: LoopSystem) -> tuple[np.ndarray, np.ndarray]:
-    """Complex copies of the point-path and loop matrices (cached)."""
-    if "path" not in sys.cache:
-        sys.cache["path"] = sys.path.astype(complex)
-        sys.cache["Ct"] = sys.C.T.astype(complex)
-    return sys.cache["path"], sys.cache["Ct"]
+def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
+    """Sums giving every point's position (and rates) and every loop's closure residual (cached)."""
+    if "sums" not in sys.cache:
+        terms = np.arange(len(sys.t_r))
+        sys.cache["sums"] = (_Sum.build(sys, terms, sys.path), _Sum.build(sys, terms, sys.C.T))
+    return sys.cache["sums"]
 
 
 class _State:
@@ -122,23 +208,12 @@ class _State:
         self.SD = np.zeros((n, ns + 1))
         self.SDD = np.zeros((n, ns + 1))
 
-    # term kinematics over rows ``k`` (a slice)
-    def e(self, k: slice, ang: np.ndarray, cd: np.ndarray) -> np.ndarray:
-        return cd * self.E[k][:, ang]
-
     def z(
         self, k: slice, ang: np.ndarray, sl: np.ndarray, r: np.ndarray, cd: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
+        """Term vectors z = (r + s)·e^{j(θ + δ)} and their unit directions over rows ``k``."""
         e = cd * self.E[k][:, ang]
         return (r + self.S[k][:, sl]) * e, e
-
-    def zdot(self, k: slice, ang: np.ndarray, sl: np.ndarray, z: np.ndarray, e: np.ndarray) -> np.ndarray:
-        return self.SD[k][:, sl] * e + 1j * self.W[k][:, ang] * z
-
-    def zddot(self, k: slice, ang: np.ndarray, sl: np.ndarray, z: np.ndarray, e: np.ndarray) -> np.ndarray:
-        w = self.W[k][:, ang]
-        sd = self.SD[k][:, sl]
-        return (self.SDD[k][:, sl] + 2j * sd * w) * e + (1j * self.AL[k][:, ang] - w * w) * z
 
 
 class _Failure(Exception):
@@ -149,67 +224,71 @@ class _Failure(Exception):
 # ------------------------------------------------------------------ positions
 
 
-def _closed_form(p: _Plan, st: _State, k: slice, na: int) -> tuple[np.ndarray, np.ndarray]:
-    """Closed-form positions of a one-loop dyad for rows ``k``; returns (valid mask, discriminant)."""
+def _w(p: _Plan, st: _State, k: slice, a: int, skip: int = -2) -> np.ndarray | complex:
+    """W_a: the block's vectors turning with unknown angle a, before rotation (slider ``skip`` left out)."""
+    w: np.ndarray | complex = p.w_const[a]
+    for i, coef in p.w_sl[a]:
+        if i != skip:
+            w = w + coef * st.S[k, i]
+    return w
+
+
+def _u(p: _Plan, st: _State, k: slice, i: int) -> np.ndarray:
+    a, coef = p.u_dir[i]
+    return coef * st.E[k, a]
+
+
+def _closed_form(p: _Plan, st: _State, k: slice, na: int) -> np.ndarray:
+    """Closed-form positions of a one-loop dyad for rows ``k``; returns the mask of assemblable rows."""
     b = p.block
-    mag = (p.r + st.S[k][:, p.sl]) * p.cd  # term vectors without their rotation
-    e = p.cd * st.E[k][:, p.ang]
-    g = p.Ct[:, 0]
-    X = -((mag[:, p.known_idx] * st.E[k][:, p.ang[p.known_idx]]) @ p.g_known)
+    X = -p.known_sum.pos(st, k)[:, 0]
     sig = b.sigma
     if b.kind == "RRR":
         # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
-        W1 = mag[:, p.on1] @ g[p.on1]
-        W2 = mag[:, p.on2] @ g[p.on2]
-        A2, B2 = W1.real**2 + W1.imag**2, W2.real**2 + W2.imag**2
+        W1, W2 = _w(p, st, k, p.unk_ang[0]), _w(p, st, k, p.unk_ang[1])
+        A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
         D2 = X.real**2 + X.imag**2
         k1 = 0.5 * (A2 + D2 - B2)
         h2 = A2 * D2 - k1 * k1
-        ok = h2 >= 0
+        ok = (h2 >= 0) & (D2 > 0)
         P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / np.where(D2 > 0, D2, 1.0)
         _set_angle(st, k, p.unk_ang[0], P / W1)
         _set_angle(st, k, p.unk_ang[1], (X - P) / W2)
-        return ok & (D2 > 0), h2 / np.maximum(A2 * D2, 1e-300)
+        return ok
     if b.kind == "RRP":
         # W1·E1 + s·U = X with U a known unit direction: project on U's normal
-        t = p.slider_term
-        U = g[t] * e[:, t]
-        W1 = mag[:, p.on1] @ g[p.on1]
-        Uc = np.conj(U)
+        i = p.unk_sl[0]
+        Uc = np.conj(_u(p, st, k, i))
+        W1 = _w(p, st, k, p.unk_ang[0])
         XU, WU = X * Uc, W1 * Uc
-        A2 = WU.real**2 + WU.imag**2
         y = XU.imag
-        h = A2 - y * y
+        h = np.abs(W1) ** 2 - y * y
         ok = h >= 0
         c = sig * np.sqrt(np.where(ok, h, 0.0))
         _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
-        st.S[k, p.unk_sl[0]] = XU.real - c
-        return ok, h / np.maximum(A2, 1e-300)
+        st.S[k, i] = XU.real - c
+        return ok
     if b.kind == "RPR":
         # (W + s·c)·E = X with c a unit direction fixed to the same link: |W + s·c| = |X|
-        t = p.slider_term
-        a = p.unk_ang[0]
-        cdir = g[t] * p.cd[t]
-        others = p.on1.copy()
-        others[t] = False
-        W = mag[:, others] @ g[others]
+        i, a = p.unk_sl[0], p.unk_ang[0]
+        cdir = p.u_dir[i][1]
+        W = _w(p, st, k, a, skip=i)
         bb = (W * np.conj(cdir)).real
-        disc = bb * bb - (W.real**2 + W.imag**2) + (X.real**2 + X.imag**2)
-        ok = disc >= 0
-        s = -bb + sig * np.sqrt(np.where(ok, disc, 0.0))
-        st.S[k, p.unk_sl[0]] = s
+        disc = bb * bb - np.abs(W) ** 2 + (X.real**2 + X.imag**2)
+        s = -bb + sig * np.sqrt(np.where(disc >= 0, disc, 0.0))
         den = W + s * cdir
-        _set_angle(st, k, a, X / np.where(np.abs(den) > 0, den, 1.0))
-        return ok & (np.abs(den) > 0), disc / np.maximum(X.real**2 + X.imag**2, 1e-300)
+        ok = (disc >= 0) & (np.abs(den) > 0)
+        st.S[k, i] = s
+        _set_angle(st, k, a, X / np.where(ok, den, 1.0))
+        return ok
     # PP: s1·U1 + s2·U2 = X
-    U1 = g[p.slider_term] * e[:, p.slider_term]
-    U2 = g[p.slider_term2] * e[:, p.slider_term2]
+    U1, U2 = _u(p, st, k, p.unk_sl[0]), _u(p, st, k, p.unk_sl[1])
     det = cross(U1, U2)
     ok = np.abs(det) > 1e-12
     dd = np.where(ok, det, 1.0)
     st.S[k, p.unk_sl[0]] = cross(X, U2) / dd
     st.S[k, p.unk_sl[1]] = cross(U1, X) / dd
-    return ok, np.abs(det)
+    return ok
 
 
 def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
@@ -289,9 +368,9 @@ def _newton_block(
                 k, b.loops[0], "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed"
             )
         if m and k + 1 < n:
-            xd = _rates(p, st, row, z, e, J, "v")[0]
+            xd = _rates(p, st, row, J, "v")[0]
             _store(p, st, row, xd[None, :], "v", na)
-            xdd = _rates(p, st, row, z, e, J, "a")[0]
+            xdd = _rates(p, st, row, J, "a")[0]
             _store(p, st, row, np.zeros((1, nu)), "v", na)
 
 
@@ -308,26 +387,30 @@ def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ velocities / accelerations
 
 
-def _rates(p: _Plan, st: _State, k: slice, z: np.ndarray, e: np.ndarray, J: np.ndarray | None, what: str) -> np.ndarray:
-    """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``; unknown columns must be 0."""
-    rhs_terms = st.zdot(k, p.ang, p.sl, z, e) if what == "v" else st.zddot(k, p.ang, p.sl, z, e)
-    R = -(rhs_terms @ p.Ct)  # (rows, m) complex
-    if J is None and len(p.block.unknowns) == 2:
-        c1, c2 = _columns(p, z, e)
+def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str) -> np.ndarray:
+    """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``.
+
+    The unknowns' own rate columns must still be zero: the sum is then the known part.
+    ``J``: the block Jacobians for blocks larger than 2×2 (Cramer's rule otherwise).
+    """
+    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))  # (rows, m) complex
+    if J is None:
+        c1, c2 = _columns(p, st, k)
         det = cross(c1, c2)
         R0 = R[:, 0]
         return np.stack([cross(R0, c2) / det, cross(c1, R0) / det], axis=1)
-    if J is None:
-        J = _jacobian(p, z, e)
     rhs = np.concatenate([R.real, R.imag], axis=1)
     return np.linalg.solve(J, rhs[..., None])[..., 0]
 
 
-def _columns(p: _Plan, z: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    g = p.Ct[:, 0]
+def _columns(p: _Plan, st: _State, k: slice) -> tuple[np.ndarray, np.ndarray]:
+    """The two complex Jacobian columns of a one-loop block: j·W_a·E_a for an angle, U for a slider."""
     cols = []
-    for v, mask in zip(p.block.unknowns, p.masks, strict=True):
-        cols.append((1j * z[:, mask] if v in p.unk_ang else e[:, mask]) @ g[mask])
+    for v in p.block.unknowns:
+        if v in p.unk_ang:
+            cols.append(1j * _w(p, st, k, v) * st.E[k, v])
+        else:
+            cols.append(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]))
     return cols[0], cols[1]
 
 
@@ -339,10 +422,10 @@ def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int)
             (st.SD if what == "v" else st.SDD)[k, v - na] = vals[:, i]
 
 
-def _block_health(p: _Plan, z: np.ndarray, e: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+def _block_health(p: _Plan, st: _State, k: slice, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Condition number (angle columns divided by the mechanism size) and det sign per row."""
     if len(p.block.unknowns) == 2:
-        c1, c2 = _columns(p, z, e)
+        c1, c2 = _columns(p, st, k)
         if p.block.unknowns[0] in p.unk_ang:
             c1 = c1 / scale
         if p.block.unknowns[1] in p.unk_ang:
@@ -354,7 +437,7 @@ def _block_health(p: _Plan, z: np.ndarray, e: np.ndarray, scale: float) -> tuple
         with np.errstate(divide="ignore"):
             cond = np.where(ad > 0, (f2 + root) / (2 * np.where(ad > 0, ad, 1.0)), np.inf)
         return cond, np.sign(det)
-    J = _jacobian(p, z, e)
+    J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
     colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
     Js = J * colscale
     return np.linalg.cond(Js), np.sign(np.linalg.det(J))
@@ -384,7 +467,7 @@ def _run_blocks(
             except _Failure as f:
                 failure, n_ok = f, f.sample
         else:
-            ok, _ = _closed_form(p, st, k, na)
+            ok = _closed_form(p, st, k, na)
             if not ok.all():
                 bad = int(np.argmin(ok))
                 failure = _Failure(bad, p.block.loops[0], "the loop cannot close: the input is past a limit position")
@@ -392,22 +475,20 @@ def _run_blocks(
         k = slice(0, n_ok)
         if n_ok == 0:
             break
-        z, e = st.z(k, p.ang, p.sl, p.r, p.cd)
-        cond, sgn = _block_health(p, z, e, scale)
+        cond, sgn = _block_health(p, st, k, scale)
         bad = np.nonzero((cond > TOGGLE_COND) | (sgn != sgn[0]))[0]
         if len(bad):
             failure = _Failure(int(bad[0]), p.block.loops[0], "the mechanism reaches a toggle (singular Jacobian)")
             n_ok = int(bad[0])
             k = slice(0, n_ok)
-            z, e = z[:n_ok], e[:n_ok]
             cond, sgn = cond[:n_ok], sgn[:n_ok]
         conds.append(cond)
         signs.append(sgn)
         if n_ok == 0:
             break
-        J = None if len(p.block.unknowns) == 2 else _jacobian(p, z, e)
-        _store(p, st, k, _rates(p, st, k, z, e, J, "v"), "v", na)
-        _store(p, st, k, _rates(p, st, k, z, e, J, "a"), "a", na)
+        J = None if len(p.block.unknowns) == 2 else _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
+        _store(p, st, k, _rates(p, st, k, J, "v"), "v", na)
+        _store(p, st, k, _rates(p, st, k, J, "a"), "a", na)
     return n_ok, failure, conds, signs
 
 
@@ -521,12 +602,8 @@ def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **
 def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, conds: list, signs: list) -> Result:
     mech = sys.mechanism
     k = slice(0, n_ok)
-    cd = np.exp(1j * sys.t_delta)
-    z, e = st.z(k, sys.t_ang, sys.t_sl, sys.t_r, cd)
-    zd = st.zdot(k, sys.t_ang, sys.t_sl, z, e)
-    zdd = st.zddot(k, sys.t_ang, sys.t_sl, z, e)
-    path, Ct = _system_matrices(sys)
-    P, V, A = z @ path, zd @ path, zdd @ path
+    points, loops = _system_sums(sys)
+    P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
     cols: dict[str, np.ndarray] = {}
     for name, a, offset in sys.link_outputs:
         if a >= 0:
@@ -543,7 +620,7 @@ def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, co
         cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
     for i, name in enumerate(sys.slider_names):
         cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[k, i], st.SD[k, i], st.SDD[k, i]
-    residual = np.max(np.abs(z @ Ct), axis=1) / mech.scale if len(sys.loops) else np.zeros(n_ok)
+    residual = np.max(np.abs(loops.pos(st, k)), axis=1) / mech.scale if len(sys.loops) else np.zeros(n_ok)
     cond = np.max(np.stack([c[:n_ok] for c in conds]), axis=0) if conds else np.ones(n_ok)
     branch = np.zeros(n_ok, np.int64)
     for bit, s in enumerate(signs):
