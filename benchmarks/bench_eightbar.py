@@ -16,13 +16,19 @@ a one-off per mechanism and is reported on its own line). Times are the best of
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-from scipy.optimize import fsolve
+# The matrix products here are tiny (thousands × a few); OpenBLAS's threads gain nothing on
+# them and, when the other core is busy, make every product wait — run BLAS single-threaded.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+from scipy.optimize import fsolve  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))

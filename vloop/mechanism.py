@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -178,7 +179,7 @@ class Mechanism:
         """Body frames and local joint coordinates (stated binary-link lengths applied)."""
         return _bodies(self)
 
-    @property
+    @cached_property
     def scale(self) -> float:
         """A length scale: the diagonal of the bounding box of all joints/points at t = 0."""
         pts = np.array([*self.joints.values(), *(p.at for p in self.points.values())], float)

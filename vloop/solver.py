@@ -43,6 +43,13 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a.real * b.imag - a.imag * b.real
 
 
+def _add_real_product(out: np.ndarray, A: np.ndarray, H: np.ndarray) -> None:
+    """out += A @ H for real A and complex H, as two real BLAS products (numpy's mixed
+    real-complex matmul takes a slow generic loop)."""
+    out.real += A @ H.real
+    out.imag += A @ H.imag
+
+
 @dataclass
 class _Sum:
     """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small matrix products:
@@ -80,7 +87,7 @@ class _Sum:
     def pos(self, st: _State, k: slice) -> np.ndarray:
         out = st.E[k][:, self.avars] @ self.G + self.c0
         if len(self.f_sl):
-            out += (self.f_r + st.S[k][:, self.f_sl]) @ self.Hf
+            _add_real_product(out, self.f_r + st.S[k][:, self.f_sl], self.Hf)
         if len(self.s_sl):
             es = self.s_cd * st.E[k][:, self.s_ang]
             out += ((self.s_r + st.S[k][:, self.s_sl]) * es) @ self.Ms
@@ -89,7 +96,7 @@ class _Sum:
     def vel(self, st: _State, k: slice) -> np.ndarray:
         out = 1j * ((st.W[k][:, self.avars] * st.E[k][:, self.avars]) @ self.G)
         if len(self.f_sl):
-            out += st.SD[k][:, self.f_sl] @ self.Hf
+            _add_real_product(out, st.SD[k][:, self.f_sl], self.Hf)
         if len(self.s_sl):
             es = self.s_cd * st.E[k][:, self.s_ang]
             ms = self.s_r + st.S[k][:, self.s_sl]
@@ -100,7 +107,7 @@ class _Sum:
         w = st.W[k][:, self.avars]
         out = ((1j * st.AL[k][:, self.avars] - w * w) * st.E[k][:, self.avars]) @ self.G
         if len(self.f_sl):
-            out += st.SDD[k][:, self.f_sl] @ self.Hf
+            _add_real_product(out, st.SDD[k][:, self.f_sl], self.Hf)
         if len(self.s_sl):
             es = self.s_cd * st.E[k][:, self.s_ang]
             ms = self.s_r + st.S[k][:, self.s_sl]
@@ -398,7 +405,10 @@ def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str) -> n
         c1, c2 = _columns(p, st, k)
         det = cross(c1, c2)
         R0 = R[:, 0]
-        return np.stack([cross(R0, c2) / det, cross(c1, R0) / det], axis=1)
+        out = np.empty((len(R0), 2))
+        out[:, 0] = cross(R0, c2) / det
+        out[:, 1] = cross(c1, R0) / det
+        return out
     rhs = np.concatenate([R.real, R.imag], axis=1)
     return np.linalg.solve(J, rhs[..., None])[..., 0]
 
