@@ -139,6 +139,92 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_validate(args: argparse.Namespace) -> int:
+    import datetime as dt
+    import json
+
+    from validators import harness, nightly
+
+    from .pytest_plugin import catalog
+
+    files = [Path(f) for f in args.files]
+    if args.all:
+        files += catalog()
+    if not files:
+        return _fail("validate: name mechanism files or use --all")
+    engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
+    unknown = [e for e in engines if e not in harness.ENGINES]
+    if unknown:
+        return _fail(f"validate: unknown engine {', '.join(unknown)} (known: {', '.join(harness.ENGINES)})")
+    root = Path(args.out)
+    out = nightly.dated_folder(root) if args.nightly else root
+
+    def progress(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    validation = harness.run(files, engines, progress=progress)
+    summary = harness.to_summary(validation)
+    flags: list[dict] = []
+    if args.nightly:
+        prev = Path(args.previous) if args.previous else nightly.previous_summary(root, out)
+        if prev is not None:
+            flags = nightly.compare_summaries(summary, nightly.load_summary(prev))
+        summary["nightly"] = {
+            "date": dt.date.today().isoformat(),
+            "previous": str(prev) if prev else None,
+            "flags": flags,
+        }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False), encoding="utf-8")
+    written = [out / "summary.json"]
+    if not args.no_report:
+        try:
+            from reports.html import write_report
+        except ImportError as exc:  # the report needs Jinja2; the summary does not
+            print(f"vloop: no report ({exc})", file=sys.stderr)
+        else:
+            written.append(write_report(validation, summary, out, animate=args.animate))
+    print(_table(summary))
+    for f in flags:
+        print(f"FLAG {f['message']}")
+    print("wrote " + ", ".join(str(w) for w in written))
+    if validation.bad_input:
+        return 2
+    return 0 if validation.passed and not flags else 1
+
+
+def _table(summary: dict) -> str:
+    """One line per mechanism: each engine's worst error as a fraction of what is allowed."""
+    engines = [e for e in summary["engines"] if e != "vloop"]
+    head = f"{'mechanism':32s} " + " ".join(f"{e:>17s}" for e in engines) + "  result"
+    lines = [head, "-" * len(head)]
+    for m in summary["mechanisms"]:
+        cells = []
+        for e in engines:
+            run = m.get("runs", {}).get(e)
+            comps = [c for c in m.get("comparisons", []) if c["engine"] == e]
+            if run is None or run["status"] == "skipped":
+                cells.append("-")
+            elif run["status"] == "error":
+                cells.append("ERROR")
+            else:
+                worst = max(
+                    (
+                        (c["worst"]["max_abs"] if isinstance(c["worst"]["max_abs"], float) else float("inf"))
+                        / max(c["worst"]["allowed"], 1e-300)
+                        for c in comps
+                        if c["worst"]
+                    ),
+                    default=0.0,
+                )
+                mark = "" if all(c["passed"] for c in comps) else " FAIL"
+                cells.append(f"{worst:.1e} of tol{mark}")
+        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else "FAIL")
+        lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>17s}" for c in cells) + f"  {verdict}")
+    lines.append(f"{'all passed' if summary['passed'] else 'FAILED'} in {summary['seconds']:.1f} s")
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
     p.add_argument("--version", action="version", version=f"vloop {__version__}")
@@ -155,6 +241,20 @@ def build_parser() -> argparse.ArgumentParser:
     lo.add_argument("file")
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
     lo.set_defaults(func=cmd_loops)
+    v = sub.add_parser("validate", help="run every engine on mechanisms, compare, write summary.json and a report")
+    v.add_argument("files", nargs="*", help="mechanism files (or --all)")
+    v.add_argument("--all", action="store_true", help="every file in mechanisms/")
+    v.add_argument(
+        "--engines",
+        default="vloop,analytic,pinocchio,exudyn-kinematic,exudyn-dynamic",
+        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic",
+    )
+    v.add_argument("--out", default="validation", help="output folder (default: validation)")
+    v.add_argument("--nightly", action="store_true", help="dated subfolder; compare with the previous run")
+    v.add_argument("--previous", help="summary.json to compare with (default: the newest under --out)")
+    v.add_argument("--no-report", action="store_true", help="summary.json only")
+    v.add_argument("--animate", action="store_true", help="add an animated GIF per mechanism to the report")
+    v.set_defaults(func=cmd_validate)
     i = sub.add_parser("info", help="links, joints, pin orders, mobility, loops, Grashof class")
     i.add_argument("file")
     i.set_defaults(func=cmd_info)

@@ -1,0 +1,154 @@
+"""`vloop validate`: summary.json (schema), pass/fail, a perturbed engine input, nightly flags."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jsonschema
+import pytest
+
+import vloop
+from tests.conftest import MECHANISMS
+from validators import harness, nightly
+from vloop.cli import main
+
+SCHEMA = json.loads((Path(harness.__file__).parent / "summary.schema.json").read_text())
+FAST = "vloop,analytic,pinocchio"
+
+
+@pytest.fixture(scope="module")
+def validated(tmp_path_factory):
+    pytest.importorskip("pinocchio")
+    out = tmp_path_factory.mktemp("val")
+    files = [MECHANISMS / "eightbar.toml", MECHANISMS / "fourbar_nongrashof_past_limit.toml"]
+    code = main(["validate", *map(str, files), "--engines", FAST, "--out", str(out), "--no-report"])
+    return code, out, json.loads((out / "summary.json").read_text())
+
+
+def test_validate_passes_and_summary_matches_schema(validated):
+    code, _, summary = validated
+    assert code == 0
+    jsonschema.validate(summary, SCHEMA)
+    assert summary["passed"] is True
+    assert [m["name"] for m in summary["mechanisms"]] == ["eightbar", "fourbar_nongrashof_past_limit"]
+    eb = summary["mechanisms"][0]
+    assert eb["loops"] == 3 and eb["mobility"] == 1 and eb["samples"] == 48
+    assert {(c["engine"], c["reference"]) for c in eb["comparisons"]} == {
+        ("analytic", "vloop"),
+        ("pinocchio", "vloop"),
+        ("pinocchio", "analytic"),
+    }
+    for c in eb["comparisons"]:
+        assert c["samples"] == 48 and c["passed"]
+        assert len(c["quantities"]) > 50
+        assert all(q["max_abs"] <= q["allowed"] for q in c["quantities"])
+    # the past-limit run: every engine stops at sample 173 and they agree before it
+    ng = summary["mechanisms"][1]
+    assert {r["status"] for r in ng["runs"].values()} == {"stopped"}
+    assert {r["samples"] for r in ng["runs"].values()} == {173}
+    assert summary["versions"]["pin"] != "not installed"
+
+
+def test_perturbed_engine_input_fails_naming_mechanism_engine_quantity_time():
+    """Rod l5 1 % too long in Pinocchio's input only: the comparison must fail and say where."""
+    pytest.importorskip("pinocchio")
+    path = MECHANISMS / "eightbar.toml"
+    good = vloop.load(path)
+    text = path.read_text().replace("length = 6.15 }   # rod d", "length = 6.2115 }  # rod d, +1 %")
+    bad = vloop.loads(text.replace("[time]", "[solver]\nassembly_tolerance = 0.02\n\n[time]"), source=str(path))
+    a = harness.run_engine("pinocchio", bad)
+    b = harness.run_engine("vloop", good)
+    c = harness.check(a, b, "eightbar")
+    assert not c.passed
+    assert "eightbar: pinocchio vs vloop:" in c.message
+    assert "l5.theta off by" in c.message or "l6.s off by" in c.message or "C." in c.message
+    assert " at t = " in c.message
+
+
+def test_failing_engine_does_not_stop_the_others(tmp_path, monkeypatch, capsys):
+    real = harness._engine_fn
+
+    def broken(name):
+        if name == "analytic":
+            def boom(m):
+                raise RuntimeError("closed form exploded")
+            return boom
+        return real(name)
+
+    monkeypatch.setattr(harness, "_engine_fn", broken)
+    code = main(["validate", str(MECHANISMS / "slider_crank_offset.toml"), "--engines", "vloop,analytic", "--out", str(tmp_path), "--no-report"])
+    assert code == 1
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    runs = summary["mechanisms"][0]["runs"]
+    assert runs["analytic"]["status"] == "error" and "closed form exploded" in runs["analytic"]["message"]
+    assert runs["vloop"]["status"] == "ok"
+    assert "ERROR" in capsys.readouterr().out
+
+
+def test_bad_input_gives_exit_code_2(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = 'x'\n[joints]\nA = [0.0, 0.0]\n")
+    assert main(["validate", str(bad), "--engines", "vloop", "--out", str(tmp_path / "o"), "--no-report"]) == 2
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert "missing or empty" in summary["mechanisms"][0]["error"]
+    assert main(["validate", str(bad), "--engines", "vloop,warp-drive", "--out", str(tmp_path / "o")]) == 2
+
+
+def test_nightly_flags_an_injected_regression(validated, tmp_path, monkeypatch, capsys):
+    """Yesterday: the real run. Today: Pinocchio's l3.alpha off by 1e-10 of itself — still within
+    its 1e-9 tolerance, but 10^3 times yesterday's error: the nightly run must flag it."""
+    _, _, summary = validated
+    root = tmp_path / "nightly"
+    yesterday = root / "2026-11-20"
+    yesterday.mkdir(parents=True)
+    (yesterday / "summary.json").write_text(json.dumps(summary))
+    real = harness._engine_fn
+
+    def drifting(name):
+        fn = real(name)
+        if name != "pinocchio":
+            return fn
+
+        def run(m):
+            res = fn(m)
+            res.columns["l3.alpha"] = res.columns["l3.alpha"] * (1 + 1e-10)
+            return res
+
+        return run
+
+    monkeypatch.setattr(harness, "_engine_fn", drifting)
+    code = main(["validate", str(MECHANISMS / "eightbar.toml"), "--engines", FAST, "--out", str(root), "--nightly", "--no-report"])
+    text = capsys.readouterr().out
+    assert code == 1
+    assert "FLAG eightbar: pinocchio vs vloop: l3.alpha grew more than 10x" in text
+    dated = [p for p in root.iterdir() if p.name != "2026-11-20"]
+    assert len(dated) == 1
+    new = json.loads((dated[0] / "summary.json").read_text())
+    jsonschema.validate(new, SCHEMA)
+    assert new["passed"] is True  # within tolerance: only the nightly comparison sees the drift
+    assert new["nightly"]["previous"].endswith("2026-11-20/summary.json")
+    assert {(f["quantity"], f["kind"]) for f in new["nightly"]["flags"]} >= {("l3.alpha", "grew more than 10x")}
+    # a quantity that crosses its tolerance is flagged whatever its growth
+    cur = json.loads(json.dumps(summary))
+    q = cur["mechanisms"][0]["comparisons"][0]["quantities"][0]
+    q["max_abs"], q["passed"] = q["allowed"] * 2, False
+    crossed = nightly.compare_summaries(cur, summary)
+    assert [f["kind"] for f in crossed] == ["crossed tolerance"]
+    assert f"{q['quantity']} crossed tolerance" in crossed[0]["message"]
+
+
+def test_plugin_parametrizes_over_the_catalog(vloop_mechanism_file, assert_histories_close):
+    """The pytest plugin's fixtures: every catalog file, vloop against the Newton path at 1e-9."""
+    mech = vloop.load(vloop_mechanism_file)
+    try:
+        a = vloop.solve(mech)
+    except vloop.MotionError as exc:
+        a = exc.partial
+    b_sys = vloop.compile(mech)
+    try:
+        b = vloop.solve(b_sys, a.t[: max(len(a) - 2, 1)], method="newton")
+    except vloop.MotionError as exc:
+        b = exc.partial
+    n = min(len(a), len(b))
+    assert_histories_close(a.head(n), b.head(n), rtol=1e-9)

@@ -1,0 +1,113 @@
+"""Nightly runs: a dated output folder and a comparison with the previous run's summary.json.
+
+A quantity is flagged when its error crossed its tolerance (passed before, fails now) or grew
+by more than ``GROWTH`` times. Errors far below their tolerance are round-off and jitter
+between library versions, so growth is measured on max(error, NOISE × allowed): a quantity at
+1e-16 that moves to 1e-15 is not news; one that moves from 1e-12 to 1e-10 of a 1e-9 tolerance is.
+An engine that ran before and fails now, and a comparison that disappeared, are flagged too.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from pathlib import Path
+from typing import Any
+
+GROWTH = 10.0
+NOISE = 1e-4  # fraction of the allowed error below which changes are not flagged
+
+
+def dated_folder(root: Path, now: _dt.datetime | None = None) -> Path:
+    """root/YYYY-MM-DD, or root/YYYY-MM-DD-HHMMSS if that exists already."""
+    now = now or _dt.datetime.now()
+    p = root / now.strftime("%Y-%m-%d")
+    if p.exists():
+        p = root / now.strftime("%Y-%m-%d-%H%M%S")
+    return p
+
+
+def previous_summary(root: Path, current: Path) -> Path | None:
+    """The newest summary.json under ``root`` from another run folder than ``current``."""
+    cands = (
+        [
+            p / "summary.json"
+            for p in root.iterdir()
+            if p.is_dir() and p.resolve() != current.resolve() and (p / "summary.json").exists()
+        ]
+        if root.exists()
+        else []
+    )
+    return max(cands, key=lambda p: p.parent.name, default=None)
+
+
+def _index(summary: dict[str, Any]) -> dict[tuple[str, str, str, str], dict[str, Any]]:
+    out = {}
+    for m in summary.get("mechanisms", []):
+        for c in m.get("comparisons", []):
+            for q in c.get("quantities", []):
+                out[(m["name"], c["engine"], c["reference"], q["quantity"])] = q
+    return out
+
+
+def _err(q: dict[str, Any]) -> float:
+    v = q["max_abs"]
+    return float("inf") if isinstance(v, str) else float(v)
+
+
+def compare_summaries(current: dict[str, Any], previous: dict[str, Any]) -> list[dict[str, Any]]:
+    """Flags (one dict each: mechanism, engine, reference, quantity, kind, before, after, message)."""
+    flags: list[dict[str, Any]] = []
+    cur, prev = _index(current), _index(previous)
+    for key, q in cur.items():
+        p = prev.get(key)
+        if p is None:
+            continue
+        mech, engine, ref, quantity = key
+        before, after = _err(p), _err(q)
+        floor = NOISE * float(q["allowed"])
+        if p["passed"] and not q["passed"]:
+            kind = "crossed tolerance"
+        elif max(after, floor) > GROWTH * max(before, floor):
+            kind = f"grew more than {GROWTH:g}x"
+        else:
+            continue
+        flags.append(
+            {
+                "mechanism": mech,
+                "engine": engine,
+                "reference": ref,
+                "quantity": quantity,
+                "kind": kind,
+                "before": before,
+                "after": after,
+                "allowed": q["allowed"],
+                "message": (
+                    f"{mech}: {engine} vs {ref}: {quantity} {kind} "
+                    f"({before:.3g} -> {after:.3g}, allowed {q['allowed']:.3g})"
+                ),
+            }
+        )
+    prev_runs = {(m["name"], e): r for m in previous.get("mechanisms", []) for e, r in m.get("runs", {}).items()}
+    for m in current.get("mechanisms", []):
+        for e, r in m.get("runs", {}).items():
+            before = prev_runs.get((m["name"], e))
+            if before is not None and before["status"] in ("ok", "stopped") and r["status"] == "error":
+                flags.append(
+                    {
+                        "mechanism": m["name"],
+                        "engine": e,
+                        "reference": "",
+                        "quantity": "",
+                        "kind": "engine failed",
+                        "before": before["status"],
+                        "after": r["status"],
+                        "allowed": 0.0,
+                        "message": f"{m['name']}: {e} ran before and fails now: {r['message'][:200]}",
+                    }
+                )
+    return flags
+
+
+def load_summary(path: Path) -> dict[str, Any]:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
