@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from .errors import MechanismError, MotionError, VloopError
-from .mechanism import Mechanism, from_dict, load, loads
+from .mechanism import Mechanism, dumps, from_dict, load, loads, save
 from .result import Result
 
 __version__ = "0.1.0"
@@ -26,9 +26,11 @@ __all__ = [
     "VloopError",
     "__version__",
     "compile",
+    "dumps",
     "from_dict",
     "load",
     "loads",
+    "save",
     "solve",
 ]
 

@@ -7,7 +7,6 @@ engine evaluates the inputs with this one function.
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline, CubicSpline
 
 from .errors import MechanismError
 from .mechanism import Driver, Mechanism
@@ -41,6 +40,8 @@ def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
             entry=driver.entry,
             time=float(t[k]),
         )
+    from scipy.interpolate import CubicHermiteSpline, CubicSpline  # only profiles need scipy (slow import)
+
     if p.v is not None:
         xs = CubicHermiteSpline(p.t, p.x, p.v)
         if p.a is not None:

@@ -745,3 +745,67 @@ def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
         else:
             out["max_iter"] = raw["max_iter"]
     return out
+
+
+# ---------------------------------------------------------------- saving
+
+
+def to_dict(mech: Mechanism) -> dict[str, Any]:
+    """The TOML structure of a Mechanism (:func:`from_dict` reads it back to an equal Mechanism).
+
+    Tabulated profiles are written inline (``profile = { t = [...], theta = [...] }``);
+    the time grid as an explicit ``times`` list.
+    """
+    out: dict[str, Any] = {"name": mech.name}
+    if mech.title:
+        out["title"] = mech.title
+    out["units"] = mech.units
+    out["joints"] = {j: list(xy) for j, xy in mech.joints.items()}
+    links: dict[str, Any] = {}
+    for n, lk in mech.links.items():
+        entry: dict[str, Any] = {"joints": list(lk.joints)}
+        if lk.ground:
+            entry["ground"] = True
+        if lk.length is not None:
+            entry["length"] = lk.length
+        links[n] = entry
+    out["links"] = links
+    if mech.sliders:
+        out["sliders"] = {
+            n: {"joint": s.joint, "guide": s.guide, "axis": list(s.axis)} for n, s in mech.sliders.items()
+        }
+    if mech.points:
+        out["points"] = {n: {"link": p.link, "at": list(p.at)} for n, p in mech.points.items()}
+    drivers = []
+    for d in mech.drivers:
+        names = ("theta0", "omega", "alpha") if d.kind == "crank" else ("s0", "v", "a")
+        cols = ("t", "theta", "omega", "alpha") if d.kind == "crank" else ("t", "s", "v", "a")
+        entry = {"link": d.target, "pivot": d.pivot} if d.kind == "crank" else {"slider": d.target}
+        if d.profile is None:
+            entry.update(zip(names, (d.x0, d.v0, d.a0), strict=True))
+        else:
+            p = d.profile
+            prof = {cols[0]: p.t.tolist(), cols[1]: p.x.tolist()}
+            if p.v is not None:
+                prof[cols[2]] = p.v.tolist()
+            if p.a is not None:
+                prof[cols[3]] = p.a.tolist()
+            entry["profile"] = prof
+        drivers.append(entry)
+    out["drivers"] = drivers
+    out["time"] = {"times": mech.times.tolist()}
+    if mech.options:
+        out["solver"] = dict(mech.options)
+    return out
+
+
+def dumps(mech: Mechanism) -> str:
+    """The mechanism as TOML text (see :func:`to_dict`)."""
+    import tomli_w
+
+    return tomli_w.dumps(to_dict(mech))
+
+
+def save(mech: Mechanism, path: str | Path) -> None:
+    """Write the mechanism to a TOML file that :func:`load` reads back to an equal Mechanism."""
+    Path(path).write_text(dumps(mech), encoding="utf-8")
