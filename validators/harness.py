@@ -180,8 +180,10 @@ def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | Non
             if not passed:
                 msg = f"{a.engine} {_extent(a)} samples, {b.engine} {_extent(b)}"
     if a.status == "stopped" or b.status == "stopped":
-        n = max(n - 1, 0)  # the very last sample before a limit may be solved by one engine only
-    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol)
+        # Approaching a limit position every rate grows without bound and every engine's conditioning
+        # with it (a time integrator's most of all): compare the first 90 % of what both solved.
+        n = max(int(0.9 * (n - 1)), 0)
+    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor)
     if not cmp.passed:
         passed = False
         msg = "; ".join(filter(None, [msg, cmp.message(limit=3).replace("\n", "; ")]))

@@ -15,13 +15,39 @@ GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velo
 
 @dataclass(frozen=True)
 class Tolerance:
+    """rtol: fraction of each quantity's peak; floor: absolute allowance as a fraction of its group's peak."""
+
     rtol: float | dict[str, float]
     note: str
+    floor: float | dict[str, float] = 1e-12
 
     def as_dict(self) -> dict[str, Any]:
-        rt = self.rtol if isinstance(self.rtol, dict) else {g: self.rtol for g in GROUPS}
-        return {"rtol": rt, "note": self.note}
+        def by_group(x: float | dict[str, float]) -> dict[str, float]:
+            return x if isinstance(x, dict) else {g: x for g in GROUPS}
 
+        return {"rtol": by_group(self.rtol), "floor": by_group(self.floor), "note": self.note}
+
+
+# Exudyn's real time integration (index-3 generalized-alpha, spectral radius 0.6, second order in h),
+# at the step validators/exudyn.py picks for an accuracy target of 1e-5: measured on the catalog
+# (max error / group peak) ≤ 2e-15 positions and angles (the constraints fix them), ≤ 1e-6 velocities,
+# ≤ 6e-6 accelerations. Allowed: 1e-9, 3e-6, 2e-5 of the group's peak — the same figure as the floor,
+# because a quantity that is zero in theory (a horizontal slider's vy) carries the integrator's error too.
+_DYNAMIC_RTOL = {
+    "angle": 1e-9,
+    "position": 1e-9,
+    "angular velocity": 3e-6,
+    "velocity": 3e-6,
+    "angular acceleration": 2e-5,
+    "acceleration": 2e-5,
+}
+_DYNAMIC = Tolerance(
+    _DYNAMIC_RTOL,
+    "Exudyn SolveDynamic (generalized-alpha, rho = 0.6) at its default step (accuracy target 1e-5): measured "
+    "<= 1e-6 velocities and <= 6e-6 accelerations of the group peak on the catalog; allowed 3e-6 / 2e-5, "
+    "as rtol and as floor.",
+    floor=_DYNAMIC_RTOL,
+)
 
 # (engine, reference) -> tolerance
 TOLERANCES: dict[tuple[str, str], Tolerance] = {
@@ -41,30 +67,8 @@ TOLERANCES: dict[tuple[str, str], Tolerance] = {
         "Newton on Exudyn's own constraint residuals and Jacobians, stopped at ~1e-12; the issue asks 1e-8.",
     ),
     ("exudyn-kinematic", "analytic"): Tolerance(1e-8, "As exudyn-kinematic vs vloop."),
-    ("exudyn-dynamic", "vloop"): Tolerance(
-        {
-            "angle": 1e-6,
-            "position": 1e-6,
-            "angular velocity": 1e-4,
-            "velocity": 1e-4,
-            "angular acceleration": 2e-2,
-            "acceleration": 2e-2,
-        },
-        "Index-3 generalized-alpha (spectral radius 0.6) with prescribed drivers: a real time integration, "
-        "second order in its step. Bounds cover the errors measured at the harness's default step "
-        "(see validators/exudyn.py: dynamic_step) with margin ×10.",
-    ),
-    ("exudyn-dynamic", "analytic"): Tolerance(
-        {
-            "angle": 1e-6,
-            "position": 1e-6,
-            "angular velocity": 1e-4,
-            "velocity": 1e-4,
-            "angular acceleration": 2e-2,
-            "acceleration": 2e-2,
-        },
-        "As exudyn-dynamic vs vloop.",
-    ),
+    ("exudyn-dynamic", "vloop"): _DYNAMIC,
+    ("exudyn-dynamic", "analytic"): _DYNAMIC,
 }
 
 

@@ -58,7 +58,7 @@ class Comparison:
     mechanism: str
     engine_a: str
     engine_b: str
-    rtol: float
+    rtol: float | dict[str, float]
     errors: list[QuantityError]
 
     @property
@@ -99,18 +99,25 @@ def _field(col: str) -> str:
     return col.rsplit(".", 1)[1]
 
 
+def group_of(column: str) -> str:
+    """The quantity group of a column: "angle", "velocity", ... (KeyError for "t" or health columns)."""
+    return _GROUP[_field(column)][0]
+
+
 def compare(
     a: Result,
     b: Result,
     rtol: float | dict[str, float],
     *,
-    floor: float = 1e-12,
+    floor: float | dict[str, float] = 1e-12,
     columns: list[str] | None = None,
 ) -> Comparison:
     """Compare ``a`` against reference ``b`` on their shared columns.
 
     ``rtol`` is one number or a dict by group (``"position"``, ``"velocity"``,
-    ``"acceleration"``, ``"angle"``, ``"angular velocity"``, ``"angular acceleration"``).
+    ``"acceleration"``, ``"angle"``, ``"angular velocity"``, ``"angular acceleration"``);
+    so is ``floor``, the absolute allowance as a fraction of the group's peak (an integrator's
+    error on a quantity that is zero in theory is of the order of its group's error, not zero).
     The sample times must agree (to 1e-9 of the run's length).
     """
     if len(a.t) != len(b.t) or (len(a.t) and not np.allclose(a.t, b.t, rtol=0, atol=1e-9 * max(1.0, np.ptp(b.t)))):
@@ -134,13 +141,14 @@ def compare(
         k = int(np.argmax(e)) if len(e) else 0
         mx = float(e[k]) if len(e) else 0.0
         r = rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol
-        tol = floor * group_scale[g] + r * peaks[c]
+        f = floor.get(g, 1e-12) if isinstance(floor, dict) else floor
+        tol = f * group_scale[g] + r * peaks[c]
         # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
         ref = max(peaks[c], ZERO_FLOOR * group_scale[g])
         rel = mx / ref if ref > 0 else (0.0 if mx == 0 else math.inf)
         rms = float(np.sqrt(np.mean(d * d))) if len(d) else 0.0
         errors.append(QuantityError(c, g, mx, peaks[c], rel, rms, float(b.t[k]) if len(b.t) else 0.0, tol, mx <= tol))
-    return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol if isinstance(rtol, float) else 0.0, errors)
+    return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, errors)
 
 
 def assert_histories_close(
@@ -148,7 +156,7 @@ def assert_histories_close(
     b: Result,
     rtol: float | dict[str, float],
     *,
-    floor: float = 1e-12,
+    floor: float | dict[str, float] = 1e-12,
     columns: list[str] | None = None,
     min_columns: int = 1,
 ) -> Comparison:
