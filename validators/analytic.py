@@ -1,7 +1,8 @@
 """Pick the hand-derived closed form that applies to a mechanism.
 
-Each closed-form module (``analytic_eightbar``, ``analytic_slider_crank``,
-``analytic_fourbar``) exposes ``applies(mech)``, which inspects the structure
+Each closed-form module in ``CLOSED_FORMS`` (the eight-bar, slider-crank, four-bar,
+inverted slider-crank, Whitworth, Watt II and Stephenson III six-bars, five-bar and
+Jansen pair) exposes ``applies(mech)``, which inspects the structure
 (bodies, pins, sliders, the driver, slider axes) rather than names, and
 ``solve(mech, times=None) -> Result`` (engine ``"analytic"``; the closed form
 used is in ``result.meta["closed_form"]``). None of them shares code with
@@ -17,10 +18,30 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from . import analytic_eightbar, analytic_fourbar, analytic_slider_crank
+from . import (
+    analytic_eightbar,
+    analytic_fivebar,
+    analytic_fourbar,
+    analytic_inverted_slider_crank,
+    analytic_jansen,
+    analytic_sixbar_stephenson3,
+    analytic_sixbar_watt2,
+    analytic_slider_crank,
+    analytic_whitworth,
+)
 from .analytic_common import LimitPositionError
 
-CLOSED_FORMS: tuple[ModuleType, ...] = (analytic_eightbar, analytic_slider_crank, analytic_fourbar)
+CLOSED_FORMS: tuple[ModuleType, ...] = (
+    analytic_eightbar,
+    analytic_slider_crank,
+    analytic_fourbar,
+    analytic_inverted_slider_crank,
+    analytic_whitworth,
+    analytic_sixbar_watt2,
+    analytic_sixbar_stephenson3,
+    analytic_fivebar,
+    analytic_jansen,
+)
 
 __all__ = ["CLOSED_FORMS", "LimitPositionError", "available", "closed_form_for", "solve"]
 
@@ -45,7 +66,6 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     if mod is None:
         names = ", ".join(m.NAME for m in CLOSED_FORMS)
         raise ValueError(
-            f"{mech.name}: no closed form applies (known structures: {names}; each needs exactly one crank driver "
-            "and ground-guided sliders)"
+            f"{mech.name}: no closed form applies (known structures: {names}; they are crank-driven)"
         )
     return mod.solve(mech, times)

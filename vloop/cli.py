@@ -270,6 +270,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(str(exc))
     except KeyboardInterrupt:
         return _fail("interrupted")
+    except BrokenPipeError:  # the reader went away (vloop ... | head): nothing left to say
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

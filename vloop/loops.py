@@ -298,6 +298,8 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     )  # fmt: skip
     q0, report = _assemble(sys)
     blocks = _blocks(sys, q0, method)
+    if mech.options.get("branches"):
+        blocks, q0, report = _choose_branches(sys, blocks, q0, report)
     return LoopSystem(
         mech, angle_links, slider_names, arr_ang, arr_sl, arr_r, arr_delta, tuple(t_label), tuple(loops), C,
         points, path, link_outputs, tuple(driven), unknowns, blocks, q0, coords_q, G, report, method,
@@ -407,6 +409,81 @@ def _assemble(sys: LoopSystem) -> tuple[np.ndarray, dict]:
         "moved": float(moved.max(initial=0.0)),
         "moved_by_point": dict(zip(sys.point_names, moved.tolist(), strict=True)),
     }
+
+
+def loop_polygon(sys: LoopSystem, q: np.ndarray, loop: Loop) -> list[complex]:
+    """The distinct joints along a loop at configuration ``q`` (the world origin where the loop uses it)."""
+    z = term_values(sys, q)
+    tol = 1e-12 * sys.mechanism.scale
+    pts: list[complex] = []
+    for _, joint in loop.nodes:
+        p = 0j if joint == ORIGIN else complex(z @ sys.path[:, sys.point_names.index(joint)])
+        if not pts or abs(p - pts[-1]) > tol:
+            pts.append(p)
+    if len(pts) > 1 and abs(pts[0] - pts[-1]) <= tol:
+        pts.pop()
+    return pts
+
+
+def _segments_cross(a: complex, b: complex, c: complex, d: complex) -> bool:
+    def orient(p: complex, q: complex, r: complex) -> float:
+        return ((q - p).conjugate() * (r - p)).imag
+
+    return orient(a, b, c) * orient(a, b, d) < 0 and orient(c, d, a) * orient(c, d, b) < 0
+
+
+def branch_name(sys: LoopSystem, q: np.ndarray, loop: Loop) -> str | None:
+    """ "open" or "crossed" for a loop of four joints (a four-bar's quadrilateral), else None."""
+    pts = loop_polygon(sys, q, loop)
+    if len(pts) != 4:
+        return None
+    crossed = _segments_cross(pts[0], pts[1], pts[2], pts[3]) or _segments_cross(pts[1], pts[2], pts[3], pts[0])
+    return "crossed" if crossed else "open"
+
+
+def _choose_branches(
+    sys: LoopSystem, blocks: tuple[Block, ...], q0: np.ndarray, report: dict
+) -> tuple[tuple[Block, ...], np.ndarray, dict]:
+    """Put the dyads the file names in [solver] branches on the requested branch, then re-assemble t = 0."""
+    import dataclasses
+
+    from .solver import assemble_blocks
+
+    mech = sys.mechanism
+    wanted: dict[int, str] = mech.options["branches"]
+    by_loop = {b.loops[0]: i for i, b in enumerate(blocks) if len(b.loops) == 1}
+    new = list(blocks)
+    for number, choice in sorted(wanted.items()):
+        li = number - 1
+        if li >= len(sys.loops):
+            raise MechanismError(f"{mech.source}: [solver] branches: there is no loop {number}", entry="solver")
+        i = by_loop.get(li)
+        if i is None or blocks[i].kind not in ("RRR", "RRP", "RPR"):
+            raise MechanismError(
+                f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a dyad with two "
+                "assembly branches",
+                entry="solver",
+            )
+        flip = choice == "flip"
+        if choice in ("open", "crossed"):
+            now = branch_name(sys, q0, sys.loops[li])
+            if now is None:
+                raise MechanismError(
+                    f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a four-joint "
+                    "loop; 'open'/'crossed' name a four-bar's branches — use 'flip' or 'keep'",
+                    entry="solver",
+                )
+            flip = now != choice
+        if flip:
+            new[i] = dataclasses.replace(blocks[i], sigma=-blocks[i].sigma)
+    if new == list(blocks):
+        return blocks, q0, report
+    q1 = assemble_blocks(sys, tuple(new), q0)
+    z0, z1 = term_values(sys, sys.coords_q), term_values(sys, q1)
+    moved = np.abs((z1 - z0) @ sys.path)
+    report = dict(report, moved=float(moved.max(initial=0.0)), branches_flipped=True)
+    report["moved_by_point"] = dict(zip(sys.point_names, moved.tolist(), strict=True))
+    return tuple(new), q1, report
 
 
 def _blocks(sys: LoopSystem, q0: np.ndarray, method: str) -> tuple[Block, ...]:

@@ -719,7 +719,8 @@ def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
     return start + step * np.arange(n)
 
 
-_SOLVER_KEYS = {"method", "tol", "max_iter", "assembly_tolerance"}
+_SOLVER_KEYS = {"method", "tol", "max_iter", "assembly_tolerance", "branches"}
+BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
 
 
 def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
@@ -739,6 +740,17 @@ def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
             if v <= 0:
                 probs.add("solver", f"{k} must be positive")
             out[k] = v
+    if "branches" in raw:
+        br = raw["branches"]
+        if not isinstance(br, dict) or not all(
+            isinstance(k, str) and k.isdigit() and int(k) >= 1 and v in BRANCH_CHOICES for k, v in br.items()
+        ):
+            probs.add(
+                "solver",
+                "branches must map loop numbers to one of " + ", ".join(BRANCH_CHOICES) + ', e.g. { 1 = "crossed" }',
+            )
+        else:
+            out["branches"] = {int(k): v for k, v in br.items()}
     if "max_iter" in raw:
         if not isinstance(raw["max_iter"], int) or raw["max_iter"] < 1:
             probs.add("solver", "max_iter must be a positive integer")
@@ -796,6 +808,8 @@ def to_dict(mech: Mechanism) -> dict[str, Any]:
     out["time"] = {"times": mech.times.tolist()}
     if mech.options:
         out["solver"] = dict(mech.options)
+        if "branches" in out["solver"]:
+            out["solver"]["branches"] = {str(k): v for k, v in out["solver"]["branches"].items()}
     return out
 
 

@@ -545,6 +545,34 @@ def _locate_failure(
     return lo, x_lo
 
 
+def assemble_blocks(sys: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarray:
+    """The t = 0 configuration the closed-form blocks give with their (possibly flipped) branches."""
+    import dataclasses
+
+    trial_sys = dataclasses.replace(sys, blocks=blocks, q0=q0, cache={})
+    na, ns = sys.n_angles, len(sys.slider_names)
+    st = _State(1, na, ns)
+    st.TH[0] = q0[:na]
+    st.E[0, :na] = np.exp(1j * q0[:na])
+    st.S[0, :ns] = q0[na:]
+    mech = sys.mechanism
+    if mech.drivers:
+        _impose_drivers(sys, st, *evaluate_all(mech, np.zeros(1)))
+    n_ok, failure, *_ = _run_blocks(trial_sys, st, np.zeros(1), 1, mech.scale, DEFAULT_TOL, DEFAULT_MAX_ITER)
+    if n_ok < 1:
+        from .errors import MechanismError
+
+        raise MechanismError(
+            f"{mech.source}: [solver] branches: the mechanism cannot be assembled on the requested branch at t = 0 "
+            f"({failure.why if failure else 'no solution'})",
+            entry="solver",
+        )
+    th = st.TH[0].copy()
+    free = np.array([v not in sys.drivers for v in range(na)], bool)
+    th[free] %= 2 * math.pi  # the file's convention at t = 0: θ in [0, 2π)
+    return np.concatenate([th, st.S[0, :ns]])
+
+
 def _impose_drivers(sys: LoopSystem, st: _State, X: np.ndarray, XD: np.ndarray, XDD: np.ndarray) -> None:
     na = sys.n_angles
     for j, v in enumerate(sys.drivers):
