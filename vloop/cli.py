@@ -29,6 +29,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     mech = load(args.file)
     out = Path(args.out) if args.out else Path("out") / mech.name
+    if args.sweep:
+        from .sweep import rocking
+
+        mech = rocking(mech)
+        lo, hi = mech.options.get("sweep", (None, None))
+        if lo is not None:
+            d = mech.drivers[0]
+            print(f"{mech.name}: {d.symbol} rocks between its limits {lo:.10g} and {hi:.10g}")
     system = compile_system(mech, args.method)
     try:
         result = solve(system)
@@ -53,9 +61,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         files += plot_result(mech, result, out)
     asm = system.assembly
-    moved = f", t = 0 assembly moved joints by up to {asm['moved']:.3g} {mech.units}" if asm.get("moved", 0) > 0 else ""
+    moved = ""
+    if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
+        moved = f", t = 0 assembly moved joints by up to {asm['moved']:.3g} {mech.units}"
     print(
-        f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s, {len(system.loops)} loops, "
+        f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s, "
+        f"{len(system.loops)} loop{'s' if len(system.loops) != 1 else ''}, "
         f"max closure {np.max(result.health['residual'], initial=0):.2g}, "
         f"max condition {np.max(result.health['cond'], initial=1):.3g}{moved}"
     )
@@ -134,7 +145,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
     n = len(mech.times)
     print(f"time: {n} samples, t = {mech.times[0]:g}..{mech.times[-1]:g} s")
-    if system.assembly.get("moved", 0) > 0:
+    if system.assembly.get("moved", 0) > 1e-12 * mech.scale:
         print(f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops")
     return 0
 
@@ -235,6 +246,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png")
     r.add_argument(
         "--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only"
+    )
+    r.add_argument(
+        "--sweep",
+        action="store_true",
+        help="instead of the file's motion, rock the input between its limit positions (one turn if it has none)",
     )
     r.set_defaults(func=cmd_run)
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
