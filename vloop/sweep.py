@@ -48,7 +48,8 @@ def feasible_range(mech: Mechanism) -> tuple[float, float, bool]:
         return x0, x0 + 2 * math.pi, True
     if hi is None or lo is None:
         raise MechanismError(
-            f"{mech.name}: the input {d.symbol} is limited on one side only within ±{span:.4g}: nothing to rock between",
+            f"{mech.name}: the input {d.symbol} is limited on one side only within ±{span:.4g}: "
+            "nothing to rock between",
             entry="drivers",
         )
     return lo, hi, False
