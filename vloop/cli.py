@@ -141,6 +141,14 @@ def cmd_info(args: argparse.Namespace) -> int:
     for lp in system.loops:
         print(f"  loop {lp.index + 1}: {lp.label}")
     print("solving order: " + " -> ".join(f"{[i + 1 for i in b.loops]} {b.kind}" for b in system.blocks))
+    from .loops import branch_name
+
+    for b in system.blocks:
+        if b.kind in ("RRR", "RRP", "RPR"):
+            lp = system.loops[b.loops[0]]
+            name = branch_name(system, system.q0, lp)
+            named = f" ({name})" if name else ""
+            print(f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}{named}")
     for li, cls, (g, p1, c, p2) in grashof(system):
         print(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
     n = len(mech.times)
