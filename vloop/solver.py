@@ -394,7 +394,9 @@ def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ velocities / accelerations
 
 
-def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str) -> np.ndarray:
+def _rates(
+    p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: tuple | None = None
+) -> np.ndarray:
     """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``.
 
     The unknowns' own rate columns must still be zero: the sum is then the known part.
@@ -402,7 +404,7 @@ def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str) -> n
     """
     R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))  # (rows, m) complex
     if J is None:
-        c1, c2 = _columns(p, st, k)
+        c1, c2 = cols if cols is not None else _columns(p, st, k)
         det = cross(c1, c2)
         R0 = R[:, 0]
         out = np.empty((len(R0), 2))
@@ -432,10 +434,12 @@ def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int)
             (st.SD if what == "v" else st.SDD)[k, v - na] = vals[:, i]
 
 
-def _block_health(p: _Plan, st: _State, k: slice, scale: float) -> tuple[np.ndarray, np.ndarray]:
+def _block_health(
+    p: _Plan, st: _State, k: slice, scale: float, cols: tuple | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Condition number (angle columns divided by the mechanism size) and det sign per row."""
     if len(p.block.unknowns) == 2:
-        c1, c2 = _columns(p, st, k)
+        c1, c2 = cols if cols is not None else _columns(p, st, k)
         if p.block.unknowns[0] in p.unk_ang:
             c1 = c1 / scale
         if p.block.unknowns[1] in p.unk_ang:
@@ -485,20 +489,22 @@ def _run_blocks(
         k = slice(0, n_ok)
         if n_ok == 0:
             break
-        cond, sgn = _block_health(p, st, k, scale)
+        cols = _columns(p, st, k) if len(p.block.unknowns) == 2 else None  # shared by health and rates
+        cond, sgn = _block_health(p, st, k, scale, cols)
         bad = np.nonzero((cond > TOGGLE_COND) | (sgn != sgn[0]))[0]
         if len(bad):
             failure = _Failure(int(bad[0]), p.block.loops[0], "the mechanism reaches a toggle (singular Jacobian)")
             n_ok = int(bad[0])
             k = slice(0, n_ok)
             cond, sgn = cond[:n_ok], sgn[:n_ok]
+            cols = None if cols is None else (cols[0][:n_ok], cols[1][:n_ok])
         conds.append(cond)
         signs.append(sgn)
         if n_ok == 0:
             break
-        J = None if len(p.block.unknowns) == 2 else _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
-        _store(p, st, k, _rates(p, st, k, J, "v"), "v", na)
-        _store(p, st, k, _rates(p, st, k, J, "a"), "a", na)
+        J = None if cols is not None else _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
+        _store(p, st, k, _rates(p, st, k, J, "v", cols), "v", na)
+        _store(p, st, k, _rates(p, st, k, J, "a", cols), "a", na)
     return n_ok, failure, conds, signs
 
 
