@@ -30,7 +30,7 @@ from matplotlib.ticker import FuncFormatter, NullFormatter
 from matplotlib.transforms import ScaledTranslation
 
 from validators.harness import CheckedComparison, EngineRun, MechanismValidation, Validation
-from vloop.compare import QuantityError
+from vloop.compare import QuantityError, error_series
 from vloop.mechanism import Driver, Mechanism
 from vloop.result import Result
 
@@ -488,14 +488,6 @@ def _pow10(y: float, _pos: Any = None) -> str:
     return "10" + str(round(k)).translate(_SUPERSCRIPT) if abs(k - round(k)) < 1e-9 else ""
 
 
-def _error_series(a: Result, b: Result, column: str, n: int) -> np.ndarray:
-    """|a − b| over the compared samples, angles modulo 2π as in vloop.compare."""
-    d = np.asarray(a[column][:n], float) - np.asarray(b[column][:n], float)
-    if column.endswith(".theta"):
-        d = (d + math.pi) % (2 * math.pi) - math.pi
-    return np.abs(d)
-
-
 def _error_checks(item: MechanismValidation) -> list[CheckedComparison]:
     """One comparison per engine for the error plots: against vloop, else against the closed form."""
     out: dict[str, CheckedComparison] = {}
@@ -519,7 +511,7 @@ def _error_figure(item: MechanismValidation) -> Image | None:
         t = b.t[: c.samples]
         plotted = False
         for k, e in enumerate(worst):
-            err = _error_series(a, b, e.column, c.samples)
+            err = error_series(a, b, e.column, c.samples)
             color = _COLORS[k % len(_COLORS)]
             shown = np.where(err > 0, err, np.nan)
             if np.any(np.isfinite(shown)):

@@ -265,7 +265,7 @@ def to_summary(v: Validation) -> dict[str, Any]:
         entry: dict[str, Any] = {"name": it.name, "file": it.path, "passed": it.passed}
         if it.error:
             entry["error"] = it.error
-            entry.update(samples=0, loops=0, mobility=0, runs={}, comparisons=[])
+            entry.update(samples=None, loops=None, mobility=None, runs={}, comparisons=[])
             mechs.append(entry)
             continue
         m = it.mechanism

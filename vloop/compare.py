@@ -104,6 +104,14 @@ def group_of(column: str) -> str:
     return _GROUP[_field(column)][0]
 
 
+def error_series(a: Result, b: Result, column: str, n: int | None = None) -> np.ndarray:
+    """|a − b| of one column over the first ``n`` samples (all by default), angles modulo 2π."""
+    d = np.asarray(a[column][:n], float) - np.asarray(b[column][:n], float)
+    if _GROUP[_field(column)][0] == "angle":
+        d = (d + math.pi) % (2 * math.pi) - math.pi
+    return np.abs(d)
+
+
 def compare(
     a: Result,
     b: Result,
@@ -133,10 +141,7 @@ def compare(
     errors = []
     for c in cols:
         g = _GROUP[_field(c)][0]
-        d = np.asarray(a[c], float) - np.asarray(b[c], float)
-        if g == "angle":
-            d = (d + math.pi) % (2 * math.pi) - math.pi
-        e = np.abs(d)
+        e = error_series(a, b, c)
         e = np.where(np.isfinite(e), e, np.inf)
         k = int(np.argmax(e)) if len(e) else 0
         mx = float(e[k]) if len(e) else 0.0
@@ -146,7 +151,7 @@ def compare(
         # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
         ref = max(peaks[c], ZERO_FLOOR * group_scale[g])
         rel = mx / ref if ref > 0 else (0.0 if mx == 0 else math.inf)
-        rms = float(np.sqrt(np.mean(d * d))) if len(d) else 0.0
+        rms = float(np.sqrt(np.mean(e * e))) if len(e) else 0.0
         errors.append(QuantityError(c, g, mx, peaks[c], rel, rms, float(b.t[k]) if len(b.t) else 0.0, tol, mx <= tol))
     return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, errors)
 
