@@ -123,31 +123,22 @@ class _Plan:
     """Index data of one block (precomputed once per LoopSystem)."""
 
     block: Block
-    terms: np.ndarray  # term ids of the block's loops
-    C: np.ndarray  # (m, n_terms_block) signs
-    ang: np.ndarray
+    C: np.ndarray  # (m, n_terms_block) signs of the block's terms in its loops
+    Ct: np.ndarray  # C.T as complex: complex @ complex matmuls are far faster than complex @ float
+    ang: np.ndarray  # per term: angle variable, slider, r, e^{jδ}
     sl: np.ndarray
     r: np.ndarray
     cd: np.ndarray
     unk_ang: list[int]  # angle variables among the unknowns
     unk_sl: list[int]  # slider indices among the unknowns
-    known: np.ndarray  # mask of terms independent of the unknowns
     masks: list[np.ndarray]  # per unknown: the block terms it enters
-    Ct: np.ndarray  # C.T as complex: complex @ complex matmuls are far faster than complex @ float
-    known_idx: np.ndarray  # indices of the known terms
-    g_known: np.ndarray  # their signs (complex), loop 0
-    total: _Sum | None = None  # Σ over the block's loops (K = m)
-    known_sum: _Sum | None = None  # Σ over the vectors independent of the unknowns
+    total: _Sum  # Σ over the block's loops (K = m)
+    known_sum: _Sum  # Σ over the vectors independent of the unknowns
     # per unknown angle a: W_a(t) = const + Σ coef·s (the block's vectors turning with a, unrotated)
-    w_const: dict[int, complex] | None = None
-    w_sl: dict[int, list[tuple[int, complex]]] | None = None
+    w_const: dict[int, complex]
+    w_sl: dict[int, list[tuple[int, complex]]]
     # per unknown slider i: its vector's direction U = coef·E[:, ang]
-    u_dir: dict[int, tuple[int, complex]] | None = None
-    # closed-form roles
-    on1: np.ndarray | None = None
-    on2: np.ndarray | None = None
-    slider_term: int = -1  # position of the unknown slider's term in ``terms``
-    slider_term2: int = -1
+    u_dir: dict[int, tuple[int, complex]]
 
 
 def _plans(sys: LoopSystem) -> list[_Plan]:
@@ -164,33 +155,22 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
         ang, sl = sys.t_ang[terms], sys.t_sl[terms]
         unk_ang = [v for v in b.unknowns if v < na]
         unk_sl = [v - na for v in b.unknowns if v >= na]
-        depends = np.isin(ang, unk_ang) | np.isin(sl, unk_sl)
+        known = ~(np.isin(ang, unk_ang) | np.isin(sl, unk_sl))
         masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
-        known_idx = np.nonzero(~depends)[0]
-        p = _Plan(
-            b, terms, Cb, ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, ~depends, masks,
-            Cb.T.astype(complex), known_idx, Cb[0, known_idx].astype(complex),
-        )  # fmt: skip
-        p.total = _Sum.build(sys, terms, Cb.T)
-        p.known_sum = _Sum.build(sys, terms[known_idx], Cb.T[known_idx])
         g = Cb[0]
-        p.w_const, p.w_sl, p.u_dir = {}, {}, {}
+        w_const, w_sl, u_dir = {}, {}, {}
         for a in unk_ang:
             on = np.nonzero(ang == a)[0]
-            p.w_const[a] = complex(sum(g[t] * sys.t_r[terms[t]] * cd_all[terms[t]] for t in on))
-            p.w_sl[a] = [(int(sl[t]), complex(g[t] * cd_all[terms[t]])) for t in on if sl[t] >= 0]
+            w_const[a] = complex(sum(g[t] * sys.t_r[terms[t]] * cd_all[terms[t]] for t in on))
+            w_sl[a] = [(int(sl[t]), complex(g[t] * cd_all[terms[t]])) for t in on if sl[t] >= 0]
         for i in unk_sl:
             t = int(np.nonzero(sl == i)[0][0])
-            p.u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
-        if b.kind == "RRR":
-            p.on1, p.on2 = ang == unk_ang[0], ang == unk_ang[1]
-        elif b.kind in ("RRP", "RPR"):
-            p.on1 = ang == unk_ang[0]
-            p.slider_term = int(np.nonzero(sl == unk_sl[0])[0][0])
-        elif b.kind == "PP":
-            p.slider_term = int(np.nonzero(sl == unk_sl[0])[0][0])
-            p.slider_term2 = int(np.nonzero(sl == unk_sl[1])[0][0])
-        plans.append(p)
+            u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
+        plan = _Plan(
+            b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
+            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], Cb.T[known]), w_const, w_sl, u_dir,
+        )  # fmt: skip
+        plans.append(plan)
     sys.cache["plans"] = plans
     return plans
 
@@ -394,9 +374,7 @@ def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ velocities / accelerations
 
 
-def _rates(
-    p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: tuple | None = None
-) -> np.ndarray:
+def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: tuple | None = None) -> np.ndarray:
     """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``.
 
     The unknowns' own rate columns must still be zero: the sum is then the known part.
