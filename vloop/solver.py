@@ -302,6 +302,15 @@ def _newton_block(
     m = p.C.shape[0]
     colscale = np.where(is_ang, 1.0 / scale, 1.0)  # unit-free condition number, as in _block_health
     cond_first = cond_last = 1.0
+
+    def put(k: int, x: np.ndarray) -> None:
+        for i in range(nu):
+            if is_ang[i]:
+                st.TH[k, col[i]] = x[i]
+                st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
+            else:
+                st.S[k, col[i]] = x[i]
+
     for k in range(n):
         if k > 0:
             h = tg[k] - tg[k - 1]
@@ -309,12 +318,7 @@ def _newton_block(
         row = slice(k, k + 1)
         converged = False
         for _ in range(max_iter):
-            for i in range(nu):
-                if is_ang[i]:
-                    st.TH[k, col[i]] = x[i]
-                    st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
-                else:
-                    st.S[k, col[i]] = x[i]
+            put(k, x)
             z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
             F = p.C @ z[0]
             J = _jacobian(p, z, e)[0]
@@ -326,12 +330,7 @@ def _newton_block(
             if np.max(np.abs(dx)) <= tol * (1.0 + np.max(np.abs(x))):
                 converged = True
                 break
-        for i in range(nu):
-            if is_ang[i]:
-                st.TH[k, col[i]] = x[i]
-                st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
-            else:
-                st.S[k, col[i]] = x[i]
+        put(k, x)
         z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
         res = np.max(np.abs(p.C @ z[0])) / scale
         if not converged or not np.isfinite(res) or res > 1e-9:
