@@ -152,3 +152,25 @@ def test_plugin_parametrizes_over_the_catalog(vloop_mechanism_file, assert_histo
         b = exc.partial
     n = min(len(a), len(b))
     assert_histories_close(a.head(n), b.head(n), rtol=1e-9)
+
+
+def test_validate_all_on_the_catalog_passes(tmp_path, capsys):
+    """The whole catalog, every engine (Exudyn's dynamic mode included), summary and report."""
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    from tests.conftest import mechanism_files
+
+    code = main(["validate", "--all", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert code == 0, out
+    jsonschema.validate(summary, SCHEMA)
+    assert summary["passed"] and "all passed" in out
+    names = {m["name"] for m in summary["mechanisms"]}
+    assert names == {p.stem for p in mechanism_files()}
+    assert summary["engines"] == ["vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"]
+    for m in summary["mechanisms"]:
+        engines = {c["engine"] for c in m["comparisons"] if c["reference"] == "vloop"}
+        assert engines == {"analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"}, m["name"]
+    html = (tmp_path / "report.html").read_text()
+    assert "loop 1 (" in html and all(name in html for name in names)
