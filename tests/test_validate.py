@@ -171,6 +171,10 @@ def test_validate_all_on_the_catalog_passes(tmp_path, capsys):
     assert summary["engines"] == ["vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"]
     for m in summary["mechanisms"]:
         engines = {c["engine"] for c in m["comparisons"] if c["reference"] == "vloop"}
-        assert engines == {"analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"}, m["name"]
+        expected = {"pinocchio", "exudyn-kinematic", "exudyn-dynamic"}
+        if m["runs"]["analytic"]["status"] != "skipped":  # closed forms exist for most, not all
+            expected.add("analytic")
+        assert engines == expected, m["name"]
+    assert sum(m["runs"]["analytic"]["status"] == "skipped" for m in summary["mechanisms"]) <= 1
     html = (tmp_path / "report.html").read_text()
     assert "loop 1 (" in html and all(name in html for name in names)
