@@ -584,6 +584,29 @@ def _read_profile(
     return Profile(t, table[xcol], table.get(vcol), table.get(acol), source)
 
 
+def _motion(
+    d: dict,
+    keys: tuple[str, str, str],
+    cols: tuple[str, str, str, str],
+    x_coords: float,
+    entry: str,
+    base: Path,
+    probs: _Problems,
+) -> tuple[float, float, float, Profile | None]:
+    """A driver's x0 (default: from the coordinates), rate and acceleration, or its profile."""
+    x0 = _number(d, keys[0], entry, probs, x_coords)
+    v0 = _number(d, keys[1], entry, probs, 0.0)
+    a0 = _number(d, keys[2], entry, probs, 0.0)
+    prof = None
+    if "profile" in d:
+        for k in keys:
+            if k in d:
+                probs.add(entry, f"'{k}' and 'profile' both given: the profile sets the motion")
+        prof = _read_profile(d["profile"], cols, entry, base, probs)
+        x0 = float(prof.x[0]) if prof is not None else x0
+    return x0, v0, a0, prof
+
+
 def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[Driver]:
     if raw is None:
         probs.add("drivers", "missing: give at least one [[drivers]] entry (a crank or a driven slider)")
@@ -627,17 +650,9 @@ def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[
                     entry, f"pivot '{pivot}' must be the first joint listed for link '{ln}' (its θ is measured from it)"
                 )
                 continue
-            theta_coords = bodies[ln].theta0
-            x0 = _number(d, "theta0", entry, probs, theta_coords)
-            v0 = _number(d, "omega", entry, probs, 0.0)
-            a0 = _number(d, "alpha", entry, probs, 0.0)
-            prof = None
-            if "profile" in d:
-                for k in ("theta0", "omega", "alpha"):
-                    if k in d:
-                        probs.add(entry, f"'{k}' and 'profile' both given: the profile sets the motion")
-                prof = _read_profile(d["profile"], ("t", "theta", "omega", "alpha"), entry, base, probs)
-                x0 = float(prof.x[0]) if prof is not None else x0
+            x0, v0, a0, prof = _motion(
+                d, ("theta0", "omega", "alpha"), ("t", "theta", "omega", "alpha"), bodies[ln].theta0, entry, base, probs
+            )
             key = f"link:{ln}"
             drv = Driver("crank", ln, x0, v0, a0, pivot, prof, entry)
         elif "slider" in d:
@@ -651,16 +666,7 @@ def _load_drivers(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[
             gb = bodies[sl.guide]
             p = m.joints[sl.joint]
             s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
-            x0 = _number(d, "s0", entry, probs, s_coords)
-            v0 = _number(d, "v", entry, probs, 0.0)
-            a0 = _number(d, "a", entry, probs, 0.0)
-            prof = None
-            if "profile" in d:
-                for k in ("s0", "v", "a"):
-                    if k in d:
-                        probs.add(entry, f"'{k}' and 'profile' both given: the profile sets the motion")
-                prof = _read_profile(d["profile"], ("t", "s", "v", "a"), entry, base, probs)
-                x0 = float(prof.x[0]) if prof is not None else x0
+            x0, v0, a0, prof = _motion(d, ("s0", "v", "a"), ("t", "s", "v", "a"), s_coords, entry, base, probs)
             key = f"slider:{sn}"
             drv = Driver("slider", sn, x0, v0, a0, None, prof, entry)
         else:
