@@ -402,7 +402,9 @@ def test_dispatcher_picks_by_structure(name: str) -> None:
 def test_dispatcher_refuses_unknown_structure() -> None:
     """The eight-bar driven by a linear actuator on its slider l4: no closed form here (they need a crank)."""
     text = (MECH / "eightbar.toml").read_text()
-    text = text.replace('link = "l2"\npivot = "O2"\nomega = 3.0   # rad/s\nalpha = 0.0   # rad/s^2', 'slider = "l4"\nv = 0.5')
+    text = text.replace(
+        'link = "l2"\npivot = "O2"\nomega = 3.0   # rad/s\nalpha = 0.0   # rad/s^2', 'slider = "l4"\nv = 0.5'
+    )
     mech = vloop.loads(text)
     assert mech.drivers[0].kind == "slider"
     assert not analytic.available(mech)

@@ -42,40 +42,112 @@ def edit(old: str, new: str, text: str = FOURBAR) -> str:
 
 
 CASES = {
-    "toml_syntax": (edit('crank = { joints = ["O2", "A"] }', 'crank = { joints = ["O2", "A" }'), ["TOML syntax error", "line 10"]),
-    "unknown_joint": (edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "Q"] }'), ["[links.coupler]", "unknown joint 'Q'"]),
+    "toml_syntax": (
+        edit('crank = { joints = ["O2", "A"] }', 'crank = { joints = ["O2", "A" }'),
+        ["TOML syntax error", "line 10"],
+    ),
+    "unknown_joint": (
+        edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "Q"] }'),
+        ["[links.coupler]", "unknown joint 'Q'"],
+    ),
     "unknown_link_in_driver": (edit('link = "crank"', 'link = "krank"'), ["drivers[0]", "unknown link 'krank'"]),
-    "unknown_guide": (FOURBAR + '[sliders]\nS = { joint = "B", guide = "nowhere", axis = [1.0, 0.0] }\n', ["[sliders.S]", "unknown guide"]),
-    "duplicate_key": (edit('rocker = { joints = ["O4", "B"] }', 'rocker = { joints = ["O4", "B"] }\nrocker = { joints = ["O4", "B"] }'), ["TOML syntax error"]),
-    "duplicate_point_name": (FOURBAR + '[points]\nA = { link = "coupler", at = [1.0, 1.0] }\n', ["[points.A]", "duplicate name"]),
-    "duplicate_slider_name": (FOURBAR + '[sliders]\nrocker = { joint = "B", guide = "ground", axis = [1.0, 0.0] }\n', ["[sliders.rocker]", "duplicate name"]),
-    "joint_twice_on_link": (edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B", "A"] }'), ["[links.coupler]", "names joint A twice"]),
-    "link_without_joints": (edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = [] }'), ["[links.coupler]", "has no joints"]),
+    "unknown_guide": (
+        FOURBAR + '[sliders]\nS = { joint = "B", guide = "nowhere", axis = [1.0, 0.0] }\n',
+        ["[sliders.S]", "unknown guide"],
+    ),
+    "duplicate_key": (
+        edit(
+            'rocker = { joints = ["O4", "B"] }', 'rocker = { joints = ["O4", "B"] }\nrocker = { joints = ["O4", "B"] }'
+        ),
+        ["TOML syntax error"],
+    ),
+    "duplicate_point_name": (
+        FOURBAR + '[points]\nA = { link = "coupler", at = [1.0, 1.0] }\n',
+        ["[points.A]", "duplicate name"],
+    ),
+    "duplicate_slider_name": (
+        FOURBAR + '[sliders]\nrocker = { joint = "B", guide = "ground", axis = [1.0, 0.0] }\n',
+        ["[sliders.rocker]", "duplicate name"],
+    ),
+    "joint_twice_on_link": (
+        edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B", "A"] }'),
+        ["[links.coupler]", "names joint A twice"],
+    ),
+    "link_without_joints": (
+        edit('coupler = { joints = ["A", "B"] }', "coupler = { joints = [] }"),
+        ["[links.coupler]", "has no joints"],
+    ),
     "zero_length_link": (edit("B = [5.0, 4.0]", "B = [0.0, 2.0]"), ["[links.coupler]", "coincide", "zero-length"]),
-    "disconnected": (FOURBAR.replace("[[drivers]]", 'floating = { joints = ["P", "Q"] }\n[[drivers]]').replace("[links]", "[links]").replace('O4 = [7.0, 0.0]', 'O4 = [7.0, 0.0]\nP = [10.0, 0.0]\nQ = [11.0, 0.0]'), ["disconnected", "floating"]),
+    "disconnected": (
+        FOURBAR.replace("[[drivers]]", 'floating = { joints = ["P", "Q"] }\n[[drivers]]')
+        .replace("[links]", "[links]")
+        .replace("O4 = [7.0, 0.0]", "O4 = [7.0, 0.0]\nP = [10.0, 0.0]\nQ = [11.0, 0.0]"),
+        ["disconnected", "floating"],
+    ),
     "driver_on_ground": (edit('link = "crank"', 'link = "ground"'), ["drivers[0]", "is the ground"]),
-    "driver_on_block": (FOURBAR.replace('rocker = { joints = ["O4", "B"] }', "").replace("[[drivers]]", '[sliders]\nblk = { joint = "B", guide = "ground", axis = [1.0, 0.0] }\n[[drivers]]').replace('link = "crank"', 'link = "blk"'), ["drivers[0]", "slider block", "cannot turn"]),
+    "driver_on_block": (
+        FOURBAR.replace('rocker = { joints = ["O4", "B"] }', "")
+        .replace("[[drivers]]", '[sliders]\nblk = { joint = "B", guide = "ground", axis = [1.0, 0.0] }\n[[drivers]]')
+        .replace('link = "crank"', 'link = "blk"'),
+        ["drivers[0]", "slider block", "cannot turn"],
+    ),
     "pivot_not_first": (edit('pivot = "O2"', 'pivot = "A"'), ["drivers[0]", "must be the first joint"]),
-    "mobility_too_high": (edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B"] }\nextra = { joints = ["B", "E"] }\nother = { joints = ["E", "O4"] }').replace("O4 = [7.0, 0.0]", "O4 = [7.0, 0.0]\nE = [7.0, 5.0]").replace('rocker = { joints = ["O4", "B"] }', ""), ["mobility mismatch", "Gruebler", "= 2", "give exactly 2 drivers"]),
-    "mobility_too_low": (FOURBAR + '[[drivers]]\nlink = "rocker"\npivot = "O4"\nomega = 1.0\n', ["mobility mismatch", "Gruebler", "= 1", "2 drivers are given", "remove a driver"]),
-    "structure": (edit('[[drivers]]', 'brace = { joints = ["A", "O4"] }\n[[drivers]]'), ["mobility mismatch", "rigid structure"]),
-    "no_close_at_t0": (edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B"], length = 6.0 }'), ["[joints]", "do not close loop 1", "O2–A–B–O4", "off by"]),
-    "theta0_far_off": (edit("omega = 1.0", "omega = 1.0\ntheta0 = 0.0"), ["do not close loop 1", "theta0/s0 differ from the coordinates"]),
+    "mobility_too_high": (
+        edit(
+            'coupler = { joints = ["A", "B"] }',
+            'coupler = { joints = ["A", "B"] }\nextra = { joints = ["B", "E"] }\nother = { joints = ["E", "O4"] }',
+        )
+        .replace("O4 = [7.0, 0.0]", "O4 = [7.0, 0.0]\nE = [7.0, 5.0]")
+        .replace('rocker = { joints = ["O4", "B"] }', ""),
+        ["mobility mismatch", "Gruebler", "= 2", "give exactly 2 drivers"],
+    ),
+    "mobility_too_low": (
+        FOURBAR + '[[drivers]]\nlink = "rocker"\npivot = "O4"\nomega = 1.0\n',
+        ["mobility mismatch", "Gruebler", "= 1", "2 drivers are given", "remove a driver"],
+    ),
+    "structure": (
+        edit("[[drivers]]", 'brace = { joints = ["A", "O4"] }\n[[drivers]]'),
+        ["mobility mismatch", "rigid structure"],
+    ),
+    "no_close_at_t0": (
+        edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B"], length = 6.0 }'),
+        ["[joints]", "do not close loop 1", "O2–A–B–O4", "off by"],
+    ),
+    "theta0_far_off": (
+        edit("omega = 1.0", "omega = 1.0\ntheta0 = 0.0"),
+        ["do not close loop 1", "theta0/s0 differ from the coordinates"],
+    ),
     "non_finite_coordinate": (edit("B = [5.0, 4.0]", "B = [5.0, nan]"), ["[joints.B]", "non-finite"]),
     "non_finite_omega": (edit("omega = 1.0", "omega = inf"), ["drivers[0]", "'omega' is not finite"]),
     "zero_step": (edit("step = 0.1", "step = 0.0"), ["[time]", "step must be positive"]),
     "negative_step": (edit("step = 0.1", "step = -0.1"), ["[time]", "step must be positive"]),
     "absurd_step": (edit("step = 0.1", "step = 1e-9"), ["[time]", "more than the limit"]),
-    "zero_axis": (FOURBAR.replace('rocker = { joints = ["O4", "B"] }', "").replace("[[drivers]]", '[sliders]\nblk = { joint = "B", guide = "ground", axis = [0.0, 0.0] }\n[[drivers]]'), ["[sliders.blk]", "axis has zero length"]),
+    "zero_axis": (
+        FOURBAR.replace('rocker = { joints = ["O4", "B"] }', "").replace(
+            "[[drivers]]", '[sliders]\nblk = { joint = "B", guide = "ground", axis = [0.0, 0.0] }\n[[drivers]]'
+        ),
+        ["[sliders.blk]", "axis has zero length"],
+    ),
     "wrong_type": (edit("A = [0.0, 2.0]", 'A = "north"'), ["[joints.A]", "expected a pair of numbers"]),
     "missing_links": ("name = 'x'\n[joints]\nA = [0.0, 0.0]\n", ["[links]", "missing or empty"]),
     "typo_key": (edit("ground = true", "grund = true"), ["[links.ground]", "unknown key 'grund'"]),
-    "floating_link": (edit('coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B"] }\ndangling = { joints = ["B", "E"] }').replace("O4 = [7.0, 0.0]", "O4 = [7.0, 0.0]\nE = [9.0, 9.0]"), ["mobility mismatch", "= 2"]),
+    "floating_link": (
+        edit(
+            'coupler = { joints = ["A", "B"] }', 'coupler = { joints = ["A", "B"] }\ndangling = { joints = ["B", "E"] }'
+        ).replace("O4 = [7.0, 0.0]", "O4 = [7.0, 0.0]\nE = [9.0, 9.0]"),
+        ["mobility mismatch", "= 2"],
+    ),
     "missing_drivers": (FOURBAR.split("[[drivers]]")[0] + "[time]\nstop = 1.0\nstep = 0.1\n", ["[drivers]", "missing"]),
     "missing_time": (FOURBAR.split("[time]")[0], ["[time]", "missing"]),
     "wrong_type_omega": (edit("omega = 1.0", 'omega = "fast"'), ["drivers[0]", "'omega' must be a number"]),
-    "profile_both": (edit("omega = 1.0", 'omega = 1.0\nprofile = { t = [0.0, 1.0], theta = [1.57, 1.6] }'), ["'omega' and 'profile' both given"]),
-    "profile_column_missing": (edit("omega = 1.0", "profile = { t = [0.0, 1.0], angle = [1.57, 1.6] }"), ["profile needs columns 't' and 'theta'"]),
+    "profile_both": (
+        edit("omega = 1.0", "omega = 1.0\nprofile = { t = [0.0, 1.0], theta = [1.57, 1.6] }"),
+        ["'omega' and 'profile' both given"],
+    ),
+    "profile_column_missing": (
+        edit("omega = 1.0", "profile = { t = [0.0, 1.0], angle = [1.57, 1.6] }"),
+        ["profile needs columns 't' and 'theta'"],
+    ),
 }
 
 # mid-run: an isosceles slider-crank (crank = rod = 1) reaches its change point, a toggle, at t = 1 s
@@ -159,7 +231,9 @@ def test_mid_run_failures_keep_the_solved_rows(text, sample, why, tmp_path, caps
 def test_no_traceback_from_the_console_script(tmp_path):
     f = tmp_path / "bad.toml"
     f.write_text(CASES["unknown_joint"][0])
-    proc = subprocess.run([sys.executable, "-m", "vloop.cli", "run", str(f), "--out", str(tmp_path)], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "vloop.cli", "run", str(f), "--out", str(tmp_path)], capture_output=True, text=True
+    )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert proc.stderr.count("\n") == 1

@@ -110,7 +110,11 @@ def test_random_offset_slider_cranks(a, extra, e, th2, sigma, omega, alpha_frac)
     B = (A[0] + sigma * dx, e)
     text = {
         "joints": {"O2": [0.0, 0.0], "A": list(A), "B": list(B)},
-        "links": {"ground": {"joints": ["O2"], "ground": True}, "crank": {"joints": ["O2", "A"]}, "rod": {"joints": ["A", "B"]}},
+        "links": {
+            "ground": {"joints": ["O2"], "ground": True},
+            "crank": {"joints": ["O2", "A"]},
+            "rod": {"joints": ["A", "B"]},
+        },
         "sliders": {"blk": {"joint": "B", "guide": "ground", "axis": [1.0, 0.0]}},
         "drivers": [{"link": "crank", "pivot": "O2", "omega": omega, "alpha": alpha}],
         "time": {"times": np.linspace(0.0, 2 * math.pi / omega, N).tolist()},
@@ -145,7 +149,11 @@ def test_random_inverted_slider_cranks(a, gap, th2, sigma, omega):
     axis = [sigma * r[0] / n, sigma * r[1] / n]  # s = sigma·|A − O4|: the branch
     text = {
         "joints": {"O2": [0.0, 0.0], "A": list(A), "O4": [d, 0.0]},
-        "links": {"ground": {"joints": ["O2", "O4"], "ground": True}, "crank": {"joints": ["O2", "A"]}, "rocker": {"joints": ["O4"]}},
+        "links": {
+            "ground": {"joints": ["O2", "O4"], "ground": True},
+            "crank": {"joints": ["O2", "A"]},
+            "rocker": {"joints": ["O4"]},
+        },
         "sliders": {"blk": {"joint": "A", "guide": "rocker", "axis": axis}},
         "drivers": [{"link": "crank", "pivot": "O2", "omega": omega}],
         "time": {"times": np.linspace(0.0, 2 * math.pi / omega, N).tolist()},
@@ -160,7 +168,12 @@ def test_random_inverted_slider_cranks(a, gap, th2, sigma, omega):
     u = np.exp(1j * res["rocker.theta"])
     assert np.max(np.abs(sigma * u * dist - (A_ - d))) <= 1e-10 * mech.scale
     h = res.t[1] - res.t[0]
-    for q, dq in (("rocker.theta", "rocker.omega"), ("rocker.omega", "rocker.alpha"), ("blk.s", "blk.v"), ("blk.v", "blk.a")):
+    for q, dq in (
+        ("rocker.theta", "rocker.omega"),
+        ("rocker.omega", "rocker.alpha"),
+        ("blk.s", "blk.v"),
+        ("blk.v", "blk.a"),
+    ):
         peak = np.max(np.abs(res[dq]))
         assert np.max(np.abs(five_point(res[q], h) - res[dq][2:-2])) <= 1e-6 * peak, dq
 

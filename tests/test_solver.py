@@ -61,7 +61,9 @@ def test_rates_match_central_differences(path):
     for dq, err in errs.items():
         g = dq.rsplit(".", 1)[1]
         scale = max(np.max(np.abs(res[dq])), 1e-3 * group_peak[g])
-        assert err <= 1e-6 * scale, f"{path.stem}: {dq} differs from the central difference by {err:.3g} ({err / scale:.2g} of scale)"
+        assert err <= 1e-6 * scale, (
+            f"{path.stem}: {dq} differs from the central difference by {err:.3g} ({err / scale:.2g} of scale)"
+        )
 
 
 @pytest.mark.parametrize("path", mechanism_files(), ids=lambda p: p.stem)
@@ -145,7 +147,9 @@ def test_tabulated_crank_profile_equals_the_formula(tmp_path):
 def test_driven_slider_runs_the_eightbar_backwards(tmp_path):
     """Drive slider l4 with a linear actuator: the crank follows; check rigidity and finite differences."""
     text = (MECHANISMS / "eightbar.toml").read_text()
-    text = text.replace('link = "l2"\npivot = "O2"\nomega = 3.0   # rad/s\nalpha = 0.0   # rad/s^2', 'slider = "l4"\nv = 0.5\na = 0.2')
+    text = text.replace(
+        'link = "l2"\npivot = "O2"\nomega = 3.0   # rad/s\nalpha = 0.0   # rad/s^2', 'slider = "l4"\nv = 0.5\na = 0.2'
+    )
     text = text.replace("stop = 2.35", "stop = 2.0")
     (tmp_path / "act.toml").write_text(text)
     mech = vloop.load(tmp_path / "act.toml")

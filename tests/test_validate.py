@@ -71,13 +71,25 @@ def test_failing_engine_does_not_stop_the_others(tmp_path, monkeypatch, capsys):
 
     def broken(name):
         if name == "analytic":
+
             def boom(m):
                 raise RuntimeError("closed form exploded")
+
             return boom
         return real(name)
 
     monkeypatch.setattr(harness, "_engine_fn", broken)
-    code = main(["validate", str(MECHANISMS / "slider_crank_offset.toml"), "--engines", "vloop,analytic", "--out", str(tmp_path), "--no-report"])
+    code = main(
+        [
+            "validate",
+            str(MECHANISMS / "slider_crank_offset.toml"),
+            "--engines",
+            "vloop,analytic",
+            "--out",
+            str(tmp_path),
+            "--no-report",
+        ]
+    )
     assert code == 1
     summary = json.loads((tmp_path / "summary.json").read_text())
     runs = summary["mechanisms"][0]["runs"]
@@ -118,7 +130,18 @@ def test_nightly_flags_an_injected_regression(validated, tmp_path, monkeypatch, 
         return run
 
     monkeypatch.setattr(harness, "_engine_fn", drifting)
-    code = main(["validate", str(MECHANISMS / "eightbar.toml"), "--engines", FAST, "--out", str(root), "--nightly", "--no-report"])
+    code = main(
+        [
+            "validate",
+            str(MECHANISMS / "eightbar.toml"),
+            "--engines",
+            FAST,
+            "--out",
+            str(root),
+            "--nightly",
+            "--no-report",
+        ]
+    )
     text = capsys.readouterr().out
     assert code == 1
     assert "FLAG eightbar: pinocchio vs vloop: l3.alpha grew more than 10x" in text

@@ -65,7 +65,5 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     mod = closed_form_for(mech)
     if mod is None:
         names = ", ".join(m.NAME for m in CLOSED_FORMS)
-        raise ValueError(
-            f"{mech.name}: no closed form applies (known structures: {names}; they are crank-driven)"
-        )
+        raise ValueError(f"{mech.name}: no closed form applies (known structures: {names}; they are crank-driven)")
     return mod.solve(mech, times)
