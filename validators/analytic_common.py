@@ -20,7 +20,7 @@ z̈_P = z̈_K + (jα − ω²)·e^{jθ}(ρ_P − ρ_K).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -150,6 +150,28 @@ def driver_input(drv: Driver, t: np.ndarray) -> Kin:
 def requested_index(k: int, inserted: int | None) -> int:
     """Map an index of the evaluation grid back to the requested times."""
     return k if inserted is None or k < inserted else k - 1
+
+
+def check_dyads(
+    fails: Sequence[tuple[np.ndarray, str]],
+    *,
+    mech: Mechanism,
+    t: np.ndarray,
+    inserted: int | None,
+    theta_in: np.ndarray,
+    resolve: Callable[[np.ndarray], Result],
+) -> None:
+    """:func:`check_assembly` over several dyads: ``fails`` pairs each one's closable-mask with its message."""
+    check_assembly(
+        np.logical_and.reduce([ok for ok, _ in fails]),
+        mech=mech,
+        t=t,
+        inserted=inserted,
+        theta_in=theta_in,
+        what=lambda k: "; ".join(msg for ok, msg in fails if not ok[k]),
+        limit=None,
+        resolve=resolve,
+    )
 
 
 def check_assembly(

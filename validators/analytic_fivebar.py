@@ -47,7 +47,7 @@ from .analytic_common import (
     pins,
     pins_of,
 )
-from .analytic_dyads import rrr, rrr_sigma
+from .analytic_dyads import carry, fixed_kin, rrr, rrr_sigma
 
 NAME = "fivebar"
 
@@ -124,10 +124,9 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     th2, om2, al2 = driver_input(drv[r.crank2], t)
     th5, om5, al5 = driver_input(drv[r.crank5], t)
     asm = Assembly(mech, t, inserted, anchor)
-    rA = a * np.exp(1j * (th2 + beta2))
-    rD = e * np.exp(1j * (th5 + beta5))
-    zA = (asm.fixed(r.O2) + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
-    zD = (asm.fixed(r.O5) + rD, 1j * om5 * rD, (1j * al5 - om5 * om5) * rD)
+    n = len(t)
+    zA = carry(fixed_kin(asm.fixed(r.O2), n), (th2, om2, al2), a * np.exp(1j * beta2))
+    zD = carry(fixed_kin(asm.fixed(r.O5), n), (th5, om5, al5), e * np.exp(1j * beta5))
     ok, phi3, phi4, zC = rrr(zA, zD, l3, l4, sigma)
     f = np.abs(zD[0] - zA[0])
     check_assembly(

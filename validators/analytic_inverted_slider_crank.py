@@ -60,7 +60,7 @@ from .analytic_common import (
     pins,
     pins_of,
 )
-from .analytic_dyads import GuidedAssembly, fixed_kin, rpr
+from .analytic_dyads import GuidedAssembly, carry, fixed_kin, rpr
 
 NAME = "inverted_slider_crank"
 
@@ -137,8 +137,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     t, inserted, anchor = evaluation_times(mech, times)
     th2, om2, al2 = driver_input(drv, t)
     asm = GuidedAssembly(mech, t, inserted, anchor)
-    rA = a * np.exp(1j * (th2 + beta2))
-    zA = (asm.fixed(r.O2) + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
+    zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
     ok, phi, _ = rpr(zA, fixed_kin(zO4, len(t)), e, sigma)
     check_assembly(
         ok,

@@ -49,7 +49,7 @@ from vloop.result import Result
 
 from .analytic_common import (
     Assembly,
-    check_assembly,
+    check_dyads,
     crank_driver,
     driver_input,
     evaluation_times,
@@ -199,14 +199,5 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
             (ok2, f"links {lg.k} and {lg.c} cannot close"),
             (ok3, f"links {lg.f} and {lg.foot} cannot close"),
         ]
-    check_assembly(
-        np.logical_and.reduce([ok for ok, _ in fails]),
-        mech=mech,
-        t=t,
-        inserted=inserted,
-        theta_in=th,
-        what=lambda k: "; ".join(msg for ok, msg in fails if not ok[k]),
-        limit=None,
-        resolve=lambda tt: solve(mech, tt),
-    )
+    check_dyads(fails, mech=mech, t=t, inserted=inserted, theta_in=th, resolve=lambda tt: solve(mech, tt))
     return asm.result(NAME, {"legs": len(leg_list)})

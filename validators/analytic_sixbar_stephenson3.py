@@ -48,7 +48,7 @@ from vloop.result import Result
 
 from .analytic_common import (
     Assembly,
-    check_assembly,
+    check_dyads,
     crank_driver,
     driver_input,
     evaluation_times,
@@ -161,8 +161,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     n = len(t)
     th2, om2, al2 = driver_input(drv, t)
     asm = Assembly(mech, t, inserted, anchor)
-    rA = a * np.exp(1j * (th2 + beta2))
-    zA = (asm.fixed(r.O2) + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
+    zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
     ok1, phi3, phi4, zB = rrr(zA, fixed_kin(z[r.O4], n), b, c, sigma1)
     asm.set_from_vector(r.coupler, r.A, r.B, *phi3)
     asm.set_from_vector(r.rocker, r.O4, r.B, *phi4)
@@ -172,16 +171,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         (ok1, f"coupler {r.coupler} and rocker {r.rocker} cannot close"),
         (ok2, f"link {r.link5} and rocker {r.output} cannot close"),
     )
-    check_assembly(
-        ok1 & ok2,
-        mech=mech,
-        t=t,
-        inserted=inserted,
-        theta_in=th2,
-        what=lambda k: "; ".join(msg for m, msg in fails if not m[k]),
-        limit=None,
-        resolve=lambda tt: solve(mech, tt),
-    )
+    check_dyads(fails, mech=mech, t=t, inserted=inserted, theta_in=th2, resolve=lambda tt: solve(mech, tt))
     asm.set_angle(r.crank, th2, om2, al2)
     asm.set_from_vector(r.link5, r.P, r.E, *phi5)
     asm.set_from_vector(r.output, r.O6, r.E, *phi6)

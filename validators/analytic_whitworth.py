@@ -53,7 +53,7 @@ from vloop.result import Result
 
 from .analytic_common import (
     branch_sign,
-    check_assembly,
+    check_dyads,
     crank_driver,
     cross,
     driver_input,
@@ -159,8 +159,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     t, inserted, anchor = evaluation_times(mech, times)
     th2, om2, al2 = driver_input(drv, t)
     asm = GuidedAssembly(mech, t, inserted, anchor)
-    rA = a * np.exp(1j * (th2 + beta2))
-    zA = (asm.fixed(r.O2) + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
+    zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
     ok1, phi, _ = rpr(zA, fixed_kin(zO4, len(t)), e, sigma1)
     asm.set_from_axis(r.lever, r.block, phi)
     zC = carry(fixed_kin(zO4, len(t)), asm.angles[r.lever], local_vector(mech, r.lever, r.O4, r.C))
@@ -169,16 +168,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         (ok1, f"the slot of {r.lever} cannot reach the crank pin {r.A}"),
         (ok2, f"rod {r.rod} (length {ell:g}) cannot reach the line of ram {r.ram}"),
     )
-    check_assembly(
-        ok1 & ok2,
-        mech=mech,
-        t=t,
-        inserted=inserted,
-        theta_in=th2,
-        what=lambda k: "; ".join(msg for m, msg in fails if not m[k]),
-        limit=None,
-        resolve=lambda tt: solve(mech, tt),
-    )
+    check_dyads(fails, mech=mech, t=t, inserted=inserted, theta_in=th2, resolve=lambda tt: solve(mech, tt))
     asm.set_angle(r.crank, th2, om2, al2)
     asm.set_point(r.A, *zA)
     asm.set_point(r.C, *zC)
