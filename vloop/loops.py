@@ -26,6 +26,7 @@ closed form by the solver; larger blocks by Newton–Raphson.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -300,10 +301,7 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     blocks = _blocks(sys, q0, method)
     if mech.options.get("branches"):
         blocks, q0, report = _choose_branches(sys, blocks, q0, report)
-    return LoopSystem(
-        mech, angle_links, slider_names, arr_ang, arr_sl, arr_r, arr_delta, tuple(t_label), tuple(loops), C,
-        points, path, link_outputs, tuple(driven), unknowns, blocks, q0, coords_q, G, report, method,
-    )  # fmt: skip
+    return dataclasses.replace(sys, blocks=blocks, q0=q0, assembly=report, method=method, cache={})
 
 
 def _ordered_cycle(G: nx.Graph, nodes: list, order: dict) -> list:
@@ -445,8 +443,6 @@ def _choose_branches(
     sys: LoopSystem, blocks: tuple[Block, ...], q0: np.ndarray, report: dict
 ) -> tuple[tuple[Block, ...], np.ndarray, dict]:
     """Put the dyads the file names in [solver] branches on the requested branch, then re-assemble t = 0."""
-    import dataclasses
-
     from .solver import assemble_blocks
 
     mech = sys.mechanism
