@@ -1,0 +1,202 @@
+"""Writing output safely: one module every command uses.
+
+Rules (README, "Output files"):
+
+* **Inside the output folder.** The default folder is ``out/<safe name>``; a mechanism's
+  ``name`` is free text, so the folder name is derived from it (:func:`safe_folder_name`)
+  and can never climb out of ``out/``.
+* **Atomic.** Every file is written to a temporary file in the folder it goes to and renamed
+  into place (:func:`atomic_write`), so a crash, Ctrl-C or a full disk never leaves a truncated
+  file that looks complete.
+* **One run's files together.** :class:`OutputSet` stages a run's files in a private folder
+  inside the output folder and renames them all into place while holding a lock on the folder,
+  so two runs into the same ``--out`` leave one run's complete set, never a mix.
+* **Errors name the path.** Any failure to write (an existing file where a folder should be,
+  permission denied, disk full, a folder that cannot be created) is an :class:`OutputError`
+  naming the path (CLI exit code 2).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import re
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import IO, Any
+
+from .errors import VloopError
+
+DEFAULT_ROOT = Path("out")
+_UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
+MAX_FOLDER_NAME = 64
+
+
+class OutputError(VloopError):
+    """An output file or folder cannot be written (the message names it)."""
+
+
+def safe_folder_name(name: str) -> str:
+    """A folder name derived from free text: letters, digits, ``_ . -`` only, no leading dot,
+    at most 64 characters; ``"mechanism"`` when nothing is left."""
+    text = _UNSAFE.sub("_", name.replace("\x00", "")).strip("._-")[:MAX_FOLDER_NAME]
+    return text or "mechanism"
+
+
+def default_folder(name: str, root: str | Path = DEFAULT_ROOT) -> Path:
+    """``out/<safe name>``: always a direct child of ``root``."""
+    return Path(root) / safe_folder_name(name)
+
+
+def describe_os_error(exc: OSError) -> str:
+    """A short reason for an OSError (``permission denied``, ``no space left on device``...)."""
+    if exc.errno == errno.ENOSPC:
+        return "no space left on device"
+    if exc.errno == errno.EDQUOT:
+        return "disk quota exceeded"
+    return (exc.strerror or type(exc).__name__).lower()
+
+
+def ensure_folder(folder: str | Path) -> Path:
+    """Create ``folder`` (and parents) or raise OutputError naming it."""
+    folder = Path(folder)
+    if "\x00" in str(folder):
+        raise OutputError(f"output folder {str(folder)!r}: a path cannot contain a NUL character", entry="out")
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"output folder {folder}: exists and is not a folder", entry="out")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output folder {folder}: {describe_os_error(exc)}", entry="out") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"output folder {folder}: permission denied", entry="out")
+    return folder
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | Path, mode: str = "w", **open_kw: Any) -> Iterator[IO[Any]]:
+    """Open a temporary file next to ``path``; on success rename it onto ``path``.
+
+    On any exception (KeyboardInterrupt included) the temporary file is removed and ``path``
+    is left as it was. OSErrors become OutputError naming ``path``.
+    """
+    path = Path(path)
+    ensure_folder(path.parent)
+    if path.is_dir():
+        raise OutputError(f"cannot write {path}: a folder of that name is in the way", entry="out")
+    if "b" not in mode:
+        open_kw.setdefault("encoding", "utf-8")
+        open_kw.setdefault("newline", "")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {describe_os_error(exc)}", entry="out") from None
+    try:
+        with os.fdopen(fd, mode, **open_kw) as fh:
+            yield fh
+            fh.flush()
+        os.replace(tmp, path)
+    except OSError as exc:
+        _unlink_quietly(tmp)
+        raise OutputError(f"cannot write {path}: {describe_os_error(exc)}", entry="out") from None
+    except BaseException:
+        _unlink_quietly(tmp)
+        raise
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) atomically."""
+    with atomic_write(path) as fh:
+        fh.write(text)
+    return Path(path)
+
+
+def write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` atomically."""
+    with atomic_write(path, "wb") as fh:
+        fh.write(data)
+    return Path(path)
+
+
+def _unlink_quietly(path: str | Path) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
+class OutputSet:
+    """A run's output files, published together.
+
+        with OutputSet(folder) as out:
+            out.write("results.csv", lambda fh: ...)     # staged in a private folder
+            out.write_text("notes.txt", "...")
+        # on leaving without an exception: every staged file renamed into folder, under a lock
+
+    If the block raises (Ctrl-C included), nothing staged is published and the stage is removed.
+    ``published`` lists the final paths.
+    """
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = ensure_folder(folder)
+        self.published: list[Path] = []
+        self._names: list[str] = []
+        try:
+            self._stage = Path(tempfile.mkdtemp(prefix=".vloop-stage-", dir=self.folder))
+        except OSError as exc:
+            raise OutputError(f"cannot write to {self.folder}: {describe_os_error(exc)}", entry="out") from None
+
+    def path(self, name: str) -> Path:
+        """Where a file is staged (for writers that want a path, e.g. matplotlib or pyarrow)."""
+        if name not in self._names:
+            if (self.folder / name).is_dir():
+                raise OutputError(f"cannot write {self.folder / name}: a folder of that name is in the way")
+            self._names.append(name)
+        return self._stage / name
+
+    def write(self, name: str, fill: Callable[[IO[Any]], None], binary: bool = False) -> Path:
+        """Stage ``name`` by calling ``fill(file_object)``."""
+        target = self.path(name)
+        try:
+            with open(target, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": ""})) as fh:
+                fill(fh)
+        except OSError as exc:
+            raise OutputError(f"cannot write {self.folder / name}: {describe_os_error(exc)}", entry="out") from None
+        return self.folder / name
+
+    def write_text(self, name: str, text: str) -> Path:
+        return self.write(name, lambda fh: fh.write(text))
+
+    def publish(self) -> list[Path]:
+        """Rename every staged file into the folder, holding an exclusive lock on the folder."""
+        import fcntl
+
+        try:
+            fd = os.open(self.folder, os.O_RDONLY)  # the folder itself is the lock: no lock file left behind
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX)
+                for name in self._names:
+                    src = self._stage / name
+                    if src.exists():
+                        os.replace(src, self.folder / name)
+                        self.published.append(self.folder / name)
+            finally:
+                os.close(fd)  # closing releases the lock
+        except OSError as exc:
+            raise OutputError(f"cannot write to {self.folder}: {describe_os_error(exc)}", entry="out") from None
+        finally:
+            self.discard()
+        return self.published
+
+    def discard(self) -> None:
+        shutil.rmtree(self._stage, ignore_errors=True)
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.publish()
+        else:
+            self.discard()
