@@ -14,7 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import VloopError
+from .errors import MotionError, VloopError
+from .result import Result
+
+INFO_SOLVE_LIMIT = 200_000  # vloop info solves the file's motion up to this many samples
 
 
 def _fail(msg: str) -> int:
@@ -70,8 +73,29 @@ def cmd_run(args: argparse.Namespace) -> int:
         f"max closure {np.max(result.health['residual'], initial=0):.2g}, "
         f"max condition {np.max(result.health['cond'], initial=1):.3g}{moved}"
     )
+    for line in health_notes(result):
+        print(line)
     print("wrote " + ", ".join(str(f) for f in files))
     return 0
+
+
+def health_notes(result: Result) -> list[str]:
+    """Lines that say what health.csv flags: change points passed, ill-conditioned samples kept."""
+    lines = []
+    for cp in result.meta.get("change_points", []):
+        inputs = ", ".join(f"{k} = {v:.10g}" for k, v in cp["inputs"].items())
+        lines.append(
+            f"  change point: loop {cp['loop']} ({cp['label']}) at t = {cp['time']:.10g} s, {inputs}: "
+            f"continued on the {'smooth' if cp['continued'] == 'smooth' else 'other (as [solver] change_points asks)'}"
+            " branch"
+        )
+    ill = int(np.sum(result.health.get("ill_conditioned", 0)))
+    if ill:
+        lines.append(
+            f"  {ill} ill-conditioned sample{'s' if ill != 1 else ''} kept (error bound cond²·ε above "
+            f"1e-3 of rtol = {result.meta.get('rtol', 1e-9):g}): flagged in health.csv"
+        )
+    return lines
 
 
 def cmd_loops(args: argparse.Namespace) -> int:
@@ -153,6 +177,14 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
     n = len(mech.times)
     print(f"time: {n} samples, t = {mech.times[0]:g}..{mech.times[-1]:g} s")
+    if n <= INFO_SOLVE_LIMIT:  # change points and kept ill-conditioned samples show only along the motion
+        from .solver import solve
+
+        try:
+            notes = health_notes(solve(system))
+        except MotionError as exc:
+            notes = [*health_notes(exc.partial), f"  the motion stops: {exc}"]
+        print("\n".join(["motion:", *notes]) if notes else "motion: no change point, no ill-conditioned sample")
     if system.assembly.get("moved", 0) > 1e-12 * mech.scale:
         print(f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops")
     return 0

@@ -725,8 +725,9 @@ def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
     return start + step * np.arange(n)
 
 
-_SOLVER_KEYS = {"method", "tol", "max_iter", "assembly_tolerance", "branches"}
+_SOLVER_KEYS = {"method", "tol", "rtol", "max_iter", "assembly_tolerance", "branches", "change_points"}
 BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
+CHANGE_POINT_CHOICES = ("smooth", "other")
 
 
 def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
@@ -740,12 +741,28 @@ def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
             probs.add("solver", "method must be 'auto' or 'newton'")
         else:
             out["method"] = raw["method"]
-    for k in ("tol", "assembly_tolerance"):
+    for k in ("tol", "rtol", "assembly_tolerance"):
         v = _number(raw, k, "solver", probs)
         if v is not None:
-            if v <= 0:
-                probs.add("solver", f"{k} must be positive")
+            if not 0 < v < 1:
+                probs.add("solver", f"{k} must be between 0 and 1 (a fraction), got {v:g}")
             out[k] = v
+    if "change_points" in raw:
+        cp = raw["change_points"]
+
+        def ok(v: Any) -> bool:
+            if isinstance(v, list):
+                return bool(v) and all(x in CHANGE_POINT_CHOICES for x in v)
+            return v in CHANGE_POINT_CHOICES
+
+        if not isinstance(cp, dict) or not all(isinstance(k, str) and k.isdigit() and ok(v) for k, v in cp.items()):
+            probs.add(
+                "solver",
+                'change_points must map loop numbers to "smooth" or "other" (or a list of them for successive '
+                'change points), e.g. { 1 = "other" }',
+            )
+        else:
+            out["change_points"] = {int(k): v for k, v in cp.items()}
     if "branches" in raw:
         br = raw["branches"]
         if not isinstance(br, dict) or not all(
@@ -814,8 +831,9 @@ def to_dict(mech: Mechanism) -> dict[str, Any]:
     out["time"] = {"times": mech.times.tolist()}
     if mech.options:
         out["solver"] = dict(mech.options)
-        if "branches" in out["solver"]:
-            out["solver"]["branches"] = {str(k): v for k, v in out["solver"]["branches"].items()}
+        for key in ("branches", "change_points"):
+            if key in out["solver"]:
+                out["solver"][key] = {str(k): v for k, v in out["solver"][key].items()}
     return out
 
 

@@ -158,8 +158,9 @@ class OutputSet:
     def write(self, name: str, fill: Callable[[IO[Any]], None], binary: bool = False) -> Path:
         """Stage ``name`` by calling ``fill(file_object)``."""
         target = self.path(name)
+        text = {} if binary else {"encoding": "utf-8", "newline": ""}
         try:
-            with open(target, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": ""})) as fh:
+            with open(target, "wb" if binary else "w", **text) as fh:
                 fill(fh)
         except OSError as exc:
             raise OutputError(f"cannot write {self.folder / name}: {describe_os_error(exc)}", entry="out") from None

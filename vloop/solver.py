@@ -20,22 +20,28 @@ at once (Cramer's rule for 2×2 blocks, batched ``numpy.linalg.solve`` otherwise
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from .drivers import evaluate_all
-from .errors import MotionError
+from .errors import MechanismError, MotionError
 from .loops import Block, LoopSystem, compile_system
 from .mechanism import Mechanism
 from .result import Result
 
-TOGGLE_COND = 1e12  # a block Jacobian this ill-conditioned is a toggle (singular)
+EPS = float(np.finfo(float).eps)
+DEFAULT_RTOL = (
+    1e-9  # accuracy asked of every output, relative: a sample whose error bound cond²·ε exceeds it is refused
+)
+ILL_FRACTION = 1e-3  # a kept sample whose error bound exceeds this fraction of rtol is flagged ill-conditioned
+CHANGE_GAP = 1e-6  # two assembly branches closer than this fraction of the mechanism size meet: a change point
 DEFAULT_TOL = 1e-12  # Newton stops when the step is below tol·(1 + |x|)
 DEFAULT_MAX_ITER = 30
-MAX_LEAD_IN = 100_000
+TWO_PI = 2.0 * math.pi
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -204,7 +210,9 @@ class _State:
 
 
 class _Failure(Exception):
-    def __init__(self, sample: int, loop: int, why: str) -> None:
+    """Why sample ``sample`` cannot be solved; ``loop`` (index) where a loop is to blame."""
+
+    def __init__(self, sample: int, loop: int | None, why: str) -> None:
         self.sample, self.loop, self.why = sample, loop, why
 
 
@@ -225,23 +233,28 @@ def _u(p: _Plan, st: _State, k: slice, i: int) -> np.ndarray:
     return coef * st.E[k, a]
 
 
-def _closed_form(p: _Plan, st: _State, k: slice, na: int) -> np.ndarray:
-    """Closed-form positions of a one-loop dyad for rows ``k``; returns the mask of assemblable rows."""
+def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form positions of a one-loop dyad for rows ``k`` on branches ``sig`` (±1 per row).
+
+    Returns the mask of assemblable rows and the discriminant h [length²]: the dyad's two
+    assembly solutions lie 2·√h apart (h < 0: no solution, the input is past a limit position;
+    h = 0: the two branches meet — a toggle, or a change point where they cross).
+    """
     b = p.block
     X = -p.known_sum.pos(st, k)[:, 0]
-    sig = b.sigma
     if b.kind == "RRR":
         # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
         W1, W2 = _w(p, st, k, p.unk_ang[0]), _w(p, st, k, p.unk_ang[1])
         A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
         D2 = X.real**2 + X.imag**2
         k1 = 0.5 * (A2 + D2 - B2)
-        h2 = A2 * D2 - k1 * k1
+        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2)
         ok = (h2 >= 0) & (D2 > 0)
-        P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / np.where(D2 > 0, D2, 1.0)
+        Dd = np.where(D2 > 0, D2, 1.0)
+        P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / Dd
         _set_angle(st, k, p.unk_ang[0], P / W1)
         _set_angle(st, k, p.unk_ang[1], (X - P) / W2)
-        return ok
+        return ok, h2 / Dd
     if b.kind == "RRP":
         # W1·E1 + s·U = X with U a known unit direction: project on U's normal
         i = p.unk_sl[0]
@@ -249,42 +262,57 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int) -> np.ndarray:
         W1 = _w(p, st, k, p.unk_ang[0])
         XU, WU = X * Uc, W1 * Uc
         y = XU.imag
-        h = np.abs(W1) ** 2 - y * y
+        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2)
         ok = h >= 0
         c = sig * np.sqrt(np.where(ok, h, 0.0))
         _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
         st.S[k, i] = XU.real - c
-        return ok
+        return ok, h
     if b.kind == "RPR":
         # (W + s·c)·E = X with c a unit direction fixed to the same link: |W + s·c| = |X|
         i, a = p.unk_sl[0], p.unk_ang[0]
         cdir = p.u_dir[i][1]
         W = _w(p, st, k, a, skip=i)
         bb = (W * np.conj(cdir)).real
-        disc = bb * bb - np.abs(W) ** 2 + (X.real**2 + X.imag**2)
+        D2 = X.real**2 + X.imag**2
+        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, bb * bb + np.abs(W) ** 2 + D2)
         s = -bb + sig * np.sqrt(np.where(disc >= 0, disc, 0.0))
         den = W + s * cdir
         ok = (disc >= 0) & (np.abs(den) > 0)
         st.S[k, i] = s
         _set_angle(st, k, a, X / np.where(ok, den, 1.0))
-        return ok
-    # PP: s1·U1 + s2·U2 = X
+        return ok, disc
+    # PP: s1·U1 + s2·U2 = X (linear: one solution, no branches)
     U1, U2 = _u(p, st, k, p.unk_sl[0]), _u(p, st, k, p.unk_sl[1])
     det = cross(U1, U2)
     ok = np.abs(det) > 1e-12
     dd = np.where(ok, det, 1.0)
     st.S[k, p.unk_sl[0]] = cross(X, U2) / dd
     st.S[k, p.unk_sl[1]] = cross(U1, X) / dd
-    return ok
+    return ok, np.full(len(ok), np.inf)
+
+
+def _round_off_zero(h: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """A discriminant whose magnitude is within round-off of the terms it was computed from (``size``)
+    is zero: the two branches meet (an input exactly at a limit or change point, up to round-off)."""
+    return np.where(np.abs(h) <= 16 * EPS * size, 0.0, h)
 
 
 def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
+    """Store e^{jθ} and the unwrapped θ = φ + 2π·n for rows ``k`` (row k.start keeps its turn count).
+
+    φ is the principal angle of E, n the whole turns counted by continuity from the first row:
+    the stored θ is then exactly φ + 2πn whatever the sampling before it, so a run that starts
+    late gives the same numbers as one from t = 0.
+    """
     E = E / np.abs(E)
     st.E[k, a] = E
-    # unwrap by accumulating the increments from the t = 0 assembly (row 0)
-    Ek = st.E[k, a]
-    inc = np.angle(Ek[1:] * np.conj(Ek[:-1]))
-    st.TH[k, a] = st.TH[0, a] + np.concatenate(([np.angle(Ek[0] * np.exp(-1j * st.TH[0, a]))], np.cumsum(inc)))
+    phi = np.angle(st.E[k, a])
+    start = st.TH[k.start or 0, a]
+    est = start + np.concatenate(
+        ([np.angle(np.exp(1j * (phi[0] - start)))], np.cumsum(np.angle(np.exp(1j * np.diff(phi)))))
+    )
+    st.TH[k, a] = phi + TWO_PI * np.round((est - phi) / TWO_PI)
 
 
 def _newton_block(
@@ -434,92 +462,390 @@ def _block_health(
     return np.linalg.cond(Js), np.sign(np.linalg.det(J))
 
 
-# ------------------------------------------------------------------ driver
+# ------------------------------------------------------------------ run context
 
 
-def _run_blocks(
-    sys: LoopSystem, st: _State, tg: np.ndarray, n: int, scale: float, tol: float, max_iter: int
-) -> tuple[int, _Failure | None, list[np.ndarray], list[np.ndarray]]:
-    """Solve every block in order on rows 0..n-1 (row 0 must be an assembled configuration).
+@dataclass
+class _Inputs:
+    """The drivers' values, rates and accelerations at internal grid times.
 
-    Returns the number of rows solved, the first failure (or None), and each
-    block's condition numbers and Jacobian determinant signs.
+    From ``t_first`` on: the file's drivers. Before it, a path in input space x0 + u·R with
+    u = (t − lead_from)/span: the lead-in of a run that starts late (from the inputs at t = 0
+    to those at ``t_first`` less their whole crank turns, see :func:`_lead_in`), or the one-turn
+    probe that measures winding numbers (``t_first`` = ∞).
     """
+
+    mech: Mechanism
+    t_first: float = -math.inf
+    lead_from: float = 0.0
+    span: float = 1.0
+    x0: np.ndarray | None = None
+    R: np.ndarray | None = None
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t, float)
+        m = len(self.mech.drivers)
+        X, XD, XDD = np.zeros((len(t), m)), np.zeros((len(t), m)), np.zeros((len(t), m))
+        if m == 0:
+            return X, XD, XDD
+        real = t >= self.t_first
+        if real.any():
+            X[real], XD[real], XDD[real] = evaluate_all(self.mech, t[real])
+        if not real.all():
+            u = (t[~real] - self.lead_from) / self.span
+            X[~real] = self.x0 + u[:, None] * self.R
+            XD[~real] = self.R / self.span
+        return X, XD, XDD
+
+
+@dataclass(frozen=True)
+class _ChangePoint:
+    """Where the two assembly branches of closed-form block ``block`` meet, at internal time ``time``."""
+
+    block: int
+    time: float
+    flip: bool  # whether σ changes there (True on the smooth continuation of a crossing)
+    smooth: bool  # whether this continuation is the one whose velocities stay continuous
+
+
+@dataclass
+class _Run:
+    """What one solve needs besides the state arrays; probes share ``events`` with their run."""
+
+    sys: LoopSystem
+    inputs: _Inputs
+    scale: float
+    tol: float
+    max_iter: int
+    rtol: float
+    events: dict[int, list[_ChangePoint]] = field(default_factory=dict)
+    detect: bool = True  # look for change points (the main run only)
+    check: bool = True  # refuse ill-conditioned samples and branch flips
+    rates: bool = True
+
+    def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
+        """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
+        sig = np.full(len(t), _plans(self.sys)[i].block.sigma)
+        for ev in self.events.get(i, ()):
+            if ev.flip:
+                sig[t > ev.time] *= -1.0
+        return sig
+
+
+@dataclass
+class _Solved:
+    n_ok: int
+    failure: _Failure | None
+    conds: list[np.ndarray]
+    signs: list[np.ndarray]
+    discs: list[np.ndarray]  # closed-form blocks' discriminants h (None for Newton blocks)
+    at_change: np.ndarray  # rows whose rates were taken across a change point
+
+
+# ------------------------------------------------------------------ blocks in order
+
+
+def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None = None) -> _Solved:
+    """Solve blocks 0..upto (default: all) in order on rows 0..n-1 (row 0 must be assembled)."""
+    sys = run.sys
     na = sys.n_angles
-    n_ok = n
-    failure: _Failure | None = None
-    conds: list[np.ndarray] = []
-    signs: list[np.ndarray] = []
-    for p in _plans(sys):
-        k = slice(0, n_ok)
-        if p.block.kind == "newton":
-            try:
-                _newton_block(p, st, n_ok, tg, na, scale, tol, max_iter)
-            except _Failure as f:
-                failure, n_ok = f, f.sample
-        else:
-            ok = _closed_form(p, st, k, na)
-            if not ok.all():
-                bad = int(np.argmin(ok))
-                failure = _Failure(bad, p.block.loops[0], "the loop cannot close: the input is past a limit position")
-                n_ok = bad
-        k = slice(0, n_ok)
-        if n_ok == 0:
+    out = _Solved(n, None, [], [], [], np.zeros(n, bool))
+    for i, p in enumerate(_plans(sys)):
+        if upto is not None and i > upto:
             break
+        sig = _positions(run, st, tg, i, p, out)
+        if out.n_ok == 0:
+            break
+        k = slice(0, out.n_ok)
         cols = _columns(p, st, k) if len(p.block.unknowns) == 2 else None  # shared by health and rates
-        cond, sgn = _block_health(p, st, k, scale, cols)
-        bad = np.nonzero((cond > TOGGLE_COND) | (sgn != sgn[0]))[0]
-        if len(bad):
-            failure = _Failure(int(bad[0]), p.block.loops[0], "the mechanism reaches a toggle (singular Jacobian)")
-            n_ok = int(bad[0])
-            k = slice(0, n_ok)
-            cond, sgn = cond[:n_ok], sgn[:n_ok]
-            cols = None if cols is None else (cols[0][:n_ok], cols[1][:n_ok])
-        conds.append(cond)
-        signs.append(sgn)
-        if n_ok == 0:
-            break
+        cond, sgn = _block_health(p, st, k, run.scale, cols)
+        near = _near_change_point(run, i, tg[k], cond)
+        if run.check:
+            signed = sgn * sig[: out.n_ok]
+            bad = np.nonzero(((_error_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
+            if len(bad):
+                _fail(out, _Failure(int(bad[0]), p.block.loops[0], _toggle_reason(cond[bad[0]], run.rtol)))
+                k = slice(0, out.n_ok)
+                cond, sgn, near = cond[k], sgn[k], near[k]
+                cols = None if cols is None else (cols[0][k], cols[1][k])
+        out.conds.append(cond)
+        out.signs.append(sgn)
+        if out.n_ok == 0 or not run.rates:
+            continue
         J = None if cols is not None else _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
         _store(p, st, k, _rates(p, st, k, J, "v", cols), "v", na)
         _store(p, st, k, _rates(p, st, k, J, "a", cols), "a", na)
-    return n_ok, failure, conds, signs
+        if near.any():
+            _rates_across(run, st, tg, i, p, np.nonzero(near)[0], out)
+    out.at_change = out.at_change[: out.n_ok]
+    return out
+
+
+def _fail(out: _Solved, failure: _Failure) -> None:
+    """Keep the earliest failure; rows from it on are not solved."""
+    if failure.sample < out.n_ok:
+        out.n_ok, out.failure = failure.sample, failure
+
+
+def _toggle_reason(cond: float, rtol: float) -> str:
+    return (
+        f"the mechanism reaches a toggle (singular Jacobian: condition number {cond:.3g}, so the accelerations "
+        f"could be wrong by cond²·ε = {min(float(_error_bound(cond)), 1.0):.2g} of their size, "
+        f"more than rtol = {rtol:g})"
+    )
+
+
+def _positions(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, out: _Solved) -> np.ndarray:
+    """Solve block ``i``'s positions on rows 0..out.n_ok-1 (finding change points on the main run)."""
+    na = run.sys.n_angles
+    k = slice(0, out.n_ok)
+    if p.block.kind == "newton":
+        try:
+            _newton_block(p, st, out.n_ok, tg, na, run.scale, run.tol, run.max_iter)
+        except _Failure as f:
+            _fail(out, f)
+        out.discs.append(None)
+        return np.ones(out.n_ok)
+    sig = run.sigma(i, tg[k])
+    ok, h = _closed_form(p, st, k, na, sig)
+    if run.detect and p.block.kind != "PP":
+        n_lim = int(np.argmin(ok)) if not ok.all() else out.n_ok
+        try:
+            found = _find_change_points(run, st, tg, i, h[:n_lim])
+        except _Failure as f:
+            found = []
+            _fail(out, f)
+        if found:
+            sig = run.sigma(i, tg[k])
+            ok, h = _closed_form(p, st, k, na, sig)
+    if not ok[: out.n_ok].all():
+        bad = int(np.argmin(ok))
+        _fail(out, _Failure(bad, p.block.loops[0], "the loop cannot close: the input is past a limit position"))
+    out.discs.append(h)
+    return sig
+
+
+# ------------------------------------------------------------------ change points
+
+ZOOM_POINTS = 17  # probes per zoom step when locating where two branches meet
+ZOOM_STEPS = 12  # each step narrows the bracket 16-fold
+ETA_INPUT = 1e-5  # the rates across a change point are compared this far from it (input units: rad, or size)
+
+
+def _candidate_minima(t: np.ndarray, h: np.ndarray) -> list[tuple[int, int]]:
+    """Brackets (row lo, row hi) around sampled minima of h deep enough to hide a zero between samples.
+
+    Near a double zero h ≈ c·(t − t*)², so a parabola through three samples has its minimum
+    near 0 whatever the phase of the sampling; a broad minimum keeps it near the samples.
+    """
+    n = len(h)
+    if n < 2:
+        return []
+    out = []
+    m = np.nonzero((h[1:-1] <= h[:-2]) & (h[1:-1] <= h[2:]))[0] + 1
+    for c in m:
+        u0, u2 = t[c - 1] - t[c], t[c + 1] - t[c]
+        g0, g2 = (h[c - 1] - h[c]) / u0, (h[c + 1] - h[c]) / u2
+        a = (g0 - g2) / (u0 - u2)  # h ≈ h[c] + b·u + a·u² through the three samples
+        low = h[c] - (g0 - a * u0) ** 2 / (4 * a) if a > 0 else h[c]
+        if low <= 0.25 * min(h[c - 1], h[c + 1]):
+            out.append((c - 1, c + 1))
+    if h[-1] < h[-2]:  # still falling at the end: a zero may lie before the last sample
+        out.append((n - 2, n - 1))
+    return out
+
+
+def _probe(run: _Run, st: _State, tg: np.ndarray, base: int, times: np.ndarray, upto: int, **mode: bool) -> tuple:
+    """Solve blocks 0..upto at ``times`` (ascending, after sample ``base``), continuing from sample ``base``.
+
+    Returns (the _Solved record, the probe's state); row 0 of the probe is sample ``base``.
+    """
+    sys = run.sys
+    grid = np.concatenate([[tg[base]], times])
+    trial = _State(len(grid), sys.n_angles, len(sys.slider_names))
+    for name in ("E", "TH", "S"):
+        getattr(trial, name)[0] = getattr(st, name)[base]
+    try:
+        _impose_drivers(sys, trial, *run.inputs(grid))
+    except MechanismError:  # a probe past the end of a tabulated input: nothing to learn there
+        return _Solved(0, None, [], [], [], np.zeros(0, bool)), trial
+    sub = dataclasses.replace(run, detect=False, **mode)  # shares the events found so far
+    return _run_blocks(sub, trial, grid, len(grid), upto=upto), trial
+
+
+def _find_change_points(run: _Run, st: _State, tg: np.ndarray, i: int, h: np.ndarray) -> list[_ChangePoint]:
+    """Locate where block ``i``'s two assembly branches meet between samples, and pick the continuation.
+
+    A sampled minimum of the discriminant h is refined by zooming probes; where the branches come
+    within CHANGE_GAP of the mechanism size of each other it is a change point. The continuation
+    is the one whose rates stay continuous across it (or the other one where the file asks so in
+    ``[solver] change_points``). h < 0 between samples means the motion passes a limit there.
+    """
+    found = []
+    loop = run.sys.loops[_plans(run.sys)[i].block.loops[0]]
+    choices = _change_point_choices(run.sys, loop.index + 1)
+    for lo, hi in _candidate_minima(tg[: len(h)], h):
+        t_star, h_min = _zoom(run, st, tg, i, lo, hi)
+        if h_min < 0:
+            raise _Failure(hi, loop.index, "the loop cannot close between samples: the input passes a limit position")
+        if 2.0 * math.sqrt(h_min) > CHANGE_GAP * run.scale:
+            continue
+        smooth_flip = _smooth_continuation(run, st, tg, i, lo, t_star)
+        choice = choices[min(len(found), len(choices) - 1)]
+        flip = smooth_flip if choice == "smooth" else not smooth_flip
+        ev = _ChangePoint(i, t_star, flip, choice == "smooth")
+        run.events.setdefault(i, []).append(ev)
+        found.append(ev)
+    return found
+
+
+def _zoom(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, hi: int) -> tuple[float, float]:
+    """(t*, h(t*)): where block ``i``'s discriminant h is least between samples lo and hi.
+
+    Zooms on the sign change of g(t) = h(t + η) − h(t − η), which crosses zero linearly at the
+    minimum (h itself is flat there), so t* is found to ~1e-12 of the bracket, not to √ε.
+    """
+    a, b = float(tg[lo]), float(tg[hi])
+    eta = _eta(run, 0.5 * (a + b), b - a)
+    for _ in range(ZOOM_STEPS):
+        ts = np.linspace(a, b, ZOOM_POINTS)
+        h = _discriminant(run, st, tg, lo, i, np.concatenate([ts, ts - eta, ts + eta]))
+        if h is None:  # an earlier block cannot be solved in the bracket: leave it to the main run
+            return a, math.inf
+        mid, g = h[: len(ts)], h[2 * len(ts) :] - h[len(ts) : 2 * len(ts)]
+        if np.any(mid < 0):
+            j = int(np.argmin(mid))
+            return float(ts[j]), float(mid[j])
+        j = int(np.argmax(g >= 0)) if np.any(g >= 0) else len(ts) - 1
+        a, b = float(ts[max(j - 1, 0)]), float(ts[j])
+        if b - a <= 1e-9 * (tg[hi] - tg[lo]):
+            break
+    t_star = 0.5 * (a + b)
+    h = _discriminant(run, st, tg, lo, i, np.array([t_star]))
+    return t_star, (math.inf if h is None else float(h[0]))
+
+
+def _discriminant(run: _Run, st: _State, tg: np.ndarray, base: int, i: int, times: np.ndarray) -> np.ndarray | None:
+    """Block ``i``'s discriminant h at ``times`` (None if an earlier block fails there)."""
+    order = np.argsort(times, kind="stable")
+    solved, _ = _probe(run, st, tg, base, times[order], i, check=False, rates=False)
+    if solved.n_ok < len(times) + 1 or len(solved.discs) <= i:
+        return None
+    h = np.empty(len(times))
+    h[order] = solved.discs[i][1:]
+    return h
+
+
+def _eta(run: _Run, t_star: float, width: float, move: float = ETA_INPUT) -> float:
+    """A time offset over which the inputs move ``move`` (radians, or mechanism sizes for sliders)."""
+    _, XD, _ = run.inputs(np.array([t_star]))
+    units = np.array([1.0 if d.kind == "crank" else run.scale for d in run.sys.mechanism.drivers])
+    rate = float(np.max(np.abs(XD[0]) / units, initial=0.0))
+    return min(move / rate if rate > 0 else math.inf, 0.25 * width)
+
+
+def _block_rates(run: _Run, trial: _State, i: int, rows: slice) -> np.ndarray:
+    """Block ``i``'s unknown rates (angles: rad/s; sliders: sizes/s) on ``rows`` of a probe."""
+    p = _plans(run.sys)[i]
+    na = run.sys.n_angles
+    return np.stack([trial.W[rows, v] if v < na else trial.SD[rows, v - na] / run.scale for v in p.block.unknowns], 1)
+
+
+def _smooth_continuation(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, t_star: float) -> bool:
+    """Whether flipping σ at ``t_star`` keeps block ``i``'s rates continuous (else keeping it does)."""
+    eta = _eta(run, t_star, float(tg[lo + 1] - tg[lo]))
+    ts = np.array([t_star - eta, t_star + eta])
+    jumps = []
+    for flip in (True, False):
+        run.events.setdefault(i, []).append(_ChangePoint(i, t_star, flip, True))
+        try:
+            solved, trial = _probe(run, st, tg, lo, ts, i, check=False)
+        finally:
+            run.events[i].pop()
+        if solved.n_ok < 3:
+            jumps.append(math.inf)
+            continue
+        r = _block_rates(run, trial, i, slice(1, 3))
+        jumps.append(float(np.max(np.abs(r[1] - r[0]))))
+    return jumps[0] <= jumps[1]
+
+
+STENCIL = np.array([-4, -3, -2, -1, 1, 2, 3, 4], float)  # rates across a change point: interpolated from these
+STENCIL_INPUT = 0.05  # ... multiples of the time in which the inputs move this far (rad, or sizes)
+
+
+def _error_bound(cond: np.ndarray) -> np.ndarray:
+    """Relative error bound of a sample's rates: accelerations lose cond²·ε (velocities cond·ε, feeding them)."""
+    return cond * cond * EPS
+
+
+def _near_change_point(run: _Run, i: int, t: np.ndarray, cond: np.ndarray) -> np.ndarray:
+    """Rows too ill-conditioned for accurate rates that lie within a change point's stencil."""
+    near = np.zeros(len(t), bool)
+    events = run.events.get(i, ())
+    if not events or not run.check:
+        return near
+    weak = _error_bound(cond) > run.rtol * ILL_FRACTION
+    for ev in events:
+        reach = 4.0 * _eta(run, ev.time, math.inf, STENCIL_INPUT)
+        near |= weak & (np.abs(t - ev.time) < reach)
+    return near
+
+
+def _rates_across(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, rows: np.ndarray, out: _Solved) -> None:
+    """Rates of block ``i`` at rows next to a change point, where its Jacobian is (nearly) singular:
+    interpolated (degree 7) from the smooth branch at t* ± k·η, k = 1..4, where it is well conditioned."""
+    na = run.sys.n_angles
+    for ev in run.events[i]:
+        eta = _eta(run, ev.time, math.inf, STENCIL_INPUT)
+        mine = rows[np.abs(tg[rows] - ev.time) < 4.0 * eta]
+        if not len(mine):
+            continue
+        base = max(int(np.searchsorted(tg, ev.time - 4.0 * eta)) - 1, 0)
+        solved, trial = _probe(run, st, tg, base, ev.time + eta * STENCIL, i, check=False)
+        if solved.n_ok < len(STENCIL) + 1:
+            continue  # the stencil leaves the feasible range: keep the direct rates (flagged)
+        u = (tg[mine] - ev.time) / eta
+        for what, ang, sl in (("v", trial.W, trial.SD), ("a", trial.AL, trial.SDD)):
+            vals = np.stack([ang[1:, v] if v < na else sl[1:, v - na] for v in p.block.unknowns], 1)
+            fit = np.polynomial.polynomial.polyfit(STENCIL, vals, len(STENCIL) - 1)
+            _store(p, st, mine, np.polynomial.polynomial.polyval(u, fit).T, what, na)
+        out.at_change[mine] = True
+
+
+def _change_point_choices(sys: LoopSystem, loop_number: int) -> list[str]:
+    """``[solver] change_points`` for a loop: "smooth" (default) or "other", or a list for successive ones."""
+    spec = sys.mechanism.options.get("change_points", {}).get(loop_number, "smooth")
+    return [spec] if isinstance(spec, str) else list(spec)
+
+
+# ------------------------------------------------------------------ limits
 
 
 LIMIT_RTOL = 1e-12  # the limit is located to this fraction of the drivers' range over the run
 
 
-def _locate_failure(
-    sys: LoopSystem, st: _State, tg: np.ndarray, k: int, X: np.ndarray, scale: float, tol: float, max_iter: int
-) -> tuple[float, np.ndarray]:
+def _locate_failure(run: _Run, st: _State, tg: np.ndarray, k: int, X: np.ndarray) -> tuple[float, np.ndarray]:
     """Bisect between the last solved sample k−1 and the failing sample k for the last assemblable
     time (a limit position or toggle). Returns (time, driver values there)."""
-    mech = sys.mechanism
-    na, ns = sys.n_angles, len(sys.slider_names)
     span = np.ptp(X, axis=0) if X.size else np.zeros(0)
     span = np.where(span > 0, span, 1.0)
-    base = _State(1, na, ns)
+    base = _State(1, run.sys.n_angles, len(run.sys.slider_names))
     for name in ("E", "TH", "S"):
         getattr(base, name)[0] = getattr(st, name)[k - 1]
     lo, hi = float(tg[k - 1]), float(tg[k])
-    x_lo = X[k - 1] if X.size else np.zeros(0)
-    x_hi = X[k] if X.size else np.zeros(0)
+    x_lo, x_hi = X[k - 1], X[k]
     for _ in range(200):
         if X.size and np.all(np.abs(x_hi - x_lo) <= LIMIT_RTOL * span):
             break
         if hi - lo <= 4 * np.spacing(max(abs(hi), 1.0)):
             break
         mid = 0.5 * (lo + hi)
-        trial = _State(2, na, ns)
-        for name in ("E", "TH", "S"):
-            getattr(trial, name)[0] = getattr(base, name)[0]
-        grid = np.array([lo, mid])
-        xm = np.zeros(0)
-        if mech.drivers:
-            Xd, XD, XDD = evaluate_all(mech, grid)
-            _impose_drivers(sys, trial, Xd, XD, XDD)
-            xm = Xd[1]
-        n_ok, *_ = _run_blocks(sys, trial, grid, 2, scale, tol, max_iter)
-        if n_ok == 2:
+        solved, trial = _probe(
+            run, base, np.array([lo]), 0, np.array([mid]), len(_plans(run.sys)) - 1, check=False, rates=False
+        )
+        xm = run.inputs(np.array([mid]))[0][0]
+        if solved.n_ok == 2:
             lo, x_lo = mid, xm
             for name in ("E", "TH", "S"):
                 getattr(base, name)[0] = getattr(trial, name)[1]
@@ -530,8 +856,6 @@ def _locate_failure(
 
 def assemble_blocks(sys: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarray:
     """The t = 0 configuration the closed-form blocks give with their (possibly flipped) branches."""
-    import dataclasses
-
     trial_sys = dataclasses.replace(sys, blocks=blocks, q0=q0, cache={})
     na, ns = sys.n_angles, len(sys.slider_names)
     st = _State(1, na, ns)
@@ -539,20 +863,18 @@ def assemble_blocks(sys: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarra
     st.E[0, :na] = np.exp(1j * q0[:na])
     st.S[0, :ns] = q0[na:]
     mech = sys.mechanism
-    if mech.drivers:
-        _impose_drivers(sys, st, *evaluate_all(mech, np.zeros(1)))
-    n_ok, failure, *_ = _run_blocks(trial_sys, st, np.zeros(1), 1, mech.scale, DEFAULT_TOL, DEFAULT_MAX_ITER)
-    if n_ok < 1:
-        from .errors import MechanismError
-
+    run = _Run(trial_sys, _Inputs(mech), mech.scale, DEFAULT_TOL, DEFAULT_MAX_ITER, DEFAULT_RTOL, detect=False)
+    _impose_drivers(sys, st, *run.inputs(np.zeros(1)))
+    solved = _run_blocks(run, st, np.zeros(1), 1)
+    if solved.n_ok < 1:
         raise MechanismError(
             f"{mech.source}: [solver] branches: the mechanism cannot be assembled on the requested branch at t = 0 "
-            f"({failure.why if failure else 'no solution'})",
+            f"({solved.failure.why if solved.failure else 'no solution'})",
             entry="solver",
         )
     th = st.TH[0].copy()
     free = np.array([v not in sys.drivers for v in range(na)], bool)
-    th[free] %= 2 * math.pi  # the file's convention at t = 0: θ in [0, 2π)
+    th[free] %= TWO_PI  # the file's convention at t = 0: θ in [0, 2π)
     return np.concatenate([th, st.S[0, :ns]])
 
 
@@ -567,11 +889,90 @@ def _impose_drivers(sys: LoopSystem, st: _State, X: np.ndarray, XD: np.ndarray, 
             st.S[:, v - na], st.SD[:, v - na], st.SDD[:, v - na] = X[:, j], XD[:, j], XDD[:, j]
 
 
+# ------------------------------------------------------------------ a run that starts late
+
+LEAD_STEP = math.pi / 180  # lead-in path step: 1° of crank (or 1/180 of the size of a slider input)
+MAX_LEAD = 100_000
+TURN_SAMPLES = 720  # samples of the one-turn probe that measures winding numbers
+
+
+def _lead_in(sys: LoopSystem, run: _Run, t_first: float) -> tuple[np.ndarray, _Inputs, np.ndarray]:
+    """Lead-in grid, inputs and whole-turn offsets of the angles for a run whose first time is not 0.
+
+    The configuration at t_first is reached from the t = 0 assembly along a straight path in
+    input space to the inputs at t_first less their whole crank turns K_j; the unwrapped angles
+    then get 2π·K_j·w_j(v) for the winding number w_j(v) of angle v over one turn of crank j.
+    """
+    mech = sys.mechanism
+    offsets = np.zeros(sys.n_angles)
+    if t_first == 0.0 or not mech.drivers:
+        return np.zeros(0), run.inputs, offsets
+    x0 = run.inputs(np.zeros(1))[0][0]
+    x1 = run.inputs(np.array([t_first]))[0][0]
+    crank = np.array([d.kind == "crank" for d in mech.drivers])
+    K = np.where(crank, np.trunc((x1 - x0) / TWO_PI), 0.0)
+    R = x1 - x0 - TWO_PI * K
+    units = np.where(crank, 1.0, mech.scale)
+    n_lead = int(np.clip(np.ceil(np.max(np.abs(R) / units) / LEAD_STEP), 8, MAX_LEAD))
+    length = max(1.0, 1e-3 * abs(t_first))
+    lead = t_first - length + length * np.arange(n_lead) / n_lead
+    inputs = _Inputs(mech, t_first, t_first - length, length, x0, R)
+    for j in np.nonzero(K)[0]:
+        offsets += abs(K[j]) * _turn_winding(sys, run, j, math.copysign(TWO_PI, K[j]), x0)
+    return lead, inputs, offsets
+
+
+def _turn_winding(sys: LoopSystem, run: _Run, j: int, turn: float, x0: np.ndarray) -> np.ndarray:
+    """How much every angle grows [rad] while crank ``j`` turns once by ``turn`` from the t = 0 assembly."""
+    mech = sys.mechanism
+    R = np.zeros(len(x0))
+    R[j] = turn
+    grid = np.linspace(0.0, 1.0, TURN_SAMPLES + 1)
+    inputs = _Inputs(mech, math.inf, 0.0, 1.0, x0, R)
+    st = _initial_state(sys, len(grid))
+    _impose_drivers(sys, st, *inputs(grid))
+    turn_run = dataclasses.replace(run, inputs=inputs, events={})
+    solved = _run_blocks(turn_run, st, grid, len(grid))
+    name = mech.drivers[j].symbol
+    if solved.failure is not None:
+        raise MotionError(
+            f"{mech.name}: cannot reach the first requested time: {name} cannot turn fully from its t = 0 value "
+            f"({solved.failure.why})",
+            entry="time",
+        )
+    if (
+        np.max(np.abs(st.E[-1] - st.E[0]), initial=0) > 1e-9
+        or np.max(np.abs(st.S[-1] - st.S[0]), initial=0) > 1e-9 * mech.scale
+    ):
+        raise MotionError(
+            f"{mech.name}: cannot start at the first requested time without solving every turn before it: "
+            f"one turn of {name} does not bring the mechanism back to its t = 0 branch; start nearer t = 0",
+            entry="time",
+        )
+    return TWO_PI * np.round((st.TH[-1] - st.TH[0]) / TWO_PI)
+
+
+def _initial_state(sys: LoopSystem, n: int) -> _State:
+    """A state of n rows whose row 0 is the t = 0 assembly."""
+    na, ns = sys.n_angles, len(sys.slider_names)
+    st = _State(n, na, ns)
+    st.TH[0, :] = sys.q0[:na]
+    st.E[0, :na] = np.exp(1j * sys.q0[:na])
+    st.S[0, :ns] = sys.q0[na:]
+    return st
+
+
+# ------------------------------------------------------------------ solve
+
+
 def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **options: Any) -> Result:
-    """Solve P/V/A at ``times`` (default: the mechanism's). Raises MotionError with ``partial``."""
+    """Solve P/V/A at ``times`` [s] (default: the mechanism's). Raises MotionError with ``partial``.
+
+    Options: ``method`` ("auto"|"newton"), ``tol`` (Newton step, relative), ``max_iter``,
+    ``rtol`` (accuracy asked of every output: samples whose error bound cond²·ε exceeds it are refused).
+    """
     method = options.pop("method", None)
-    tol = float(options.pop("tol", DEFAULT_TOL))
-    max_iter = int(options.pop("max_iter", DEFAULT_MAX_ITER))
+    given = {k: options.pop(k) for k in ("tol", "max_iter", "rtol") if k in options}
     if options:
         raise TypeError(f"unknown solver option(s): {', '.join(options)}")
     if isinstance(mechanism, LoopSystem):
@@ -581,116 +982,251 @@ def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **
     else:
         sys = compile_system(mechanism, method)
     mech = sys.mechanism
-    tol = float(mech.options.get("tol", tol))
-    max_iter = int(mech.options.get("max_iter", max_iter))
+    tol = float(mech.options.get("tol", given.get("tol", DEFAULT_TOL)))
+    max_iter = int(mech.options.get("max_iter", given.get("max_iter", DEFAULT_MAX_ITER)))
+    rtol = float(given.get("rtol", mech.options.get("rtol", DEFAULT_RTOL)))
     times = np.asarray(mech.times if times is None else times, float)
     if times.ndim != 1 or len(times) == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise MotionError("times must be a non-empty, finite, strictly increasing 1-D array", entry="time")
+    run = _Run(sys, _Inputs(mech), mech.scale, tol, max_iter, rtol)
+    with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
+        return _solve(run, times)
 
-    # internal grid: start at t = 0, the instant of the assembly, so branches and angles carry over
-    if times[0] == 0.0:
-        lead = np.zeros(0)
-    else:
-        h = (times[1] - times[0]) if len(times) > 1 else abs(times[0]) / 16
-        n_lead = int(min(MAX_LEAD_IN, max(1, math.ceil(abs(times[0]) / h))))
-        lead = np.linspace(0.0, times[0], n_lead + 1)[:-1]
-    tg = np.concatenate([lead, times])
-    off = len(lead)
-    n = len(tg)
-    na, ns = sys.n_angles, len(sys.slider_names)
-    st = _State(n, na, ns)
-    st.TH[0, :] = sys.q0[:na]
-    st.E[0, :na] = np.exp(1j * sys.q0[:na])
-    st.S[0, :ns] = sys.q0[na:]
-    scale = mech.scale
 
-    if mech.drivers:
-        X, XD, XDD = evaluate_all(mech, tg)
-        _impose_drivers(sys, st, X, XD, XDD)
-    else:
-        X = np.zeros((n, 0))
+@dataclass(frozen=True)
+class _Grid:
+    """The internal sample grid: the lead-in from t = 0, the requested times, and rows inserted
+    between requested samples so the inputs move at most MAX_INPUT_STEP per row (turns of the
+    other links are then counted right, change points found, Newton continued from near)."""
 
-    n_ok, failure, conds, signs = _run_blocks(sys, st, tg, n, scale, tol, max_iter)
+    t: np.ndarray
+    out: np.ndarray  # internal row of each requested sample (increasing)
+
+    @property
+    def first(self) -> int:
+        return int(self.out[0])
+
+    def requested_before(self, row: int) -> int:
+        """How many requested samples come before internal row ``row``."""
+        return int(np.searchsorted(self.out, row))
+
+
+MAX_INPUT_STEP = math.radians(10)  # per internal row: of a crank (or 1/36 of the size for a slider input)
+MAX_INSERTED = 10_000_000
+
+
+def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
+    """Lead-in + requested times, with rows inserted where an input moves more than MAX_INPUT_STEP."""
+    mech = run.sys.mechanism
+    n = len(times)
+    steps = np.ones(max(n - 1, 0), np.int64)
+    if mech.drivers and n > 1:
+        X, XD, _ = run.inputs(times)
+        units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
+        h = np.diff(times)[:, None]
+        travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
+        with np.errstate(invalid="ignore"):
+            need = np.ceil(np.nan_to_num(travel.max(axis=1), nan=1.0, posinf=1.0) / MAX_INPUT_STEP)
+        if need.sum() - len(need) > MAX_INSERTED:
+            raise MotionError(
+                f"{mech.name}: the inputs travel {float(travel.sum(axis=0).max()):.4g} rad (or sizes) over the run; "
+                f"counting the other links' turns needs at most {math.degrees(MAX_INPUT_STEP):g}° per internal "
+                f"sample, which would take {int(need.sum()):,} samples (more than {MAX_INSERTED:,}): shorten the run",
+                entry="time",
+            )
+        steps = np.maximum(need, 1).astype(np.int64)
+    frac = np.concatenate([np.arange(m) / m for m in steps]) if n > 1 else np.zeros(0)
+    start = np.repeat(times[:-1], steps)
+    width = np.repeat(np.diff(times), steps)
+    inner = np.append(start + frac * width, times[-1]) if n > 1 else times.copy()
+    inner[np.concatenate([[0], np.cumsum(steps)])] = times  # the requested times exactly
+    out = len(lead) + np.concatenate([[0], np.cumsum(steps)]) if n > 1 else np.array([len(lead)])
+    return _Grid(np.concatenate([lead, inner]), out)
+
+
+def _solve(run: _Run, times: np.ndarray) -> Result:
+    sys = run.sys
+    lead, run.inputs, turns = _lead_in(sys, run, float(times[0]))
+    grid = _grid(run, lead, times)
+    tg, n, first = grid.t, len(grid.t), grid.first
+    st = _initial_state(sys, n)
+    X, XD, XDD = run.inputs(tg)
+    _impose_drivers(sys, st, X, XD, XDD)
+    early = _check_inputs(sys, X, XD, XDD, first, run.rtol)
+    solved = _run_blocks(run, st, tg, early.sample if early else n)
+    failure = solved.failure if early is None or (solved.failure and solved.failure.sample < early.sample) else early
+    n_ok = min(solved.n_ok, failure.sample if failure else n)
+    free = [v for v in range(sys.n_angles) if v not in sys.drivers and turns[v]]
+    if free:  # whole turns skipped by the lead-in: θ = φ + 2π·n with n counted in whole turns, as from t = 0
+        phi = np.angle(st.E[first:, free])
+        st.TH[first:, free] = phi + TWO_PI * np.round((st.TH[first:, free] + turns[free] - phi) / TWO_PI)
     limit = None
-    if failure is not None and failure.sample > 0:
-        limit = _locate_failure(sys, st, tg, failure.sample, X, scale, tol, max_iter)
-    result = _result(sys, st, tg, n_ok, off, conds, signs)
+    if failure is not None and failure.sample > first and failure.loop is not None and failure is not early:
+        limit = _locate_failure(run, st, tg, failure.sample, X)
+    result = _result(run, st, grid, n_ok, solved)
+    bad = _first_non_finite(result)
+    if bad is not None:
+        row, column = bad
+        failure = _Failure(int(grid.out[row]), None, f"{column} is not finite (an overflow: the inputs are too large)")
+        result, limit = result.head(row), None
     if failure is not None:
-        raise _motion_error(sys, failure, tg, X, off, result, limit)
+        raise _motion_error(sys, failure, grid, X, result, limit)
     return result
 
 
-def _result(sys: LoopSystem, st: _State, tg: np.ndarray, n_ok: int, off: int, conds: list, signs: list) -> Result:
+def _check_inputs(
+    sys: LoopSystem, X: np.ndarray, XD: np.ndarray, XDD: np.ndarray, off: int, rtol: float
+) -> _Failure | None:
+    """The first sample whose driver inputs are not finite, or whose crank angle is too large to
+    resolve to ``rtol`` (its floating-point spacing exceeds rtol radians)."""
     mech = sys.mechanism
-    k = slice(0, n_ok)
+    bad = ~np.isfinite(X) | ~np.isfinite(XD) | ~np.isfinite(XDD)
+    for j, d in enumerate(mech.drivers):
+        if d.kind == "crank":
+            bad[off:, j] |= np.spacing(np.abs(X[off:, j])) > rtol
+    rows = np.nonzero(bad.any(axis=1))[0]
+    if not len(rows):
+        return None
+    r = int(rows[0])
+    j = int(np.argmax(bad[r]))
+    d = mech.drivers[j]
+    vals = (X[r, j], XD[r, j], XDD[r, j])
+    if np.all(np.isfinite(vals)):
+        why = f"the input {d.symbol} = {X[r, j]:.6g} rad is too large to resolve to rtol = {rtol:g} rad"
+    else:
+        which = ("value", "rate", "acceleration")[int(np.argmin(np.isfinite(vals)))]
+        why = f"the input's {which} is not finite (an overflow: the driver's numbers are too large)"
+    return _Failure(r, None, why)
+
+
+def _first_non_finite(result: Result) -> tuple[int, str] | None:
+    """(row, column) of the first non-finite output value, if any."""
+    first = None
+    for name, col in result.columns.items():
+        bad = ~np.isfinite(col)
+        if bad.any():
+            r = int(np.argmax(bad))
+            if first is None or r < first[0]:
+                first = (r, name)
+    return first
+
+
+def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> Result:
+    sys = run.sys
+    mech = sys.mechanism
+    rows = grid.out[grid.out < n_ok]  # the requested samples solved
     points, loops = _system_sums(sys)
-    P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
+    P, V, A = points.pos(st, rows), points.vel(st, rows), points.acc(st, rows)
     cols: dict[str, np.ndarray] = {}
     for name, a, offset in sys.link_outputs:
         if a >= 0:
-            cols[f"{name}.theta"] = st.TH[k, a] + offset
-            cols[f"{name}.omega"] = st.W[k, a]
-            cols[f"{name}.alpha"] = st.AL[k, a]
+            cols[f"{name}.theta"] = st.TH[rows, a] + offset
+            cols[f"{name}.omega"] = st.W[rows, a]
+            cols[f"{name}.alpha"] = st.AL[rows, a]
         else:
-            cols[f"{name}.theta"] = np.full(n_ok, offset % (2 * math.pi))
-            cols[f"{name}.omega"] = np.zeros(n_ok)
-            cols[f"{name}.alpha"] = np.zeros(n_ok)
+            cols[f"{name}.theta"] = np.full(len(rows), offset % TWO_PI)
+            cols[f"{name}.omega"] = np.zeros(len(rows))
+            cols[f"{name}.alpha"] = np.zeros(len(rows))
     for i, name in enumerate(sys.point_names):
         cols[f"{name}.x"], cols[f"{name}.y"] = P[:, i].real, P[:, i].imag
         cols[f"{name}.vx"], cols[f"{name}.vy"] = V[:, i].real, V[:, i].imag
         cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
     for i, name in enumerate(sys.slider_names):
-        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[k, i], st.SD[k, i], st.SDD[k, i]
-    residual = np.max(np.abs(loops.pos(st, k)), axis=1) / mech.scale if len(sys.loops) else np.zeros(n_ok)
-    cond = np.max(np.stack([c[:n_ok] for c in conds]), axis=0) if conds else np.ones(n_ok)
-    branch = np.zeros(n_ok, np.int64)
-    for bit, s in enumerate(signs):
-        branch |= (s[:n_ok] > 0).astype(np.int64) << bit
-    sl = slice(off, None)
+        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[rows, i], st.SD[rows, i], st.SDD[rows, i]
+    t = grid.t[rows]
     return Result(
         mech.name,
         "vloop",
-        tg[off:n_ok],
-        {c: v[sl] for c, v in cols.items()},
-        {"residual": residual[sl], "cond": cond[sl], "branch": branch[sl]},
-        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly},
+        t,
+        cols,
+        _health(run, st, t, rows, solved, loops),
+        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, t)},
     )
+
+
+def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Solved, loops: _Sum) -> dict:
+    """Per requested sample: closure residual, worst block condition number, branch signature, flags."""
+    sys = run.sys
+    residual = np.max(np.abs(loops.pos(st, rows)), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
+    cond = np.max(np.stack([c[rows] for c in solved.conds]), axis=0) if solved.conds else np.ones(len(rows))
+    branch = np.zeros(len(rows), np.int64)
+    for bit, sgn in enumerate(solved.signs):
+        branch |= (sgn[rows] > 0).astype(np.int64) << bit
+    at_change = solved.at_change[rows] if len(solved.at_change) else np.zeros(len(rows), bool)
+    change = at_change.copy()
+    for evs in run.events.values():
+        for ev in evs:
+            j = int(np.searchsorted(t, ev.time))
+            if 0 < j < len(t):
+                change[j] = True
+    return {
+        "residual": residual,
+        "cond": cond,
+        "branch": branch,
+        "ill_conditioned": ((_error_bound(cond) > ILL_FRACTION * run.rtol) & ~at_change).astype(np.int8),
+        "change_point": change.astype(np.int8),
+    }
+
+
+def _events_meta(run: _Run, t: np.ndarray) -> dict[str, Any]:
+    """The change points passed within the requested times (loop, time, inputs, which continuation)."""
+    sys = run.sys
+    out = []
+    for i, evs in sorted(run.events.items()):
+        loop = sys.loops[_plans(sys)[i].block.loops[0]]
+        for ev in evs:
+            if not len(t) or not t[0] <= ev.time <= t[-1]:
+                continue
+            x = run.inputs(np.array([ev.time]))[0][0]
+            out.append(
+                {
+                    "loop": loop.index + 1,
+                    "label": loop.label,
+                    "time": ev.time,
+                    "inputs": {d.symbol: float(v) for d, v in zip(sys.mechanism.drivers, x, strict=True)},
+                    "continued": "smooth" if ev.smooth else "other",
+                }
+            )
+    return {"change_points": sorted(out, key=lambda e: e["time"]), "rtol": run.rtol}
 
 
 def _motion_error(
     sys: LoopSystem,
     f: _Failure,
-    tg: np.ndarray,
+    grid: _Grid,
     X: np.ndarray,
-    off: int,
     partial: Result,
     limit: tuple[float, np.ndarray] | None = None,
 ) -> MotionError:
+    """The MotionError for failure ``f`` at internal row f.sample; ``sample`` is the first requested one lost."""
     mech = sys.mechanism
-    lp = sys.loops[f.loop]
-    t = float(tg[f.sample])
+    t = float(grid.t[f.sample])
+    n_req = len(grid.out)
+    j = grid.requested_before(f.sample)
     drv = ", ".join(
-        f"{d.symbol} = {X[f.sample, j]:.6g} {'rad' if d.kind == 'crank' else mech.units}"
-        for j, d in enumerate(mech.drivers)
+        f"{d.symbol} = {X[f.sample, i]:.6g} {'rad' if d.kind == 'crank' else mech.units}"
+        for i, d in enumerate(mech.drivers)
     )
-    if f.sample >= off:
-        where = f"at t = {t:.6g} s (sample {f.sample - off} of {len(tg) - off})"
-        kept = f"{f.sample - off} earlier sample{'s' if f.sample - off != 1 else ''} kept"
+    if f.sample < grid.first:
+        where = "before the first requested time (on the way from the t = 0 assembly)"
+    elif j < n_req and grid.out[j] == f.sample:
+        where = f"at t = {t:.6g} s (sample {j} of {n_req})"
     else:
-        where = f"at t = {t:.6g} s, before the first requested time"
-        kept = "no sample kept"
+        where = f"at t = {t:.6g} s (between samples {j - 1} and {j} of {n_req})"
+    kept = f"{len(partial)} earlier sample{'s' if len(partial) != 1 else ''} kept" if len(partial) else "no sample kept"
     lim = ""
     if limit is not None:
         vals = ", ".join(
-            f"{d.symbol} = {limit[1][j]:.10g} {'rad' if d.kind == 'crank' else mech.units}"
-            for j, d in enumerate(mech.drivers)
+            f"{d.symbol} = {limit[1][i]:.10g} {'rad' if d.kind == 'crank' else mech.units}"
+            for i, d in enumerate(mech.drivers)
         )
         lim = f" (last assembled at t = {limit[0]:.10g} s, {vals})"
+    at = f": loop {f.loop + 1} ({sys.loops[f.loop].label})" if f.loop is not None else ""
     err = MotionError(
-        f"{mech.name}: cannot assemble {where}, {drv}: loop {lp.index + 1} ({lp.label}): {f.why}{lim}; {kept}",
-        entry=f"loop {lp.index + 1}",
-        time=t,
-        sample=f.sample - off,
+        f"{mech.name}: cannot assemble {where}, {drv}{at}: {f.why}{lim}; {kept}",
+        entry=f"loop {f.loop + 1}" if f.loop is not None else "drivers",
+        time=t if f.sample >= grid.first else None,
+        sample=j if f.sample >= grid.first else None,
         driver_value=X[f.sample].tolist() if len(X) else None,
         partial=partial,
     )

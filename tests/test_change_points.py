@@ -1,0 +1,236 @@
+"""Change points: where a linkage's two assembly branches cross (Grashof equality), vloop continues on
+the branch whose velocities stay continuous, reports where, and lets the file pick the other branch.
+
+Every reference here is derived by hand from the geometry, not from vloop's loop equations:
+
+* parallelogram (ground 4, crank = rocker = 2, coupler 4): on its parallelogram branch the rocker
+  stays parallel to the crank and the coupler to the ground: θ4 = θ2, θ3 = 0, B = A + 4; the branches
+  cross where all four pins are collinear, θ2 = kπ. The anti-parallelogram branch has B mirrored in
+  the line A–O4 (the other intersection of the two circles).
+* isosceles slider-crank (crank = rod = 1, no offset): s = 2·cos θ2 on the branch through the crank
+  pivot; the other branch keeps B at the pivot. They cross at θ2 = π/2.
+* kite (crank = coupler = a, rocker = ground = d): both circles (centre A radius a, centre O4 radius d)
+  pass through O2, so B is the mirror image of O2 in the line A–O4; the branches (B and B ≡ O2) cross
+  where A is on the ground line, θ2 = 0 and π.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import vloop
+from vloop.cli import main
+from vloop.compare import assert_histories_close
+
+PARALLELOGRAM = """
+name = "parallelogram"
+[joints]
+O2 = [0.0, 0.0]
+O4 = [4.0, 0.0]
+A = [0.0, 2.0]
+B = [4.0, 2.0]
+[links]
+ground = {{ joints = ["O2", "O4"], ground = true }}
+crank = {{ joints = ["O2", "A"] }}
+coupler = {{ joints = ["A", "B"] }}
+rocker = {{ joints = ["O4", "B"] }}
+[[drivers]]
+link = "crank"
+omega = 2.0
+alpha = {alpha}
+[time]
+start = 0.0
+stop = {stop}
+step = {step}
+{solver}
+"""
+
+
+def parallelogram(alpha: float = 0.5, step: float = 0.01, solver: str = "") -> vloop.Mechanism:
+    # 1.5 turns of the crank from θ2 = π/2: θ2(T) = π/2 + 2T + αT²/2 = π/2 + 3π
+    stop = (-2 + math.sqrt(4 + 2 * alpha * 3 * math.pi)) / alpha if alpha else 1.5 * math.pi
+    return vloop.loads(PARALLELOGRAM.format(alpha=alpha, stop=stop, step=step, solver=solver))
+
+
+def crank_motion(mech: vloop.Mechanism) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    d = mech.drivers[0]
+    t = mech.times
+    return d.x0 + d.v0 * t + 0.5 * d.a0 * t * t, d.v0 + d.a0 * t, np.full_like(t, d.a0)
+
+
+def test_parallelogram_through_one_and_a_half_turns_stays_a_parallelogram():
+    mech = parallelogram()
+    res = vloop.solve(mech)
+    th2, w2, a2 = crank_motion(mech)
+    A = 2.0 * np.exp(1j * th2)
+    B = A + 4.0
+    ref = vloop.Result.from_arrays(
+        mech.name,
+        "closed form",
+        mech.times,
+        links={"crank": (th2, w2, a2), "rocker": (th2, w2, a2), "coupler": (np.zeros_like(th2),) * 3},
+        points={
+            "A": (A.real, A.imag, (1j * w2 * A).real, (1j * w2 * A).imag, *_acc(A, w2, a2)),
+            "B": (B.real, B.imag, (1j * w2 * A).real, (1j * w2 * A).imag, *_acc(A, w2, a2)),
+        },
+    )
+    # 1e-9 of each quantity's peak; a quantity that is zero in theory (the coupler's ω, α) gets 1e-9 of its
+    # group's peak (measured: 8e-11 of the angular accelerations' peak at the sample nearest a folding)
+    assert_histories_close(res, ref, rtol=1e-9, floor=1e-9, min_columns=15)
+    # the three foldings θ2 = π, 2π, 3π are reported, to 1e-9 rad, each continued on the smooth branch
+    cps = res.meta["change_points"]
+    assert [round(c["inputs"]["θ_crank"] / math.pi) for c in cps] == [1, 2, 3]
+    for c in cps:
+        assert abs(c["inputs"]["θ_crank"] - round(c["inputs"]["θ_crank"] / math.pi) * math.pi) < 1e-9
+        assert c["continued"] == "smooth" and c["loop"] == 1
+    marked = np.nonzero(res.health["change_point"])[0]
+    for c in cps:  # the first sample after each change point is marked in health
+        assert int(np.searchsorted(res.t, c["time"])) in marked
+    assert np.max(np.abs(np.diff(res["rocker.omega"]) - np.diff(w2))) < 1e-9  # no jump
+
+
+def _acc(A: np.ndarray, w: np.ndarray, al: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    acc = (1j * al - w * w) * A
+    return acc.real, acc.imag
+
+
+@pytest.mark.parametrize("step", [0.01, 0.05, math.pi / 8])
+def test_parallelogram_any_sampling_no_jump(step):
+    """Coarse or exact-hitting samplings (π/8 s puts samples exactly on the foldings at ω = 2, α = 0)."""
+    mech = parallelogram(alpha=0.0, step=step)
+    res = vloop.solve(mech)
+    th2, _, _ = crank_motion(mech)
+    assert np.max(np.abs(res["rocker.theta"] - th2)) < 1e-9
+    assert np.max(np.abs(res["rocker.omega"] - 2.0)) < 1e-9
+    assert np.max(np.abs(res["coupler.omega"])) < 1e-9
+    assert np.max(np.abs(res["rocker.alpha"])) < 1e-8  # α ≡ 0: measured 3e-11 at the worst sample
+    assert len(res.meta["change_points"]) == 3
+
+
+def test_the_file_picks_the_other_branch_after_a_change_point():
+    """[solver] change_points = { 1 = ["other", "smooth"] }: anti-parallelogram after the first folding."""
+    mech = parallelogram(alpha=0.0, step=0.01, solver='[solver]\nchange_points = { 1 = ["other", "smooth"] }')
+    res = vloop.solve(mech)
+    th2, _, _ = crank_motion(mech)
+    A = 2.0 * np.exp(1j * th2)
+    B1 = A + 4.0
+    u = (4.0 - A) / np.abs(4.0 - A)
+    B2 = A + u * u * np.conj(B1 - A)  # the mirror image in the line A–O4
+    after = th2 > math.pi
+    B = np.where(after, B2, B1)
+    got = res["B.x"] + 1j * res["B.y"]
+    assert np.max(np.abs(got - B)) < 1e-9 * mech.scale
+    assert [c["continued"] for c in res.meta["change_points"]] == ["other", "smooth", "smooth"]
+
+
+ISOSCELES = """
+name = "isosceles"
+[joints]
+O2 = [0.0, 0.0]
+A = [{ax!r}, {ay!r}]
+B = [{bx!r}, 0.0]
+[links]
+ground = {{ joints = ["O2"], ground = true }}
+crank = {{ joints = ["O2", "A"] }}
+rod = {{ joints = ["A", "B"] }}
+[sliders]
+blk = {{ joint = "B", guide = "ground", axis = [1.0, 0.0] }}
+[[drivers]]
+link = "crank"
+omega = {omega!r}
+[time]
+start = 0.0
+stop = 2.0
+step = 0.1
+"""
+
+
+def test_isosceles_slider_crank_passes_its_change_point_with_a_sample_on_it():
+    omega = math.pi / 2 - 0.3  # sample 10 (t = 1 s) is at θ2 = π/2, on the change point
+    mech = vloop.loads(ISOSCELES.format(ax=math.cos(0.3), ay=math.sin(0.3), bx=2 * math.cos(0.3), omega=omega))
+    res = vloop.solve(mech)
+    th = res["crank.theta"]
+    assert np.max(np.abs(res["blk.s"] - 2 * np.cos(th))) < 1e-12
+    assert np.max(np.abs(res["blk.v"] + 2 * omega * np.sin(th))) < 1e-9
+    assert np.max(np.abs(res["blk.a"] + 2 * omega**2 * np.cos(th))) < 1e-9
+    assert np.max(np.abs(res["rod.omega"] + omega)) < 1e-9  # the rod mirrors the crank: θ3 = −θ2
+    (cp,) = res.meta["change_points"]
+    assert abs(cp["inputs"]["θ_crank"] - math.pi / 2) < 1e-9 and abs(cp["time"] - 1.0) < 1e-9
+    assert res.health["change_point"][10] == 1
+
+
+def test_kite_passes_both_foldings_per_turn():
+    a, d = 1.0, 2.5
+    th0 = 0.7
+    A0 = complex(a * np.exp(1j * th0))
+    B0 = complex(_kite_B(A0, d))
+    text = f"""
+name = "kite"
+[joints]
+O2 = [0.0, 0.0]
+O4 = [{d}, 0.0]
+A = [{A0.real!r}, {A0.imag!r}]
+B = [{B0.real!r}, {B0.imag!r}]
+[links]
+ground = {{ joints = ["O2", "O4"], ground = true }}
+crank = {{ joints = ["O2", "A"] }}
+coupler = {{ joints = ["A", "B"] }}
+rocker = {{ joints = ["O4", "B"] }}
+[[drivers]]
+link = "crank"
+omega = 1.5
+[time]
+start = 0.0
+stop = 8.0
+step = 0.004
+"""
+    res = vloop.solve(vloop.loads(text))
+    th2 = th0 + 1.5 * res.t
+    B = _kite_B(a * np.exp(1j * th2), d)
+    assert np.max(np.abs(res["B.x"] + 1j * res["B.y"] - B)) < 1e-9 * d
+    # velocities against central differences of the closed form (h = 1e-5 s: error ~1e-10)
+    h = 1e-5
+    vB = (_kite_B(a * np.exp(1j * (th2 + 1.5 * h)), d) - _kite_B(a * np.exp(1j * (th2 - 1.5 * h)), d)) / (2 * h)
+    assert np.max(np.abs(res["B.vx"] + 1j * res["B.vy"] - vB)) < 1e-6 * np.max(np.abs(vB))
+    folds = [c["inputs"]["θ_crank"] / math.pi for c in res.meta["change_points"]]
+    assert np.allclose(folds, np.round(folds), atol=1e-9) and len(folds) == 4  # π, 2π, 3π, 4π within 0.7 + 12 rad
+
+
+def _kite_B(A: np.ndarray, d: float) -> np.ndarray:
+    """O2 mirrored in the line A–O4."""
+    u = (d - A) / np.abs(d - A)
+    return A + u * u * np.conj(0.0 - A)
+
+
+def test_a_near_parallelogram_is_not_a_change_point():
+    """Rocker 2.001: the branches never meet (gap ~1e-3 of the size); the motion stays on its t = 0 branch,
+    which the closed form (law of cosines, fixed branch) gives."""
+    from validators import analytic_fourbar
+
+    text = PARALLELOGRAM.format(alpha=0.0, stop=1.5 * math.pi, step=0.01, solver="").replace(
+        'rocker = { joints = ["O4", "B"] }', 'rocker = { joints = ["O4", "B"], length = 2.001 }'
+    )
+    mech = vloop.loads(text)
+    res = vloop.solve(mech)
+    assert res.meta["change_points"] == []
+    assert_histories_close(res, analytic_fourbar.solve(mech), rtol=1e-9, min_columns=15)
+
+
+def test_cli_reports_change_points(tmp_path, capsys):
+    f = tmp_path / "p.toml"
+    f.write_text(PARALLELOGRAM.format(alpha=0.0, stop=1.5 * math.pi, step=0.01, solver=""))
+    assert main(["run", str(f), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("change point: loop 1 (O2–A–B–O4)") == 3 and "θ_crank = 3.141592654" in out
+    health = np.genfromtxt(tmp_path / "o" / "health.csv", delimiter=",", names=True)
+    assert health["healthchange_point"].sum() >= 3
+    assert main(["info", str(f)]) == 0
+    assert capsys.readouterr().out.count("change point: loop 1") == 3
+
+
+def test_bad_change_point_option(tmp_path):
+    with pytest.raises(vloop.MechanismError, match="change_points"):
+        parallelogram(solver='[solver]\nchange_points = { 1 = "sideways" }')
