@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from . import newton
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
 from .loops import Block, LoopSystem, compile_system
@@ -315,79 +316,6 @@ def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
     st.TH[k, a] = phi + TWO_PI * np.round((est - phi) / TWO_PI)
 
 
-def _newton_block(
-    p: _Plan, st: _State, n: int, tg: np.ndarray, na: int, scale: float, tol: float, max_iter: int
-) -> None:
-    """Per-sample Newton with analytic Jacobian and a Taylor predictor; raises _Failure."""
-    b = p.block
-    nu = len(b.unknowns)
-    is_ang = np.array([v < na for v in b.unknowns])
-    col = [v if v < na else v - na for v in b.unknowns]
-    x = np.array([st.TH[0, c] if a else st.S[0, c] for a, c in zip(is_ang, col, strict=True)])
-    xd = np.zeros(nu)
-    xdd = np.zeros(nu)
-    sign0 = None
-    m = p.C.shape[0]
-    colscale = np.where(is_ang, 1.0 / scale, 1.0)  # unit-free condition number, as in _block_health
-    cond_first = cond_last = 1.0
-
-    def put(k: int, x: np.ndarray) -> None:
-        for i in range(nu):
-            if is_ang[i]:
-                st.TH[k, col[i]] = x[i]
-                st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
-            else:
-                st.S[k, col[i]] = x[i]
-
-    for k in range(n):
-        if k > 0:
-            h = tg[k] - tg[k - 1]
-            x = x + xd * h + 0.5 * xdd * h * h
-        row = slice(k, k + 1)
-        converged = False
-        for _ in range(max_iter):
-            put(k, x)
-            z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
-            F = p.C @ z[0]
-            J = _jacobian(p, z, e)[0]
-            try:
-                dx = np.linalg.solve(J, -np.concatenate([F.real, F.imag]))
-            except np.linalg.LinAlgError:
-                raise _Failure(k, b.loops[0], "the loop Jacobian is singular (a toggle)") from None
-            x = x + dx
-            if np.max(np.abs(dx)) <= tol * (1.0 + np.max(np.abs(x))):
-                converged = True
-                break
-        put(k, x)
-        z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
-        res = np.max(np.abs(p.C @ z[0])) / scale
-        if not converged or not np.isfinite(res) or res > 1e-9:
-            worst = b.loops[int(np.argmax(np.abs(p.C @ z[0])))] if np.isfinite(res) else b.loops[0]
-            why = f"Newton did not converge (closure {res:.2g} of the mechanism size)"
-            if k > 0 and cond_last > 10 * cond_first:
-                why += (
-                    f"; the Jacobian's condition number grew from {cond_first:.3g} to {cond_last:.3g}: "
-                    "a limit position or toggle is reached"
-                )
-            raise _Failure(k, worst, why)
-        J = _jacobian(p, z, e)
-        cond_last = float(np.linalg.cond(J[0] * colscale))
-        if k == 0:
-            cond_first = cond_last
-        sgn = np.sign(np.linalg.det(J[0]))
-        if sign0 is None:
-            sign0 = sgn
-        elif sgn != sign0:
-            raise _Failure(
-                k, b.loops[0], "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed"
-            )
-        if m and k + 1 < n:
-            xd = _rates(p, st, row, J, "v")[0]
-            _store(p, st, row, xd[None, :], "v", na)
-            xdd = _rates(p, st, row, J, "a")[0]
-            _store(p, st, row, np.zeros((1, nu)), "v", na)
-
-
 def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Real block Jacobians (rows, 2m, 2m) of [Re; Im] of the block's loops."""
     cols = []
@@ -522,6 +450,7 @@ class _Run:
     detect: bool = True  # look for change points (the main run only)
     check: bool = True  # refuse ill-conditioned samples and branch flips
     rates: bool = True
+    newton_sign: dict[int, float] = field(default_factory=dict)  # det sign of each Newton block's t = 0 branch
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
@@ -553,12 +482,24 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
     for i, p in enumerate(_plans(sys)):
         if upto is not None and i > upto:
             break
-        sig = _positions(run, st, tg, i, p, out)
+        fac = None
+        if p.block.kind == "newton":
+            failure, fac = newton.solve_block(run, st, tg, i, p, out.n_ok)
+            if failure is not None:
+                _fail(out, failure)
+            out.discs.append(None)
+            sig = run.sigma(i, tg[: out.n_ok])
+        else:
+            sig = _positions(run, st, tg, i, p, out)
         if out.n_ok == 0:
             break
         k = slice(0, out.n_ok)
-        cols = _columns(p, st, k) if len(p.block.unknowns) == 2 else None  # shared by health and rates
-        cond, sgn = _block_health(p, st, k, run.scale, cols)
+        cols = None
+        if fac is None:
+            cols = _columns(p, st, k)  # shared by health and rates
+            cond, sgn = _block_health(p, st, k, run.scale, cols)
+        else:
+            cond, sgn = fac.cond[k], fac.sign[k]
         near = _near_change_point(run, i, tg[k], cond)
         if run.check:
             signed = sgn * sig[: out.n_ok]
@@ -572,13 +513,23 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
         out.signs.append(sgn)
         if out.n_ok == 0 or not run.rates:
             continue
-        J = None if cols is not None else _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
-        _store(p, st, k, _rates(p, st, k, J, "v", cols), "v", na)
-        _store(p, st, k, _rates(p, st, k, J, "a", cols), "a", na)
+        if fac is None:
+            _store(p, st, k, _rates(p, st, k, None, "v", cols), "v", na)
+            _store(p, st, k, _rates(p, st, k, None, "a", cols), "a", na)
+        else:
+            _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "v"), "v", na)
+            _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "a"), "a", na)
         if near.any():
             _rates_across(run, st, tg, i, p, np.nonzero(near)[0], out)
     out.at_change = out.at_change[: out.n_ok]
     return out
+
+
+def _rates_by(p: _Plan, st: _State, k: slice, inv: np.ndarray, what: str) -> np.ndarray:
+    """Rates of a Newton block from its factored Jacobians (J⁻¹, or the least-squares (JᵀJ)⁻¹Jᵀ)."""
+    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))
+    rhs = np.concatenate([R.real, R.imag], axis=1)
+    return (inv @ rhs[..., None])[..., 0]
 
 
 def _fail(out: _Solved, failure: _Failure) -> None:
@@ -1035,7 +986,11 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
                 entry="time",
             )
         steps = np.maximum(need, 1).astype(np.int64)
-    frac = np.concatenate([np.arange(m) / m for m in steps]) if n > 1 else np.zeros(0)
+    if n > 1:  # the fraction of its interval of every internal row: 0, 1/m, 2/m, ... for an interval of m steps
+        first = np.repeat(np.cumsum(steps) - steps, steps)
+        frac = (np.arange(int(steps.sum())) - first) / np.repeat(steps, steps)
+    else:
+        frac = np.zeros(0)
     start = np.repeat(times[:-1], steps)
     width = np.repeat(np.diff(times), steps)
     inner = np.append(start + frac * width, times[-1]) if n > 1 else times.copy()
