@@ -114,8 +114,7 @@ class _Block:
         if self.square:
             return np.sign(np.linalg.det(J))
         if self.rows_sq is None:  # the first row seen picks the equations of the square sub-block
-            q, r, piv = _pivoted_rows(J[0])
-            self.rows_sq = piv
+            self.rows_sq = _pivoted_rows(J[0])
         return np.sign(np.linalg.det(J[:, self.rows_sq]))
 
     def factor(self, st: _State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
@@ -139,7 +138,7 @@ class _Block:
         return Factor(J, inv, cond, self.sign(J)), res, conv
 
 
-def _pivoted_rows(J: np.ndarray) -> tuple[None, None, np.ndarray]:
+def _pivoted_rows(J: np.ndarray) -> np.ndarray:
     """Indices of nu well-chosen independent equations of a tall Jacobian (Gram–Schmidt on its rows)."""
     chosen: list[int] = []
     basis: list[np.ndarray] = []
@@ -155,7 +154,7 @@ def _pivoted_rows(J: np.ndarray) -> tuple[None, None, np.ndarray]:
                 best, best_norm, best_vec = k, nv, v
         chosen.append(best)
         basis.append(best_vec / (best_norm or 1.0))
-    return None, None, np.array(sorted(chosen), int)
+    return np.array(sorted(chosen), int)
 
 
 def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -165,7 +164,7 @@ def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     try:
         X = np.linalg.solve(A, Bm)
     except np.linalg.LinAlgError:
-        X = np.full(Bm.shape[:1] + (A.shape[2],) + Bm.shape[2:], np.nan)
+        X = np.full((*Bm.shape[:1], A.shape[2], *Bm.shape[2:]), np.nan)
         for k in range(len(A)):
             try:
                 X[k] = np.linalg.solve(A[k], Bm[k])
@@ -432,7 +431,7 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     h = t - ctx.tg[a]
     x_a = ctx.blk.read(ctx.st, np.array([a]))[0]
     pred = x_a + ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
-    x, conv = newton(ctx.blk, trial, np.array([1]), pred[None], run.tol, run.max_iter)
+    _, conv = newton(ctx.blk, trial, np.array([1]), pred[None], run.tol, run.max_iter)
     if not conv[0]:
         return None
     _, J = ctx.blk.residual_jacobian(trial, np.array([1]))

@@ -550,13 +550,6 @@ def _positions(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, out: _So
     """Solve block ``i``'s positions on rows 0..out.n_ok-1 (finding change points on the main run)."""
     na = run.sys.n_angles
     k = slice(0, out.n_ok)
-    if p.block.kind == "newton":
-        try:
-            _newton_block(p, st, out.n_ok, tg, na, run.scale, run.tol, run.max_iter)
-        except _Failure as f:
-            _fail(out, f)
-        out.discs.append(None)
-        return np.ones(out.n_ok)
     sig = run.sigma(i, tg[k])
     ok, h = _closed_form(p, st, k, na, sig)
     if run.detect and p.block.kind != "PP":
