@@ -40,7 +40,8 @@ if TYPE_CHECKING:
 COARSE_STEP = math.radians(12)  # input travel between coarse rows (the grid keeps ≤ 10° per row)
 TWO_PI = 2.0 * math.pi
 JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
-LOOSE = 1e-6  # dense rows iterate to this step; the next (quadratic) one is then at round-off
+LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is then at round-off
+FRESH = 1e-14  # a last step above this (relative) refreshes the Jacobian the rates are taken from
 CLOSURE = 1e-9  # a solved row closes every equation to this fraction of the mechanism size
 LOCATE_STEPS = 40  # bisection steps locating a Newton block's change point
 
@@ -132,10 +133,12 @@ class _Block:
         dx = -(inv @ F[..., None])[..., 0]
         x = self.read(st, rows) + dx
         with np.errstate(invalid="ignore"):
-            conv = np.max(np.abs(dx), axis=1, initial=0.0) <= tol * (1.0 + np.max(np.abs(x), axis=1, initial=0.0))
+            step = np.max(np.abs(dx), axis=1, initial=0.0) / (1.0 + np.max(np.abs(x), axis=1, initial=0.0))
+        conv = step <= tol
+        fresh = step <= FRESH  # J at the rows that moved more is refreshed by the caller (rates use it)
         finite = np.all(np.isfinite(x), axis=1)
         self.put(st, rows[finite], x[finite])
-        return Factor(J, inv, cond, self.sign(J)), res, conv
+        return Factor(J, inv, cond, self.sign(J)), res, conv & fresh
 
 
 def _pivoted_rows(J: np.ndarray) -> np.ndarray:
@@ -244,6 +247,8 @@ class _Ctx:
         self.na = run.sys.n_angles
         self.xd = np.zeros((n, self.blk.nu))  # rates at the rows continued one by one (predictors)
         self.xdd = np.zeros((n, self.blk.nu))
+        self.weak = np.zeros(n, bool)  # rows whose rates are too ill-conditioned to predict from
+        self.prev = np.full(n, -1)  # the row each row was continued from
 
     def expected_sign(self, rows: np.ndarray) -> np.ndarray:
         """The determinant sign of the run's assembly branch at these rows (flipped after change points)."""
@@ -266,6 +271,12 @@ class _Ctx:
             if what == "v":
                 _s._store(p, st, row, val, "v", self.na)
         _s._store(p, st, row, np.zeros((1, self.blk.nu)), "v", self.na)  # the sums need them zero again
+        Js = J * self.blk.colscale
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sv = np.linalg.svd(Js, compute_uv=False) if np.all(np.isfinite(Js)) else np.array([1.0, 0.0])
+            cond = sv[0] / sv[-1] if sv[-1] > 0 else math.inf
+        # next to a singular row (a change point) the rates are not accurate enough to predict from
+        self.weak[k] = not (cond * cond * _s.EPS <= self.run.rtol) or not np.all(np.isfinite(out[k]))
 
 
 def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int) -> tuple[_s._Failure | None, Factor]:
@@ -360,7 +371,11 @@ def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
     run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
     h = tg[k] - tg[a]
     x_a = blk.read(st, np.array([a]))[0]
-    incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
+    if ctx.weak[a]:  # the secant through the row before instead of the (unreliable) Taylor series
+        b = ctx.prev[a]
+        incr = (x_a - blk.read(st, np.array([b]))[0]) * (h / (tg[a] - tg[b])) if b >= 0 else np.zeros(blk.nu)
+    else:
+        incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
     pred = x_a + incr
     rows = np.array([k])
     x, conv = newton(blk, st, rows, pred[None], run.tol, run.max_iter)
@@ -388,6 +403,7 @@ def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
         elif sign == 0:
             return _s._Failure(k, ctx.p.block.loops[0], "the loop Jacobian is singular (a toggle)")
     ctx.rates_at(k, J[0])
+    ctx.prev[k] = a
     return None
 
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -450,7 +451,9 @@ class _Run:
     detect: bool = True  # look for change points (the main run only)
     check: bool = True  # refuse ill-conditioned samples and branch flips
     rates: bool = True
-    newton_sign: dict[int, float] = field(default_factory=dict)  # det sign of each Newton block's t = 0 branch
+    newton_sign: dict[int, float] = field(default_factory=dict)
+    tail: bool = True  # the rows end the run (not a chunk followed by another)
+    t_start: float = 0.0  # the run's first requested time  # det sign of each Newton block's t = 0 branch
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
@@ -576,11 +579,13 @@ ZOOM_STEPS = 12  # each step narrows the bracket 16-fold
 ETA_INPUT = 1e-5  # the rates across a change point are compared this far from it (input units: rad, or size)
 
 
-def _candidate_minima(t: np.ndarray, h: np.ndarray) -> list[tuple[int, int]]:
+def _candidate_minima(t: np.ndarray, h: np.ndarray, tail: bool = True) -> list[tuple[int, int]]:
     """Brackets (row lo, row hi) around sampled minima of h deep enough to hide a zero between samples.
 
     Near a double zero h ≈ c·(t − t*)², so a parabola through three samples has its minimum
     near 0 whatever the phase of the sampling; a broad minimum keeps it near the samples.
+    ``tail``: also look between the last two samples (the end of the run, not of a chunk: the
+    next chunk sees that minimum with both its neighbours).
     """
     n = len(h)
     if n < 2:
@@ -588,15 +593,24 @@ def _candidate_minima(t: np.ndarray, h: np.ndarray) -> list[tuple[int, int]]:
     out = []
     m = np.nonzero((h[1:-1] <= h[:-2]) & (h[1:-1] <= h[2:]))[0] + 1
     for c in m:
-        u0, u2 = t[c - 1] - t[c], t[c + 1] - t[c]
-        g0, g2 = (h[c - 1] - h[c]) / u0, (h[c + 1] - h[c]) / u2
-        a = (g0 - g2) / (u0 - u2)  # h ≈ h[c] + b·u + a·u² through the three samples
-        low = h[c] - (g0 - a * u0) ** 2 / (4 * a) if a > 0 else h[c]
-        if low <= 0.25 * min(h[c - 1], h[c + 1]):
+        if _parabola_low(t, h, c, c - 1, c + 1) <= 0.25 * min(h[c - 1], h[c + 1]):
             out.append((c - 1, c + 1))
-    if h[-1] < h[-2]:  # still falling at the end: a zero may lie before the last sample
-        out.append((n - 2, n - 1))
+    if tail and h[-1] < h[-2]:  # still falling at the end: a zero may lie before the last sample
+        if n < 3 or _parabola_low(t, h, n - 2, n - 2, n - 1) <= 0.25 * h[-1]:
+            out.append((n - 2, n - 1))
     return out
+
+
+def _parabola_low(t: np.ndarray, h: np.ndarray, c: int, lo: int, hi: int) -> float:
+    """The least value over [t[lo], t[hi]] of the parabola through samples c − 1, c, c + 1 of h."""
+    u0, u2 = t[c - 1] - t[c], t[c + 1] - t[c]
+    g0, g2 = (h[c - 1] - h[c]) / u0, (h[c + 1] - h[c]) / u2
+    a = (g0 - g2) / (u0 - u2)  # h ≈ h[c] + b·u + a·u² through the three samples
+    b = g0 - a * u0
+    if not a > 0:
+        return float(min(h[lo], h[hi]))
+    u = min(max(-b / (2 * a), t[lo] - t[c]), t[hi] - t[c])
+    return float(h[c] + b * u + a * u * u)
 
 
 def _probe(run: _Run, st: _State, tg: np.ndarray, base: int, times: np.ndarray, upto: int, **mode: bool) -> tuple:
@@ -628,7 +642,7 @@ def _find_change_points(run: _Run, st: _State, tg: np.ndarray, i: int, h: np.nda
     found = []
     loop = run.sys.loops[_plans(run.sys)[i].block.loops[0]]
     choices = _change_point_choices(run.sys, loop.index + 1)
-    for lo, hi in _candidate_minima(tg[: len(h)], h):
+    for lo, hi in _candidate_minima(tg[: len(h)], h, run.tail):
         t_star, h_min = _zoom(run, st, tg, i, lo, hi)
         if h_min < 0:
             raise _Failure(hi, loop.index, "the loop cannot close between samples: the input passes a limit position")
@@ -945,6 +959,9 @@ class _Grid:
 
     t: np.ndarray
     out: np.ndarray  # internal row of each requested sample (increasing)
+    skip: int = 0  # leading requested samples already given by the chunk before (its last one)
+    offset: int = 0  # index in the whole run of the requested sample at out[0]
+    total: int = 0  # requested samples in the whole run
 
     @property
     def first(self) -> int:
@@ -992,19 +1009,92 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
     return _Grid(np.concatenate([lead, inner]), out)
 
 
-def _solve(run: _Run, times: np.ndarray) -> Result:
+CHUNK = 16_384  # requested samples solved together: the state stays in cache, memory stays bounded
+CHUNK_ROWS = 8 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
+
+
+def _solve(run: _Run, times: np.ndarray, chunk: int | None = None) -> Result:
+    """The whole run as one Result: the chunks joined (on failure, the MotionError's partial joins them)."""
+    parts: list[Result] = []
+    try:
+        for part in solve_chunks(run, times, chunk or CHUNK):
+            parts.append(part)
+    except MotionError as exc:
+        if exc.partial is not None and parts:
+            exc.partial = join([*parts, exc.partial])
+        raise
+    return join(parts)
+
+
+def join(parts: list[Result]) -> Result:
+    """Results of consecutive chunks as one (meta from the last: it has every change point)."""
+    if len(parts) == 1:
+        return parts[0]
+    first, last = parts[0], parts[-1]
+    return Result(
+        first.mechanism,
+        first.engine,
+        np.concatenate([p.t for p in parts]),
+        {k: np.concatenate([p.columns[k] for p in parts]) for k in first.columns},
+        {k: np.concatenate([p.health[k] for p in parts]) for k in first.health},
+        dict(last.meta),
+    )
+
+
+def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Result]:
+    """Solve ``times`` in chunks of about ``chunk`` requested samples, yielding each chunk's Result.
+
+    State carried across a chunk border: the last two internal rows (positions, unwrapped angles,
+    so turn counts continue; change-point detection sees the border row with both neighbours),
+    the change points found so far and each Newton block's branch sign (in ``run``). A failure
+    raises MotionError whose ``partial`` holds this chunk's rows before it (``sample`` counts from
+    the start of the run)."""
     sys = run.sys
     lead, run.inputs, turns = _lead_in(sys, run, float(times[0]))
-    grid = _grid(run, lead, times)
+    run.t_start = float(times[0])
+    carry: tuple[np.ndarray, _State] | None = None
+    i0, n_total = 0, len(times)
+    while i0 < n_total:
+        i1 = min(i0 + chunk, n_total)
+        while True:
+            if carry is None:
+                grid = _grid(run, lead, times[i0:i1])
+            else:
+                grid = _grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
+            if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= 1:
+                break
+            i1 = i0 + (i1 - i0) // 2
+        grid = dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
+        run.tail = i1 == n_total
+        st = _initial_state(sys, len(grid.t))
+        if carry is not None:
+            for name in ("E", "TH", "S"):
+                getattr(st, name)[:2] = getattr(carry[1], name)
+        yield _solve_grid(run, grid, st, turns if carry is None else None)
+        last = grid.out[-1]
+        carry = (grid.t[last - 1 : last + 1], _rows(st, slice(last - 1, last + 1)))
+        i0 = i1
+
+
+def _rows(st: _State, k: slice) -> _State:
+    """A copy of rows ``k`` of a state's positions (rates are recomputed where carried)."""
+    out = _State.__new__(_State)
+    for name in ("E", "TH", "S"):
+        setattr(out, name, getattr(st, name)[k].copy())
+    return out
+
+
+def _solve_grid(run: _Run, grid: _Grid, st: _State, turns: np.ndarray | None) -> Result:
+    """Solve one chunk's grid (row 0 assembled; rows 0–1 carried from the chunk before, if any)."""
+    sys = run.sys
     tg, n, first = grid.t, len(grid.t), grid.first
-    st = _initial_state(sys, n)
     X, XD, XDD = run.inputs(tg)
     _impose_drivers(sys, st, X, XD, XDD)
     early = _check_inputs(sys, X, XD, XDD, first, run.rtol)
     solved = _run_blocks(run, st, tg, early.sample if early else n)
     failure = solved.failure if early is None or (solved.failure and solved.failure.sample < early.sample) else early
     n_ok = min(solved.n_ok, failure.sample if failure else n)
-    free = [v for v in range(sys.n_angles) if v not in sys.drivers and turns[v]]
+    free = [v for v in range(sys.n_angles) if v not in sys.drivers and turns[v]] if turns is not None else []
     if free:  # whole turns skipped by the lead-in: θ = φ + 2π·n with n counted in whole turns, as from t = 0
         phi = np.angle(st.E[first:, free])
         st.TH[first:, free] = phi + TWO_PI * np.round((st.TH[first:, free] + turns[free] - phi) / TWO_PI)
@@ -1015,7 +1105,9 @@ def _solve(run: _Run, times: np.ndarray) -> Result:
     bad = _first_non_finite(result)
     if bad is not None:
         row, column = bad
-        failure = _Failure(int(grid.out[row]), None, f"{column} is not finite (an overflow: the inputs are too large)")
+        failure = _Failure(
+            int(grid.out[row + grid.skip]), None, f"{column} is not finite (an overflow: the inputs are too large)"
+        )
         result, limit = result.head(row), None
     if failure is not None:
         raise _motion_error(sys, failure, grid, X, result, limit)
@@ -1062,7 +1154,7 @@ def _first_non_finite(result: Result) -> tuple[int, str] | None:
 def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> Result:
     sys = run.sys
     mech = sys.mechanism
-    rows = grid.out[grid.out < n_ok]  # the requested samples solved
+    rows = grid.out[grid.skip :][grid.out[grid.skip :] < n_ok]  # the requested samples solved
     points, loops = _system_sums(sys)
     P, V, A = points.pos(st, rows), points.vel(st, rows), points.acc(st, rows)
     cols: dict[str, np.ndarray] = {}
@@ -1082,18 +1174,21 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
     for i, name in enumerate(sys.slider_names):
         cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[rows, i], st.SD[rows, i], st.SDD[rows, i]
     t = grid.t[rows]
+    seen = grid.t[grid.out[: grid.skip + len(rows)]]  # requested times solved in this chunk and the one before
+    span = np.array([run.t_start, seen[-1]]) if len(seen) else np.zeros(0)
     return Result(
         mech.name,
         "vloop",
         t,
         cols,
-        _health(run, st, t, rows, solved, loops),
-        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, t)},
+        _health(run, st, grid.t[grid.out[: grid.skip + len(rows)]], rows, solved, loops),
+        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, span)},
     )
 
 
 def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Solved, loops: _Sum) -> dict:
-    """Per requested sample: closure residual, worst block condition number, branch signature, flags."""
+    """Per requested sample (``rows``): closure residual, worst block condition number, branch signature,
+    flags. ``t``: the times of the rows, after the last sample of the chunk before if there is one."""
     sys = run.sys
     residual = np.max(np.abs(loops.pos(st, rows)), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
     cond = np.max(np.stack([c[rows] for c in solved.conds]), axis=0) if solved.conds else np.ones(len(rows))
@@ -1102,11 +1197,12 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
         branch |= (sgn[rows] > 0).astype(np.int64) << bit
     at_change = solved.at_change[rows] if len(solved.at_change) else np.zeros(len(rows), bool)
     change = at_change.copy()
+    skip = len(t) - len(rows)  # t starts with the chunk before's last sample, if any
     for evs in run.events.values():
         for ev in evs:
             j = int(np.searchsorted(t, ev.time))
-            if 0 < j < len(t):
-                change[j] = True
+            if 0 < j < len(t) and j >= skip:
+                change[j - skip] = True
     return {
         "residual": residual,
         "cond": cond,
@@ -1149,19 +1245,20 @@ def _motion_error(
     """The MotionError for failure ``f`` at internal row f.sample; ``sample`` is the first requested one lost."""
     mech = sys.mechanism
     t = float(grid.t[f.sample])
-    n_req = len(grid.out)
+    n_req = grid.total or len(grid.out)
     j = grid.requested_before(f.sample)
+    jg = j + grid.offset  # in the whole run
     drv = ", ".join(
         f"{d.symbol} = {X[f.sample, i]:.6g} {'rad' if d.kind == 'crank' else mech.units}"
         for i, d in enumerate(mech.drivers)
     )
     if f.sample < grid.first:
         where = "before the first requested time (on the way from the t = 0 assembly)"
-    elif j < n_req and grid.out[j] == f.sample:
-        where = f"at t = {t:.6g} s (sample {j} of {n_req})"
+    elif j < len(grid.out) and grid.out[j] == f.sample:
+        where = f"at t = {t:.6g} s (sample {jg} of {n_req})"
     else:
-        where = f"at t = {t:.6g} s (between samples {j - 1} and {j} of {n_req})"
-    kept = f"{len(partial)} earlier sample{'s' if len(partial) != 1 else ''} kept" if len(partial) else "no sample kept"
+        where = f"at t = {t:.6g} s (between samples {jg - 1} and {jg} of {n_req})"
+    kept = f"{jg} earlier sample{'s' if jg != 1 else ''} kept" if jg else "no sample kept"
     lim = ""
     if limit is not None:
         vals = ", ".join(
@@ -1174,7 +1271,7 @@ def _motion_error(
         f"{mech.name}: cannot assemble {where}, {drv}{at}: {f.why}{lim}; {kept}",
         entry=f"loop {f.loop + 1}" if f.loop is not None else "drivers",
         time=t if f.sample >= grid.first else None,
-        sample=j if f.sample >= grid.first else None,
+        sample=jg if f.sample >= grid.first else None,
         driver_value=X[f.sample].tolist() if len(X) else None,
         partial=partial,
     )
