@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from . import newton
+from . import budget, newton
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
 from .loops import Block, LoopSystem, compile_system
@@ -451,9 +451,10 @@ class _Run:
     detect: bool = True  # look for change points (the main run only)
     check: bool = True  # refuse ill-conditioned samples and branch flips
     rates: bool = True
-    newton_sign: dict[int, float] = field(default_factory=dict)
+    newton_sign: dict[int, float] = field(default_factory=dict)  # det sign of each Newton block's t = 0 branch
     tail: bool = True  # the rows end the run (not a chunk followed by another)
-    t_start: float = 0.0  # the run's first requested time  # det sign of each Newton block's t = 0 branch
+    t_start: float = 0.0  # the run's first requested time
+    memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
@@ -927,18 +928,35 @@ def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **
     """Solve P/V/A at ``times`` [s] (default: the mechanism's). Raises MotionError with ``partial``.
 
     Options: ``method`` ("auto"|"newton"), ``tol`` (Newton step, relative), ``max_iter``,
-    ``rtol`` (accuracy asked of every output: samples whose error bound cond²·ε exceeds it are refused).
+    ``rtol`` (accuracy asked of every output: samples whose error bound cond²·ε exceeds it are refused),
+    ``memory_budget`` (bytes or "2G"; see vloop.budget: a run whose results would not fit is refused).
     """
+    run, times = _prepare(mechanism, times, options)
+    budget.check(run.sys, len(times), False, CHUNK_ROWS, run.memory_budget)
+    with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
+        return _solve(run, times)
+
+
+def solve_iter(
+    mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, chunk: int | None = None, **options: Any
+) -> Iterator[Result]:
+    """Solve as :func:`solve` but yield the run in chunks of about ``chunk`` samples (memory bounded by a chunk,
+    whatever the run's length). A failure raises MotionError whose ``partial`` holds the failing chunk's rows."""
+    run, times = _prepare(mechanism, times, options)
+    budget.check(run.sys, len(times), True, CHUNK_ROWS, run.memory_budget)
+    with np.errstate(all="ignore"):
+        yield from solve_chunks(run, times, chunk or CHUNK)
+
+
+def _prepare(mechanism: Mechanism | LoopSystem, times: np.ndarray | None, options: dict) -> tuple[_Run, np.ndarray]:
+    """The run context and checked times of a solve."""
+    options = dict(options)
     method = options.pop("method", None)
+    explicit = options.pop("memory_budget", None)
     given = {k: options.pop(k) for k in ("tol", "max_iter", "rtol") if k in options}
     if options:
         raise TypeError(f"unknown solver option(s): {', '.join(options)}")
-    if isinstance(mechanism, LoopSystem):
-        sys = mechanism
-        if method is not None and method != sys.method:
-            sys = compile_system(sys.mechanism, method)
-    else:
-        sys = compile_system(mechanism, method)
+    sys = compiled(mechanism, method)
     mech = sys.mechanism
     tol = float(mech.options.get("tol", given.get("tol", DEFAULT_TOL)))
     max_iter = int(mech.options.get("max_iter", given.get("max_iter", DEFAULT_MAX_ITER)))
@@ -947,8 +965,21 @@ def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **
     if times.ndim != 1 or len(times) == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise MotionError("times must be a non-empty, finite, strictly increasing 1-D array", entry="time")
     run = _Run(sys, _Inputs(mech), mech.scale, tol, max_iter, rtol)
-    with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
-        return _solve(run, times)
+    run.memory_budget = explicit
+    return run, times
+
+
+def compiled(mechanism: Mechanism | LoopSystem, method: str | None = None) -> LoopSystem:
+    """The LoopSystem to solve: ``mechanism`` itself if compiled for ``method``, else compiled (a system
+    keeps its other-method variant in its cache, so it is compiled once)."""
+    if not isinstance(mechanism, LoopSystem):
+        return compile_system(mechanism, method)
+    if method is None or method == mechanism.method:
+        return mechanism
+    key = f"method:{method}"
+    if key not in mechanism.cache:
+        mechanism.cache[key] = compile_system(mechanism.mechanism, method)
+    return mechanism.cache[key]
 
 
 @dataclass(frozen=True)
