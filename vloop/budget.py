@@ -42,17 +42,23 @@ def parse_size(value: Any, where: str = "memory budget") -> int:
     if isinstance(value, bool):
         raise ValueError(f"{where}: must be a size such as 2G or 500M, got {value!r}")
     if isinstance(value, int | float):
-        number, unit = float(value), ""
+        try:
+            number, unit = float(value), ""
+        except OverflowError:  # an integer too large for a float
+            number, unit = math.inf, ""
     elif isinstance(value, str):
         m = _SIZE.match(value)
         if not m:
-            raise ValueError(f"{where}: must be a size such as 2G, 500M or a number of bytes, got {value!r}")
+            raise ValueError(f"{where}: must be a size such as 2G, 500M or a number of bytes, got {value[:40]!r}")
         number, unit = float(m.group(1)), m.group(2).upper()
     else:
         raise ValueError(f"{where}: must be a size such as 2G or 500M, got {type(value).__name__}")
-    size = number * _UNITS[unit]
+    try:
+        size = number * _UNITS[unit]
+    except OverflowError:
+        size = math.inf
     if not math.isfinite(size) or size < 1 or size > 1 << 60:
-        raise ValueError(f"{where}: {value!r} is not a usable size (1 byte to 1 EiB)")
+        raise ValueError(f"{where}: {str(value)[:40]} is not a usable size (1 byte to 1 EiB)")
     return int(size)
 
 

@@ -10,6 +10,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,10 +29,10 @@ def _fail(msg: str) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from .loops import compile_system
     from .mechanism import load
-    from .solver import solve
+    from .output import default_folder
 
     mech = load(args.file)
-    out = Path(args.out) if args.out else Path("out") / mech.name
+    out = Path(args.out) if args.out else default_folder(mech.name)
     if args.sweep:
         from .sweep import rocking
 
@@ -41,59 +42,76 @@ def cmd_run(args: argparse.Namespace) -> int:
             d = mech.drivers[0]
             print(f"{mech.name}: {d.symbol} rocks between its limits {lo:.10g} and {hi:.10g}")
     system = compile_system(mech, args.method)
-    try:
-        result = solve(system)
-    except VloopError as exc:
-        partial = exc.partial
-        if partial is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            partial.to_csv(out / "results.csv")
-            partial.to_csv(out / "health.csv", health=True)
-            if args.plot:
-                from .plots import plot_result
+    return _run_streamed(args, mech, system, out)
 
-                plot_result(mech, partial, out)
-            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'})")
-        raise
-    out.mkdir(parents=True, exist_ok=True)
-    result.to_csv(out / "results.csv")
-    result.to_csv(out / "health.csv", health=True)
-    files = [out / "results.csv", out / "health.csv"]
-    if args.plot:
-        from .plots import plot_result
 
-        files += plot_result(mech, result, out)
+def _run_streamed(args: argparse.Namespace, mech: Any, system: Any, out: Path) -> int:
+    """Solve in chunks and stream results.FMT and health.FMT into ``out`` (published together at the end;
+    a run stopped by a limit publishes the rows before it). Plots need the whole run in memory."""
+    from . import budget, writers
+    from .output import OutputSet
+    from .progress import Progress
+    from .solver import CHUNK_ROWS, join, solve_iter
+
+    fmt = args.format
+    n = len(mech.times)
+    budget.check(system, n, not args.plot, CHUNK_ROWS, args.memory_budget)
+    columns = _column_names(system)
+    with OutputSet(out) as outset:
+        writers.check_disk(outset.folder, n, len(columns), fmt)
+        chunks = solve_iter(system, memory_budget=args.memory_budget)
+        with Progress(n, mech.name) as progress:
+            summary, kept, files, failure = writers.stream(
+                outset, fmt, chunks, columns, mech.units, mech.name, progress, keep=args.plot
+            )
+        if args.plot and kept:
+            from .plots import plot_result
+
+            made = plot_result(mech, join(kept), outset.path("links.png").parent)  # into the stage folder
+            files += [outset.folder / outset.path(p.name).name for p in made]
+    if failure is not None:
+        return _fail(f"{failure} (wrote {summary.rows} rows to {files[0]})")
     asm = system.assembly
     moved = ""
     if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
         moved = f", t = 0 assembly moved joints by up to {asm['moved']:.3g} {mech.units}"
     print(
-        f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s, "
+        f"{mech.name}: {summary.rows} samples, t = {summary.t_first:g}..{summary.t_last:g} s, "
         f"{len(system.loops)} loop{'s' if len(system.loops) != 1 else ''}, "
-        f"max closure {np.max(result.health['residual'], initial=0):.2g}, "
-        f"max condition {np.max(result.health['cond'], initial=1):.3g}{moved}"
+        f"max closure {summary.closure:.2g}, max condition {summary.cond:.3g}{moved}"
     )
-    for line in health_notes(result):
+    for line in _notes(summary.meta, summary.ill):
         print(line)
     print("wrote " + ", ".join(str(f) for f in files))
     return 0
 
 
+def _column_names(system: Any) -> list[str]:
+    """The results' columns in output order (as vloop.solve names them)."""
+    cols = [f"{name}.{f}" for name, _, _ in system.link_outputs for f in ("theta", "omega", "alpha")]
+    cols += [f"{p}.{f}" for p in system.point_names for f in ("x", "y", "vx", "vy", "ax", "ay")]
+    cols += [f"{s}.{f}" for s in system.slider_names for f in ("s", "v", "a")]
+    return cols
+
+
 def health_notes(result: Result) -> list[str]:
     """Lines that say what health.csv flags: change points passed, ill-conditioned samples kept."""
+    return _notes(result.meta, int(np.sum(result.health.get("ill_conditioned", 0))))
+
+
+def _notes(meta: dict, ill: int) -> list[str]:
     lines = []
-    for cp in result.meta.get("change_points", []):
+    for cp in meta.get("change_points", []):
         inputs = ", ".join(f"{k} = {v:.10g}" for k, v in cp["inputs"].items())
         lines.append(
             f"  change point: loop {cp['loop']} ({cp['label']}) at t = {cp['time']:.10g} s, {inputs}: "
             f"continued on the {'smooth' if cp['continued'] == 'smooth' else 'other (as [solver] change_points asks)'}"
             " branch"
         )
-    ill = int(np.sum(result.health.get("ill_conditioned", 0)))
     if ill:
         lines.append(
             f"  {ill} ill-conditioned sample{'s' if ill != 1 else ''} kept (error bound cond²·ε above "
-            f"1e-3 of rtol = {result.meta.get('rtol', 1e-9):g}): flagged in health.csv"
+            f"1e-3 of rtol = {meta.get('rtol', 1e-9):g}): flagged in health.csv"
         )
     return lines
 
@@ -286,6 +304,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png")
     r.add_argument(
         "--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only"
+    )
+    r.add_argument(
+        "--format",
+        choices=["csv", "parquet", "npz"],
+        default="csv",
+        help="results and health files: csv (default), parquet (needs pyarrow, units in the schema) or npz",
+    )
+    r.add_argument(
+        "--memory-budget",
+        default=None,
+        help="refuse a run estimated to need more memory than this (e.g. 2G, 500M; default: env "
+        "VLOOP_MEMORY_BUDGET, the file's [solver] memory_budget, else half the available memory)",
     )
     r.add_argument(
         "--sweep",

@@ -29,7 +29,22 @@ import numpy as np
 
 from .errors import MechanismError
 
-MAX_SAMPLES = 10_000_000  # beyond this a time grid is refused (memory, not maths)
+TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.budget)
+
+
+def _time_limit(n: int) -> str | None:
+    """Why a time grid of n samples is refused (it alone would exceed the memory budget), or None."""
+    from .budget import budget, fmt_size
+
+    limit, source = budget()
+    if n * TIME_BYTES <= limit:
+        return None
+    return (
+        f"{n:,} samples: the time grid alone needs {fmt_size(n * TIME_BYTES)}, more than the memory budget of "
+        f"{fmt_size(limit)} ({source}); use a larger step or a shorter run, or raise VLOOP_MEMORY_BUDGET"
+    )
+
+
 COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
 
 
@@ -699,8 +714,8 @@ def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
         t = np.asarray(ts, float)
         if np.any(np.diff(t) <= 0):
             probs.add("time", "'times' must be strictly increasing")
-        if len(t) > MAX_SAMPLES:
-            probs.add("time", f"{len(t)} samples is more than the limit of {MAX_SAMPLES}")
+        if _time_limit(len(t)):
+            probs.add("time", _time_limit(len(t)))
         return t
     start = _number(raw, "start", "time", probs, 0.0)
     stop = _number(raw, "stop", "time", probs)
@@ -716,16 +731,15 @@ def _load_time(raw: Any, drivers: list[Driver], probs: _Problems) -> np.ndarray:
         probs.add("time", f"stop ({stop:g}) is before start ({start:g})")
         return np.zeros(1)
     n = math.floor((stop - start) / step + 1e-9) + 1  # up to and including stop, never past it
-    if n > MAX_SAMPLES:
-        probs.add(
-            "time",
-            f"step {step:g} over [{start:g}, {stop:g}] gives {n:,} samples, more than the limit of {MAX_SAMPLES:,}",
-        )
+    if _time_limit(n):
+        probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {_time_limit(n)}")
         return np.zeros(1)
     return start + step * np.arange(n)
 
 
-_SOLVER_KEYS = {"method", "tol", "rtol", "max_iter", "assembly_tolerance", "branches", "change_points"}
+_SOLVER_KEYS = {
+    "method", "tol", "rtol", "max_iter", "assembly_tolerance", "branches", "change_points", "memory_budget",
+}  # fmt: skip
 BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
 CHANGE_POINT_CHOICES = ("smooth", "other")
 
@@ -774,6 +788,13 @@ def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
             )
         else:
             out["branches"] = {int(k): v for k, v in br.items()}
+    if "memory_budget" in raw:  # bytes or a size such as "2G" (vloop.budget)
+        from .budget import parse_size
+
+        try:
+            out["memory_budget"] = parse_size(raw["memory_budget"], "memory_budget")
+        except ValueError as exc:
+            probs.add("solver", str(exc))
     if "max_iter" in raw:
         if not isinstance(raw["max_iter"], int) or raw["max_iter"] < 1:
             probs.add("solver", "max_iter must be a positive integer")
