@@ -74,7 +74,7 @@ def worst_relative(a: vloop.Result, b: vloop.Result) -> float:
 # ---------------------------------------------------------------- pylinkage models of the shared mechanisms
 
 
-def pylinkage_model(name: str, mech: vloop.Mechanism, dt: float):  # noqa: ANN201 (pylinkage is optional)
+def pylinkage_model(name: str, mech: vloop.Mechanism, dt: float):
     """The mechanism as a pylinkage Linkage turning its crank ω·dt per step, or None if not one of the three."""
     import pylinkage as pl
 
@@ -107,7 +107,7 @@ def pylinkage_model(name: str, mech: vloop.Mechanism, dt: float):  # noqa: ANN20
     return model
 
 
-def pylinkage_run(model, n: int):  # noqa: ANN001, ANN201
+def pylinkage_run(model, n: int):
     """n steps of P/V/A (a model continues from where its last run ended: the cost is the same)."""
     return model.step_fast_with_kinematics(iterations=n, dt=1.0)
 
