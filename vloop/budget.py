@@ -163,10 +163,23 @@ def estimate(sys: Any, samples: int, streamed: bool, chunk_rows: int) -> Estimat
     return Estimate(kept + working + grid, samples, cols, copies, working, grid)
 
 
+LAST: list[str] = []  # the last check, for the message if memory runs out all the same
+
+
+def out_of_memory() -> str:
+    """The message for a MemoryError: what was estimated and allowed (the estimate was exceeded)."""
+    said = f" (estimated {LAST[-1]})" if LAST else ""
+    return (
+        f"out of memory{said}: lower the memory budget (--memory-budget, {ENV}) so that vloop refuses such a run "
+        "before it starts, use a larger step or a shorter run"
+    )
+
+
 def check(sys: Any, samples: int, streamed: bool, chunk_rows: int, explicit: Any = None) -> Estimate:
     """Refuse (MemoryBudgetError) a run whose estimate exceeds the budget; returns the estimate."""
     est = estimate(sys, samples, streamed, chunk_rows)
     limit, source = budget(explicit, sys.mechanism.options)
+    LAST[:] = [f"{fmt_size(est.total)} for {sys.mechanism.name}, budget {fmt_size(limit)} ({source})"]
     if est.total > limit:
         way = (
             "use a larger [time] step or a shorter run, or raise the budget"

@@ -356,6 +356,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(str(exc))
     except KeyboardInterrupt:
         return _fail("interrupted")
+    except MemoryError:
+        from .budget import out_of_memory
+
+        return _fail(out_of_memory())
     except BrokenPipeError:  # the reader went away (vloop ... | head): nothing left to say
         sys.stderr.close()
         return 0

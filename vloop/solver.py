@@ -644,6 +644,8 @@ def _find_change_points(run: _Run, st: _State, tg: np.ndarray, i: int, h: np.nda
     loop = run.sys.loops[_plans(run.sys)[i].block.loops[0]]
     choices = _change_point_choices(run.sys, loop.index + 1)
     for lo, hi in _candidate_minima(tg[: len(h)], h, run.tail):
+        if any(tg[lo] <= ev.time <= tg[hi] for ev in run.events.get(i, ())):
+            continue  # found already (by the chunk before, whose last rows this chunk starts from)
         t_star, h_min = _zoom(run, st, tg, i, lo, hi)
         if h_min < 0:
             raise _Failure(hi, loop.index, "the loop cannot close between samples: the input passes a limit position")
@@ -1041,7 +1043,7 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
 
 
 CHUNK = 16_384  # requested samples solved together: the state stays in cache, memory stays bounded
-CHUNK_ROWS = 8 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
+CHUNK_ROWS = 2 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
 
 
 def _solve(run: _Run, times: np.ndarray, chunk: int | None = None) -> Result:
@@ -1072,39 +1074,80 @@ def join(parts: list[Result]) -> Result:
     )
 
 
+MARGIN_INPUT = 5 * STENCIL_INPUT  # a chunk's last rows within this input travel are solved again by the next chunk
+
+
 def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Result]:
     """Solve ``times`` in chunks of about ``chunk`` requested samples, yielding each chunk's Result.
 
-    State carried across a chunk border: the last two internal rows (positions, unwrapped angles,
-    so turn counts continue; change-point detection sees the border row with both neighbours),
-    the change points found so far and each Newton block's branch sign (in ``run``). A failure
-    raises MotionError whose ``partial`` holds this chunk's rows before it (``sample`` counts from
-    the start of the run)."""
+    State carried across a chunk border: two internal rows (positions, unwrapped angles, so turn counts
+    continue; change-point detection sees the border row with both neighbours), the change points found
+    so far and each Newton block's branch sign (in ``run``). A chunk's last rows, within MARGIN_INPUT of
+    input travel from its end, are not given out but solved again by the next chunk: a change point just
+    past the border (found by the next chunk) still reaches back to them, as in a run solved in one piece;
+    a failure among them is decided by a longer chunk. A failure raises MotionError whose ``partial``
+    holds this chunk's rows before it (``sample`` counts from the start of the run)."""
     sys = run.sys
     lead, run.inputs, turns = _lead_in(sys, run, float(times[0]))
     run.t_start = float(times[0])
     carry: tuple[np.ndarray, _State] | None = None
-    i0, n_total = 0, len(times)
+    i0, n_total, size = 0, len(times), chunk
     while i0 < n_total:
-        i1 = min(i0 + chunk, n_total)
-        while True:
-            if carry is None:
-                grid = _grid(run, lead, times[i0:i1])
-            else:
-                grid = _grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
-            if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= 1:
-                break
-            i1 = i0 + (i1 - i0) // 2
-        grid = dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
-        run.tail = i1 == n_total
+        i1 = min(i0 + size, n_total)
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total)
+        run.tail = grid.offset + len(grid.out) == n_total
         st = _initial_state(sys, len(grid.t))
         if carry is not None:
             for name in ("E", "TH", "S"):
                 getattr(st, name)[:2] = getattr(carry[1], name)
-        yield _solve_grid(run, grid, st, turns if carry is None else None)
-        last = grid.out[-1]
-        carry = (grid.t[last - 1 : last + 1], _rows(st, slice(last - 1, last + 1)))
-        i0 = i1
+        events = {i: list(evs) for i, evs in run.events.items()}
+        try:
+            res = _solve_grid(run, grid, st, turns if carry is None else None)
+            failure = None
+        except MotionError as exc:
+            res, failure = exc.partial, exc
+        cut = len(grid.out) - 1 if run.tail else _cut(run, grid)
+        if failure is not None and (run.tail or failure.sample is None or failure.sample - grid.offset <= cut):
+            raise failure
+        if cut <= grid.skip:  # nothing given out yet is safe from the chunk's end: a longer chunk
+            run.events, size = events, 2 * size
+            continue
+        t_cut = float(grid.t[grid.out[cut]])
+        run.events = {i: [ev for ev in evs if ev.time <= t_cut] for i, evs in run.events.items()}
+        yield res.head(cut + 1 - grid.skip)
+        if run.tail:
+            return
+        row = int(grid.out[cut])
+        carry = (grid.t[row - 1 : row + 1], _rows(st, slice(row - 1, row + 1)))
+        i0, size = grid.offset + cut + 1, chunk
+
+
+def _chunk_grid(
+    run: _Run, lead: np.ndarray, carry: tuple | None, times: np.ndarray, i0: int, i1: int, n_total: int
+) -> _Grid:
+    """The internal grid of requested samples i0..i1-1 (after the carried rows), split until it fits CHUNK_ROWS."""
+    while True:
+        if carry is None:
+            grid = _grid(run, lead, times[i0:i1])
+        else:
+            grid = _grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
+        if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= 1:
+            break
+        i1 = i0 + (i1 - i0) // 2
+    return dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
+
+
+def _cut(run: _Run, grid: _Grid) -> int:
+    """The last requested sample of a chunk (index into grid.out) at least MARGIN_INPUT of input travel
+    before the chunk's end."""
+    mech = run.sys.mechanism
+    if not mech.drivers:
+        return len(grid.out) - 1
+    X = run.inputs(grid.t[grid.out])[0]
+    units = np.array([1.0 if d.kind == "crank" else run.scale for d in mech.drivers])
+    left = np.max(np.abs(X - X[-1]) / units, axis=1)
+    far = np.nonzero(left >= MARGIN_INPUT)[0]
+    return int(far[-1]) if len(far) else -1
 
 
 def _rows(st: _State, k: slice) -> _State:
