@@ -121,7 +121,7 @@ CASES = {
     "non_finite_omega": (edit("omega = 1.0", "omega = inf"), ["drivers[0]", "'omega' is not finite"]),
     "zero_step": (edit("step = 0.1", "step = 0.0"), ["[time]", "step must be positive"]),
     "negative_step": (edit("step = 0.1", "step = -0.1"), ["[time]", "step must be positive"]),
-    "absurd_step": (edit("step = 0.1", "step = 1e-9"), ["[time]", "more than the limit"]),
+    "absurd_step": (edit("step = 0.1", "step = 1e-9"), ["[time]", "more than the memory budget"]),
     "zero_axis": (
         FOURBAR.replace('rocker = { joints = ["O4", "B"] }', "").replace(
             "[[drivers]]", '[sliders]\nblk = { joint = "B", guide = "ground", axis = [0.0, 0.0] }\n[[drivers]]'

@@ -37,8 +37,9 @@ from . import solver as _s
 if TYPE_CHECKING:
     from .solver import _Plan, _Run, _State
 
-COARSE_STEP = math.radians(12)  # input travel between coarse rows (the grid keeps ≤ 10° per row)
+COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π per mechanism size)
 TWO_PI = 2.0 * math.pi
+WINDOW = 6  # coarse rows predicted from one anchor and solved together
 JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
 LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is then at round-off
 FRESH = 1e-14  # a last step above this (relative) refreshes the Jacobian the rates are taken from
@@ -255,6 +256,30 @@ class _Ctx:
         ref = self.run.newton_sign.get(self.i)
         return ref * self.run.sigma(self.i, self.tg[rows])
 
+    def rates_rows(self, rows: np.ndarray, J: np.ndarray) -> None:
+        """ẋ and ẍ at several rows at once (as :meth:`rates_at`)."""
+        p, st, na = self.p, self.st, self.na
+        for what, out in (("v", self.xd), ("a", self.xdd)):
+            R = -(p.total.vel(st, rows) if what == "v" else p.total.acc(st, rows))
+            rhs = np.concatenate([R.real, R.imag], axis=1)
+            if self.blk.square:
+                val = _solve_rows(J, rhs)
+            else:
+                Jt = J.transpose(0, 2, 1)
+                val = _solve_rows(Jt @ J, (Jt @ rhs[..., None])[..., 0])
+            out[rows] = val
+            if what == "v":
+                _s._store(p, st, rows, val, "v", na)
+        _s._store(p, st, rows, np.zeros((len(rows), self.blk.nu)), "v", na)
+        Js = J * self.blk.colscale
+        ok = np.all(np.isfinite(Js), axis=(1, 2))
+        cond = np.full(len(rows), np.inf)
+        if ok.any():
+            sv = np.linalg.svd(Js[ok], compute_uv=False)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cond[ok] = sv[:, 0] / sv[:, -1]
+        self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~np.all(np.isfinite(self.xd[rows]), axis=1)
+
     def rates_at(self, k: int, J: np.ndarray) -> None:
         """ẋ and ẍ of the block at row k (exact linear solves), kept for the Taylor predictor."""
         p, st, row = self.p, self.st, np.array([k])
@@ -353,6 +378,11 @@ def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, _s._Failure | None]:
     a = 0
     while a < ctx.n - 1:
         b = _next_row(ctx, a, cum)
+        ahead = _window(ctx, a, b, cum)
+        if len(ahead):
+            coarse.extend(ahead.tolist())
+            a = int(ahead[-1])
+            continue
         while True:
             f = _step(ctx, a, b, strict=b - a > 1)
             if f is None:
@@ -363,6 +393,34 @@ def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, _s._Failure | None]:
         coarse.append(b)
         a = b
     return np.array(coarse), ctx.n, None
+
+
+def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
+    """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart, predicted from a's Taylor series and
+    solved together; returns the leading rows that pass every check of a strict step (their rates computed)."""
+    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+    if ctx.weak[a] or b - a < 2:
+        return np.zeros(0, int)
+    rows = np.unique(np.minimum(a + (b - a) * np.arange(1, WINDOW + 1), ctx.n - 1))
+    rows = rows[cum[rows] - cum[a] <= COARSE_STEP * np.arange(1, len(rows) + 1)]
+    if len(rows) < 2:
+        return np.zeros(0, int)
+    h = (tg[rows] - tg[a])[:, None]
+    x_a = blk.read(st, np.array([a]))
+    incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
+    pred = x_a + incr
+    x, conv = newton(blk, st, rows, pred, run.tol, run.max_iter)
+    F, J = blk.residual_jacobian(st, rows)
+    with np.errstate(invalid="ignore"):
+        res = np.max(np.abs(F), axis=1) / run.scale
+    ok = conv & (res <= CLOSURE) & ~_far(blk, x - pred, incr, x_a) & (blk.sign(J) == ctx.expected_sign(rows))
+    m = int(np.argmin(ok)) if not ok.all() else len(rows)
+    if m == 0:
+        return np.zeros(0, int)
+    rows, J = rows[:m], J[:m]
+    ctx.rates_rows(rows, J)
+    ctx.prev[rows] = np.concatenate([[a], rows[:-1]])
+    return rows
 
 
 def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:

@@ -1109,7 +1109,7 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
         cut = len(grid.out) - 1 if run.tail else _cut(run, grid)
         if failure is not None and (run.tail or failure.sample is None or failure.sample - grid.offset <= cut):
             raise failure
-        if cut <= grid.skip:  # nothing given out yet is safe from the chunk's end: a longer chunk
+        if not run.tail and (cut <= grid.skip or grid.out[cut] < 1):  # nothing safe from the chunk's end yet
             run.events, size = events, 2 * size
             continue
         t_cut = float(grid.t[grid.out[cut]])
