@@ -139,7 +139,22 @@ class _Block:
         fresh = step <= FRESH  # J at the rows that moved more is refreshed by the caller (rates use it)
         finite = np.all(np.isfinite(x), axis=1)
         self.put(st, rows[finite], x[finite])
-        return Factor(J, inv, cond, self.sign(J)), res, conv & fresh
+        return Factor(J, inv, cond, self.chain_sign(J, inv)), res, conv & fresh
+
+    def chain_sign(self, J: np.ndarray, inv: np.ndarray) -> np.ndarray:
+        """det J's sign on consecutive rows without a determinant per row: where ‖J_{k−1}⁻¹(J_k − J_{k−1})‖_F < 1
+        every eigenvalue of J_{k−1}⁻¹J_k = I + E lies within 1 of 1, so det J_k has det J_{k−1}'s sign; rows
+        where that bound fails (near a singular row) get their determinant computed."""
+        if not self.square or len(J) < 2:
+            return self.sign(J)
+        E = inv[:-1] @ (J[1:] - J[:-1])
+        with np.errstate(invalid="ignore"):
+            close = np.sum(E * E, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
+        exact = np.concatenate([[0], np.nonzero(~close)[0] + 1])
+        sign = np.full(len(J), np.nan)
+        sign[exact] = self.sign(J[exact])
+        last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
+        return sign[last]
 
 
 def _pivoted_rows(J: np.ndarray) -> np.ndarray:

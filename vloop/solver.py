@@ -1091,10 +1091,10 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
     lead, run.inputs, turns = _lead_in(sys, run, float(times[0]))
     run.t_start = float(times[0])
     carry: tuple[np.ndarray, _State] | None = None
-    i0, n_total, size = 0, len(times), chunk
+    i0, n_total, size, at_least = 0, len(times), chunk, 1
     while i0 < n_total:
         i1 = min(i0 + size, n_total)
-        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total)
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least)
         run.tail = grid.offset + len(grid.out) == n_total
         st = _initial_state(sys, len(grid.t))
         if carry is not None:
@@ -1110,7 +1110,8 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
         if failure is not None and (run.tail or failure.sample is None or failure.sample - grid.offset <= cut):
             raise failure
         if not run.tail and (cut <= grid.skip or grid.out[cut] < 1):  # nothing safe from the chunk's end yet
-            run.events, size = events, 2 * size
+            at_least = len(grid.out) - grid.skip + 1  # one more requested sample than this chunk had
+            run.events, size = events, max(2 * size, at_least)
             continue
         t_cut = float(grid.t[grid.out[cut]])
         run.events = {i: [ev for ev in evs if ev.time <= t_cut] for i, evs in run.events.items()}
@@ -1119,21 +1120,22 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
             return
         row = int(grid.out[cut])
         carry = (grid.t[row - 1 : row + 1], _rows(st, slice(row - 1, row + 1)))
-        i0, size = grid.offset + cut + 1, chunk
+        i0, size, at_least = grid.offset + cut + 1, chunk, 1
 
 
 def _chunk_grid(
-    run: _Run, lead: np.ndarray, carry: tuple | None, times: np.ndarray, i0: int, i1: int, n_total: int
+    run: _Run, lead: np.ndarray, carry: tuple | None, times: np.ndarray, i0: int, i1: int, n_total: int, at_least: int
 ) -> _Grid:
-    """The internal grid of requested samples i0..i1-1 (after the carried rows), split until it fits CHUNK_ROWS."""
+    """The internal grid of requested samples i0..i1-1 (after the carried rows), halved until it fits CHUNK_ROWS
+    or holds ``at_least`` requested samples."""
     while True:
         if carry is None:
             grid = _grid(run, lead, times[i0:i1])
         else:
             grid = _grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
-        if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= 1:
+        if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= at_least:
             break
-        i1 = i0 + (i1 - i0) // 2
+        i1 = max(i0 + (i1 - i0) // 2, i0 + at_least)
     return dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
 
 
