@@ -35,20 +35,33 @@ __all__ = [
 ]
 
 
-def compile(mechanism: Mechanism) -> Any:
-    """Build the immutable LoopSystem (graph, loops, unknowns, blocks) of a mechanism."""
-    from .loops import compile_system
+def compile(mechanism: Mechanism, method: str | None = None) -> Any:
+    """Build the immutable LoopSystem (graph, loops, unknowns, blocks, t = 0 assembly) of a mechanism.
 
-    return compile_system(mechanism)
+    ``method``: "auto" (closed-form dyads where possible) or "newton"; default: the file's [solver] method.
+    """
+    from .compiler import compile_system
+
+    return compile_system(mechanism, method)
 
 
 def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options: Any) -> Result:
-    """Positions, velocities and accelerations over ``times`` (default: the file's [time]).
+    """Positions, velocities and accelerations over ``times`` [s] (default: the file's [time]).
 
     ``mechanism`` may be a Mechanism or an already compiled LoopSystem.
-    Options: ``method="auto"|"newton"``, ``tol``, ``max_iter``.
-    Raises MotionError (with ``.partial``) if the motion cannot be completed.
+    Options: ``method="auto"|"newton"`` (recompiles a LoopSystem compiled otherwise), ``tol``,
+    ``max_iter``, ``rtol``. Raises MotionError (with ``.partial``) if the motion cannot be completed.
     """
-    from .solver import solve as _solve
+    from .compiler import compile_system
+    from .loops import LoopSystem
+    from .solver import solve as solve_system
 
-    return _solve(mechanism, times, **options)
+    method = options.pop("method", None)
+    unknown = set(options) - {"tol", "max_iter", "rtol"}
+    if unknown:
+        raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}")
+    if isinstance(mechanism, LoopSystem):
+        system = mechanism if method in (None, mechanism.method) else compile_system(mechanism.mechanism, method)
+    else:
+        system = compile_system(mechanism, method)
+    return solve_system(system, times, **options)

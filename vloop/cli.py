@@ -26,7 +26,7 @@ def _fail(msg: str) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .loops import compile_system
+    from .compiler import compile_system
     from .mechanism import load
     from .solver import solve
 
@@ -99,8 +99,8 @@ def health_notes(result: Result) -> list[str]:
 
 
 def cmd_loops(args: argparse.Namespace) -> int:
+    from .compiler import compile_system
     from .equations import describe
-    from .loops import compile_system
     from .mechanism import load
 
     print(describe(compile_system(load(args.file)), latex=args.latex))
@@ -108,8 +108,9 @@ def cmd_loops(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    from .compiler import compile_system
     from .equations import grashof
-    from .loops import compile_system, loop_jacobian
+    from .loops import loop_jacobian
     from .mechanism import load
 
     mech = load(args.file)

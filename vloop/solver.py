@@ -29,7 +29,7 @@ import numpy as np
 
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
-from .loops import Block, LoopSystem, compile_system
+from .loops import Block, LoopSystem
 from .mechanism import Mechanism
 from .result import Result
 
@@ -965,30 +965,28 @@ def _initial_state(sys: LoopSystem, n: int) -> _State:
 # ------------------------------------------------------------------ solve
 
 
-def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **options: Any) -> Result:
-    """Solve P/V/A at ``times`` [s] (default: the mechanism's). Raises MotionError with ``partial``.
+def solve(
+    system: LoopSystem,
+    times: np.ndarray | None = None,
+    *,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    rtol: float | None = None,
+) -> Result:
+    """P/V/A of a compiled system at ``times`` [s] (default: the file's). Raises MotionError with ``partial``.
 
-    Options: ``method`` ("auto"|"newton"), ``tol`` (Newton step, relative), ``max_iter``,
-    ``rtol`` (accuracy asked of every output: samples whose error bound cond²·ε exceeds it are refused).
+    ``tol``: Newton step tolerance (relative); ``max_iter``; ``rtol``: accuracy asked of every output
+    (samples whose error bound cond²·ε exceeds it are refused). The file's [solver] values win for tol
+    and max_iter; an ``rtol`` given here wins over the file's.
     """
-    method = options.pop("method", None)
-    given = {k: options.pop(k) for k in ("tol", "max_iter", "rtol") if k in options}
-    if options:
-        raise TypeError(f"unknown solver option(s): {', '.join(options)}")
-    if isinstance(mechanism, LoopSystem):
-        sys = mechanism
-        if method is not None and method != sys.method:
-            sys = compile_system(sys.mechanism, method)
-    else:
-        sys = compile_system(mechanism, method)
-    mech = sys.mechanism
-    tol = float(mech.options.get("tol", given.get("tol", DEFAULT_TOL)))
-    max_iter = int(mech.options.get("max_iter", given.get("max_iter", DEFAULT_MAX_ITER)))
-    rtol = float(given.get("rtol", mech.options.get("rtol", DEFAULT_RTOL)))
+    mech = system.mechanism
+    tol = float(mech.options.get("tol", DEFAULT_TOL if tol is None else tol))
+    max_iter = int(mech.options.get("max_iter", DEFAULT_MAX_ITER if max_iter is None else max_iter))
+    rtol = float(rtol if rtol is not None else mech.options.get("rtol", DEFAULT_RTOL))
     times = np.asarray(mech.times if times is None else times, float)
     if times.ndim != 1 or len(times) == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise MotionError("times must be a non-empty, finite, strictly increasing 1-D array", entry="time")
-    run = _Run(sys, _Inputs(mech), mech.scale, tol, max_iter, rtol)
+    run = _Run(system, _Inputs(mech), mech.scale, tol, max_iter, rtol)
     with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
         return _solve(run, times)
 
@@ -1025,8 +1023,8 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
         units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
         h = np.diff(times)[:, None]
         travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
-        with np.errstate(invalid="ignore"):
-            need = np.ceil(np.nan_to_num(travel.max(axis=1), nan=1.0, posinf=1.0) / MAX_INPUT_STEP)
+        need = np.ceil(travel.max(axis=1) / MAX_INPUT_STEP)
+        need = np.where(np.isfinite(need) & (need <= MAX_INSERTED), need, 1.0)  # absurd inputs: refused later
         if need.sum() - len(need) > MAX_INSERTED:
             raise MotionError(
                 f"{mech.name}: the inputs travel {float(travel.sum(axis=0).max()):.4g} rad (or sizes) over the run; "
@@ -1035,13 +1033,13 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
                 entry="time",
             )
         steps = np.maximum(need, 1).astype(np.int64)
-    frac = np.concatenate([np.arange(m) / m for m in steps]) if n > 1 else np.zeros(0)
-    start = np.repeat(times[:-1], steps)
-    width = np.repeat(np.diff(times), steps)
-    inner = np.append(start + frac * width, times[-1]) if n > 1 else times.copy()
-    inner[np.concatenate([[0], np.cumsum(steps)])] = times  # the requested times exactly
-    out = len(lead) + np.concatenate([[0], np.cumsum(steps)]) if n > 1 else np.array([len(lead)])
-    return _Grid(np.concatenate([lead, inner]), out)
+    starts = np.concatenate([[0], np.cumsum(steps)])  # internal index of each requested sample
+    k = np.arange(starts[-1])
+    seg = np.repeat(np.arange(len(steps)), steps)
+    frac = (k - starts[seg]) / steps[seg]
+    inner = np.append(times[seg] + frac * (times[seg + 1] - times[seg]), times[-1]) if n > 1 else times.copy()
+    inner[starts] = times  # the requested times exactly
+    return _Grid(np.concatenate([lead, inner]), len(lead) + starts)
 
 
 def _solve(run: _Run, times: np.ndarray) -> Result:

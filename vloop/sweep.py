@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
+from .compiler import compile_system
 from .errors import MechanismError, MotionError
-from .loops import compile_system
 from .mechanism import Driver, Mechanism, Profile
 from .result import Result
 from .solver import solve
