@@ -79,9 +79,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def health_notes(result: Result) -> list[str]:
+def health_notes(result: Result, redundancy: bool = True) -> list[str]:
     """Lines that say what health.csv flags: change points passed, ill-conditioned samples kept."""
     lines = []
+    if redundancy and "redundancy" in result.meta:
+        lines.append("  " + result.meta["redundancy"])
     for cp in result.meta.get("change_points", []):
         inputs = ", ".join(f"{k} = {v:.10g}" for k, v in cp["inputs"].items())
         lines.append(
@@ -162,6 +164,10 @@ def cmd_info(args: argparse.Namespace) -> int:
         f"\nmobility: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, drivers: {len(mech.drivers)}; "
         f"loop Jacobian at t = 0: rank {rank} of {len(unk)} unknowns ({full})"
     )
+    if "redundancy" in system.assembly:
+        from .assembly import redundancy_text
+
+        print(redundancy_text(system.assembly["redundancy"], system))
     print(f"loops: {len(system.loops)} (J - L + 1 = {J - L + 1})")
     for lp in system.loops:
         print(f"  loop {lp.index + 1}: {lp.label}")
@@ -182,9 +188,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         from .solver import solve
 
         try:
-            notes = health_notes(solve(system))
+            notes = health_notes(solve(system), redundancy=False)
         except MotionError as exc:
-            notes = [*health_notes(exc.partial), f"  the motion stops: {exc}"]
+            notes = [*health_notes(exc.partial, redundancy=False), f"  the motion stops: {exc}"]
         print("\n".join(["motion:", *notes]) if notes else "motion: no change point, no ill-conditioned sample")
     if system.assembly.get("moved", 0) > 1e-12 * mech.scale:
         print(f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops")

@@ -13,13 +13,13 @@ import dataclasses
 
 import numpy as np
 
-from .assembly import assemble
+from .assembly import assemble, moved
 from .errors import MechanismError
 from .graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
-from .loops import Block, LoopSystem, branch_name, term_values
+from .loops import Block, LoopSystem, branch_name
 from .mechanism import Mechanism
 from .solver import assemble_blocks
-from .structure import block_structure
+from .structure import analyse, block_structure
 
 
 def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
@@ -32,8 +32,9 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     mg = build_graph(mech, mech.bodies())
     loops, C = build_loops(mg, mech, cycle_basis(mg.G))
     system = _unknowns(mech, mg, loops, C)
-    q0, report = assemble(system)
-    blocks = block_structure(system, q0, method)
+    structure = analyse(system)
+    q0, report = assemble(system, structure)
+    blocks = block_structure(system, structure, q0, method)
     if mech.options.get("branches"):
         blocks, q0, report = _choose_branches(system, blocks, q0, report)
     return dataclasses.replace(system, blocks=blocks, q0=q0, assembly=report, method=method, cache={})
@@ -93,8 +94,4 @@ def _choose_branches(
     if new == list(blocks):
         return blocks, q0, report
     q1 = assemble_blocks(sys, tuple(new), q0)
-    z0, z1 = term_values(sys, sys.coords_q), term_values(sys, q1)
-    moved = np.abs((z1 - z0) @ sys.path)
-    report = dict(report, moved=float(moved.max(initial=0.0)), branches_flipped=True)
-    report["moved_by_point"] = dict(zip(sys.point_names, moved.tolist(), strict=True))
-    return tuple(new), q1, report
+    return tuple(new), q1, {**report, **moved(sys, q1), "branches_flipped": True}

@@ -206,35 +206,33 @@ def _canonical(nodes: list, order: dict) -> list:
 
 
 def _short_cycle_basis(G: nx.Graph, rank: int) -> list[list]:
+    """The shortest cycle through each non-tree edge of a breadth-first forest, kept greedily by length while
+    independent; fundamental cycles complete the basis if some of them coincide."""
     edge_id = {frozenset(e): i for i, e in enumerate(G.edges)}
+    adjacency = {n: list(G.adj[n]) for n in G.nodes}
+    fundamental = _fundamental_cycles(G)
     candidates = []
-    for u, v in G.edges:
-        path = _shortest_path_avoiding(G, u, v)
-        if path is not None:
-            candidates.append(path)
+    for cyc in fundamental:  # each closes on one non-tree edge (its last and first nodes)
+        path = _shortest_path_avoiding(adjacency, cyc[-1], cyc[0])
+        candidates.append(path if path is not None else cyc)
     candidates.sort(key=len)
     basis: dict[int, int] = {}  # pivot bit → reduced bitset, for independence tests
     chosen: list[list] = []
-    seen: set[int] = set()
-    for cyc in candidates + _fundamental_cycles(G):
-        bits = _bits(cyc, edge_id)
-        if bits in seen:
-            continue
-        seen.add(bits)
-        if _insert(basis, bits):
+    for cyc in candidates + fundamental:
+        if _insert(basis, _bits(cyc, edge_id)):
             chosen.append(cyc)
             if len(chosen) == rank:
                 break
     return chosen
 
 
-def _shortest_path_avoiding(G: nx.Graph, u, v) -> list | None:
+def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
     """The shortest path v → ... → u not using the edge (u, v) (with that edge: the shortest cycle through it)."""
     prev = {v: None}
     queue = deque([v])
     while queue:
         x = queue.popleft()
-        for y in G.neighbors(x):
+        for y in adjacency[x]:
             if y in prev or (x == v and y == u):
                 continue
             prev[y] = x

@@ -474,24 +474,29 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None
     times.flags.writeable = False
 
     mech = Mechanism(name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options)
+    if mech.gruebler()[2] > len(drivers):  # fewer drivers than Gruebler's count: never enough to fix the motion
+        raise MechanismError(mobility_message(mech), entry="drivers")
+    return mech  # Gruebler's count below the drivers may be a redundant linkage: the compiler decides by rank
+
+
+def mobility_message(mech: Mechanism, rank_note: str = "") -> str:
+    """The one-line explanation of a mobility mismatch: Gruebler's count against the drivers given."""
     L, J, M = mech.gruebler()
-    if M != len(drivers):
-        if M <= 0:
-            meaning = (
-                "it is a rigid structure"
-                if M == 0
-                else f"it is over-constrained by {-M} (a statically indeterminate structure)"
-            )
-            hint = "it cannot move: check the joints and sliders"
-        else:
-            meaning = f"it has {M} independent degree{'s' if M > 1 else ''} of freedom"
-            hint = f"give exactly {M} driver{'s' if M > 1 else ''}" if len(drivers) < M else "remove a driver"
-        raise MechanismError(
-            f"{source}: [drivers] mobility mismatch: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, "
-            f"so {meaning}, but {len(drivers)} driver{'s are' if len(drivers) != 1 else ' is'} given; {hint}",
-            entry="drivers",
+    n = len(mech.drivers)
+    if M <= 0:
+        meaning = (
+            "it is a rigid structure"
+            if M == 0
+            else f"it is over-constrained by {-M} (a statically indeterminate structure)"
         )
-    return mech
+        hint = "it cannot move: check the joints and sliders"
+    else:
+        meaning = f"it has {M} independent degree{'s' if M > 1 else ''} of freedom"
+        hint = f"give exactly {M} driver{'s' if M > 1 else ''}" if n < M else "remove a driver"
+    return (
+        f"{mech.source}: [drivers] mobility mismatch: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, "
+        f"so {meaning}, but {n} driver{'s are' if n != 1 else ' is'} given{rank_note}; {hint}"
+    )
 
 
 def _check_topology(m: Mechanism, probs: _Problems) -> None:

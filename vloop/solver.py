@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .assembly import redundancy_text
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
 from .loops import Block, LoopSystem
@@ -351,7 +352,7 @@ def _newton_block(
             F = p.C @ z[0]
             J = _jacobian(p, z, e)[0]
             try:
-                dx = np.linalg.solve(J, -np.concatenate([F.real, F.imag]))
+                dx = _solve_block(J, -np.concatenate([F.real, F.imag]))
             except np.linalg.LinAlgError:
                 raise _Failure(k, b.loops[0], "the loop Jacobian is singular (a toggle)") from None
             x = x + dx
@@ -374,7 +375,7 @@ def _newton_block(
         cond_last = float(np.linalg.cond(J[0] * colscale))
         if k == 0:
             cond_first = cond_last
-        sgn = np.sign(np.linalg.det(J[0]))
+        sgn = _det_sign(J[0])
         if sign0 is None:
             sign0 = sgn
         elif sgn != sign0:
@@ -417,7 +418,22 @@ def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols
         out[:, 1] = cross(c1, R0) / det
         return out
     rhs = np.concatenate([R.real, R.imag], axis=1)
-    return np.linalg.solve(J, rhs[..., None])[..., 0]
+    return _solve_block(J, rhs)
+
+
+def _solve_block(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve J·x = rhs (batched over leading axes); a block with more equations than unknowns (redundant
+    constraints) by least squares with the pseudo-inverse (exact when the equations are consistent)."""
+    if J.shape[-1] == J.shape[-2]:
+        return np.linalg.solve(J, rhs[..., None])[..., 0]
+    return (np.linalg.pinv(J) @ rhs[..., None])[..., 0]
+
+
+def _det_sign(J: np.ndarray) -> np.ndarray:
+    """Sign of det J (the assembly branch); a rectangular (redundant) block has no branch sign: +1."""
+    if J.shape[-1] == J.shape[-2]:
+        return np.sign(np.linalg.det(J))
+    return np.ones(J.shape[:-2])
 
 
 def _columns(p: _Plan, st: _State, k: slice) -> tuple[np.ndarray, np.ndarray]:
@@ -459,7 +475,7 @@ def _block_health(
     J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
     colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
     Js = J * colscale
-    return np.linalg.cond(Js), np.sign(np.linalg.det(J))
+    return np.linalg.cond(Js), _det_sign(J)
 
 
 # ------------------------------------------------------------------ run context
@@ -1138,7 +1154,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
         t,
         cols,
         _health(run, st, t, rows, solved, loops),
-        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, t)},
+        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, t), **_redundancy(sys)},
     )
 
 
@@ -1164,6 +1180,12 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
         "ill_conditioned": ((_error_bound(cond) > ILL_FRACTION * run.rtol) & ~at_change).astype(np.int8),
         "change_point": change.astype(np.int8),
     }
+
+
+def _redundancy(sys: LoopSystem) -> dict[str, str]:
+    """For a redundant linkage, the line that says so (its reactions are indeterminate)."""
+    info = sys.assembly.get("redundancy")
+    return {"redundancy": redundancy_text(info, sys)} if info else {}
 
 
 def _events_meta(run: _Run, t: np.ndarray) -> dict[str, Any]:
