@@ -99,7 +99,7 @@ def unit_rate_result(mech: Mechanism, result: Result) -> Result:
     profile = Profile(tt, x, np.ones_like(tt), np.zeros_like(tt), source="unit rate")
     driver = dataclasses.replace(d, profile=profile, v0=1.0, a0=0.0)
     unit = solve(dataclasses.replace(mech, drivers=(driver,), times=tt), times=tt)
-    return unit.head(len(unit)) if not len(lead) else _tail(unit, len(lead))
+    return _tail(unit, len(lead)) if len(lead) else unit
 
 
 def _tail(res: Result, start: int) -> Result:

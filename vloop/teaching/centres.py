@@ -219,7 +219,7 @@ def _best_intersection(lines: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.n
 
 
 def velocity_centres(mech: Mechanism, result: Result) -> CentreSet:
-    """Instant centres from the velocity field: I = P + j·Δv/Δω (module docstring).
+    """Instant centres [unit homogeneous, mechanism sizes] from the velocity field: I = P + j·Δv/Δω.
 
     P is body a's first joint; Δv = v_a(P) − v_b(P) from the Result's point velocities and ω.
     Where the relative motion is below ``VELOCITY_MIN`` of the bodies' own motion (both at rest) the

@@ -185,10 +185,11 @@ def _refine_zero(mech: Mechanism, walk: _Walk, output: str, a: float, b: float, 
         res = walk.solve(pts)
         r = _rate(mech, res, output)
         v = _value(mech, res, output)
-        zero = np.flatnonzero(r == 0)
-        if zero.size:
-            return float(pts[zero[0]]), float(v[zero[0]])
-        k = int(np.flatnonzero(np.sign(r[:-1]) != np.sign(r[1:]))[0])
+        change = np.flatnonzero(np.sign(r[:-1]) != np.sign(r[1:]))
+        if not change.size or r[change[0]] == 0:  # an exact zero, or round-off hid the sign change
+            k = int(np.argmin(np.abs(r)))
+            return float(pts[k]), float(v[k])
+        k = int(change[0])
         a, b = float(pts[k]), float(pts[k + 1])
         if b - a <= tol:
             f = r[k] / (r[k] - r[k + 1])  # the rate's straight line across the bracket
@@ -270,7 +271,7 @@ def _dyad_cycle(mech: Mechanism, walks: list[_Walk], dyad: Dyad) -> DyadCycle:
 
 
 def cycle(mech: Mechanism, outputs: list[str] | None = None, *, samples: int = 720) -> Cycle:
-    """Dead centres, strokes, time ratios, toggles and transmission-angle extremes over the input's cycle.
+    """Dead centres, strokes, time ratios, toggles, transmission-angle extremes [rad; inputs rad or length].
 
     One driver only. ``samples``: grid samples per cycle before refinement. Inputs in rad (crank) or
     the file's length (driven slider); module docstring for the definitions.
