@@ -26,13 +26,34 @@ __all__ = [
     "VloopError",
     "__version__",
     "compile",
+    "dead_centres",
     "dumps",
     "from_dict",
+    "instant_centres",
     "load",
     "loads",
+    "mechanical_advantage",
     "save",
     "solve",
+    "stroke",
+    "time_ratio",
+    "transmission_angles",
+    "velocity_ratio",
 ]
+
+# teaching quantities (vloop.teaching), imported on first use to keep `import vloop` light
+_TEACHING = (
+    "dead_centres", "instant_centres", "mechanical_advantage", "stroke", "time_ratio", "transmission_angles",
+    "velocity_ratio",
+)  # fmt: skip
+
+
+def __getattr__(name: str) -> Any:
+    if name in _TEACHING:
+        from . import teaching
+
+        return getattr(teaching, name)
+    raise AttributeError(f"module 'vloop' has no attribute {name!r}")
 
 
 def compile(mechanism: Mechanism, method: str | None = None) -> Any:

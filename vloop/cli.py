@@ -31,6 +31,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .solver import solve
 
     mech = load(args.file)
+    outputs = _teaching_outputs(args, mech)
     out = Path(args.out) if args.out else Path("out") / mech.name
     if args.sweep:
         from .sweep import rocking
@@ -53,6 +54,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 from .plots import plot_result
 
                 plot_result(mech, partial, out)
+            try:
+                _teaching_files(args, mech, partial, out, outputs)
+            except VloopError as extra:
+                print(f"vloop: no extras for the partial run: {extra}", file=sys.stderr)
             return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'})")
         raise
     out.mkdir(parents=True, exist_ok=True)
@@ -63,6 +68,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from .plots import plot_result
 
         files += plot_result(mech, result, out)
+    files += _teaching_files(args, mech, result, out, outputs)
     asm = system.assembly
     moved = ""
     if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
@@ -98,6 +104,22 @@ def health_notes(result: Result, redundancy: bool = True) -> list[str]:
             f"1e-3 of rtol = {result.meta.get('rtol', 1e-9):g}): flagged in health.csv"
         )
     return lines
+
+
+def _teaching_outputs(args: argparse.Namespace, mech) -> list[str] | None:
+    """The --ma outputs, checked before anything is solved (vloop.teaching)."""
+    from .teaching.report import parse_outputs
+
+    return parse_outputs(mech, args.ma) if args.ma is not None else None
+
+
+def _teaching_files(args: argparse.Namespace, mech, result, out: Path, outputs: list[str] | None) -> list[Path]:
+    """extras.csv (--extras) and transmission.png (--plot): vloop.teaching."""
+    if not (args.extras or args.plot or outputs is not None):
+        return []
+    from .teaching.report import run_files
+
+    return run_files(mech, result, out, extras=args.extras or outputs is not None, plot=args.plot, outputs=outputs)
 
 
 def cmd_loops(args: argparse.Namespace) -> int:
@@ -194,6 +216,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         print("\n".join(["motion:", *notes]) if notes else "motion: no change point, no ill-conditioned sample")
     if system.assembly.get("moved", 0) > 1e-12 * mech.scale:
         print(f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops")
+    from .teaching.report import info_lines
+
+    print("\n".join(info_lines(mech)))
     return 0
 
 
@@ -298,6 +323,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--sweep",
         action="store_true",
         help="instead of the file's motion, rock the input between its limit positions (one turn if it has none)",
+    )
+    r.add_argument(
+        "--extras",
+        action="store_true",
+        help="also write extras.csv: instant centres, transmission angles, velocity ratios, mechanical advantages",
+    )
+    r.add_argument(
+        "--ma",
+        metavar="NAMES",
+        help="outputs for the velocity ratio and mechanical advantage in extras.csv, comma-separated "
+        "(default: every slider and every undriven link pivoted on the ground)",
     )
     r.set_defaults(func=cmd_run)
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
