@@ -40,6 +40,7 @@ MAX_FRAMES = 40  # animated GIF frames per mechanism
 LINKS_PER_FIGURE = 6  # more rotating links than this are spread over several history figures
 WORST_SHOWN = 4  # quantities per engine in the error-vs-time plots
 DPI = 96
+VIEWER_FOLDER = "viewer"  # one interactive page per mechanism, next to report.html
 GIF_DPI = 72
 
 # Each engine keeps one look in every plot, so curves that lie on top of each other stay visible.
@@ -795,8 +796,30 @@ def _mechanism_section(
             for r in runs
         ],
         animation=_animation(mech, geo, runs) if animate else None,
+        viewer=f"{VIEWER_FOLDER}/{sec['anchor']}.html" if _viewer_source(item) else None,
     )
     return sec
+
+
+def _viewer_source(item: MechanismValidation) -> tuple[Result, str | None] | None:
+    """vloop's run of a mechanism for its viewer page (the samples before a stop, with the message), if any."""
+    run = item.runs.get("vloop")
+    if item.mechanism is None or run is None or run.result is None or not len(run.result):
+        return None
+    return run.result, (run.message or "motion stopped") if run.status == "stopped" else None
+
+
+def write_viewer_pages(validation: Validation, out_dir: Path) -> list[Path]:
+    """One interactive viewer page per mechanism vloop solved, ``out_dir/viewer/<anchor>.html``."""
+    from vloop.view import write_view
+
+    pages = []
+    for index, item in enumerate(validation.items):
+        source = _viewer_source(item)
+        if source is not None:
+            path = Path(out_dir) / VIEWER_FOLDER / f"{_anchor(item.name, index)}.html"
+            pages.append(write_view(item.mechanism, source[0], path, error=source[1]))
+    return pages
 
 
 def render(validation: Validation, summary: dict[str, Any], *, animate: bool = False) -> str:
@@ -838,9 +861,10 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
 
 
 def write_report(validation: Validation, summary: dict[str, Any], out_dir: Path, *, animate: bool = False) -> Path:
-    """Write ``out_dir/report.html`` (self-contained) and return its path."""
+    """Write ``out_dir/report.html`` (self-contained) and the viewer pages it links; return its path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "report.html"
     path.write_text(render(validation, summary, animate=animate), encoding="utf-8")
+    write_viewer_pages(validation, out_dir)  # linked from each mechanism's section
     return path

@@ -10,6 +10,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 from .plots import plot_result
 
                 plot_result(mech, partial, out)
-            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'})")
+            page = ""
+            if args.html and len(partial):
+                page = f" and the viewer page {_view_page(mech, partial, out, str(exc))}"
+            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'}{page})")
         raise
     out.mkdir(parents=True, exist_ok=True)
     result.to_csv(out / "results.csv")
@@ -60,6 +64,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         from .plots import plot_result
 
         files += plot_result(mech, result, out)
+    if args.html:
+        files.append(_view_page(mech, result, out))
     asm = system.assembly
     moved = ""
     if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
@@ -71,6 +77,34 @@ def cmd_run(args: argparse.Namespace) -> int:
         f"max condition {np.max(result.health['cond'], initial=1):.3g}{moved}"
     )
     print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _view_page(mech: Any, result: Any, out: Path, error: str | None = None) -> Path:
+    """The viewer page of a run, ``out/<safe name>.html`` (``vloop view``, ``vloop run --html``)."""
+    from .output import safe_folder_name
+    from .view import write_view
+
+    return write_view(mech, result, out / f"{safe_folder_name(mech.name)}.html", error=error)
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped)."""
+    from .mechanism import load
+    from .output import default_folder
+    from .view import solve_for_view
+
+    mech = load(args.file)
+    result, error = solve_for_view(mech)
+    out = Path(args.out) if args.out else default_folder(mech.name)
+    page = _view_page(mech, result, out, error)
+    print(f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
+    if args.open:
+        import webbrowser
+
+        webbrowser.open(page.resolve().as_uri())
+    if error:
+        return _fail(f"{error} (the page shows the motion up to its last assembled instant: {page})")
     return 0
 
 
@@ -260,7 +294,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="instead of the file's motion, rock the input between its limit positions (one turn if it has none)",
     )
+    r.add_argument("--html", action="store_true", help="also write the interactive viewer page NAME.html")
     r.set_defaults(func=cmd_run)
+    vw = sub.add_parser("view", help="write one offline HTML page that animates the mechanism (loops, arrows, plots)")
+    vw.add_argument("file")
+    vw.add_argument("--out", help="output folder (default: out/NAME); the page is NAME.html")
+    vw.add_argument("--open", action="store_true", help="open the page in the default web browser")
+    vw.set_defaults(func=cmd_view)
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     lo.add_argument("file")
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
