@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import io
+import itertools
 import math
 import tempfile
 from collections.abc import Iterable, Sequence
@@ -139,37 +140,23 @@ def _geometry(mech: Mechanism, system: Any) -> _Geometry:
     pos = {n: complex(*xy) for n, xy in mech.joints.items()} | {p.name: complex(*p.at) for p in mech.points.values()}
     if system is None:
         return _Geometry(pos, theta, {}, note="loops not available: the mechanism did not compile")
-    from vloop.loops import ORIGIN, term_values
+    import vloop
+    from vloop.geometry import loop_chains
 
-    z = term_values(system, system.q0)
-    pos = dict(zip(system.point_names, (z @ system.path).tolist(), strict=True))
-    na = system.n_angles
-    s0 = {n: float(system.q0[na + i]) for i, n in enumerate(system.slider_names)}
+    try:
+        at0 = vloop.solve(system, times=np.zeros(1))  # the t = 0 assembly, through the public API
+    except vloop.VloopError as exc:
+        return _Geometry(pos, theta, {}, note=f"loops not available: {exc}")
+    pos = {p: complex(at0[f"{p}.x"][0], at0[f"{p}.y"][0]) for p in mech.tracked_points}
+    s0 = {n: float(at0[f"{n}.s"][0]) for n in mech.sliders}
     tiny = 1e-9 * mech.scale
     loops = []
     origin_used = False
-    for lp in system.loops:
-        nodes = list(lp.nodes)
-
-        def at(node: tuple[str, str]) -> complex:
-            return 0j if node[1] == ORIGIN else pos[node[1]]
-
-        p = at(nodes[0])
-        segs: list[tuple[complex, complex]] = []
-        for u, v in zip(nodes, nodes[1:] + nodes[:1], strict=True):
-            origin_used |= ORIGIN in (u[1], v[1])
-            try:  # the edge's own vectors (a slider edge is its s vector plus its offset)
-                data = system.graph.edges[u, v]
-                vecs = [s * z[t] for t, s in data["terms"]]
-                if data["start"] != u:
-                    vecs = [-w for w in reversed(vecs)]
-            except (KeyError, TypeError):
-                vecs = [at(v) - at(u)]
-            for w in vecs:
-                if abs(w) > tiny:
-                    segs.append((p, p + w))
-                    p += w
-        loops.append((f"loop {lp.index + 1} ({lp.label})", segs))
+    for chain in loop_chains(system, at0):  # each loop's vectors head to tail, as the paper draws them
+        z = chain.vertices[0]
+        segs = [(complex(a), complex(b)) for a, b in itertools.pairwise(z) if abs(b - a) > tiny]
+        origin_used |= chain.start is None
+        loops.append((f"loop {chain.number} ({chain.label})", segs))
     return _Geometry(pos, theta, s0, loops, origin_used)
 
 
