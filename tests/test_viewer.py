@@ -207,6 +207,37 @@ def test_forces_must_match_the_run(eightbar) -> None:
         render(mech, result, forces=forces)
 
 
+class _Forces:
+    def __init__(self, t, columns, arrows=()) -> None:
+        self.t, self.columns, self.arrows = t, columns, list(arrows)
+
+
+@pytest.mark.parametrize(
+    ("t", "column", "arrows", "message"),
+    [
+        (None, ["a"] * 48, (), r"force:x is not an array of numbers"),
+        (None, [[1.0, 2.0]] * 48, (), r"force:x has shape \(48, 2\), expected \(48,\)"),
+        (None, np.full(48, np.inf), (), r"force:x is not finite at sample 0"),
+        (None, [10**400] * 48, (), r"force:x is not an array of numbers"),
+        (None, np.full(48, 1e308), (), None),
+        (None, np.full(48, 5e-324), (), None),  # subnormal: finite, accepted
+        (None, np.full(48, -0.0), (), None),
+        (np.full(48, np.nan), np.zeros(48), (), r"not given at the result's 48 samples"),
+        ("abc", np.zeros(48), (), r"forces\.t is not an array of numbers"),
+        (None, np.zeros(48), [("A", "x")], r"force arrow 0: expected \(point, fx column, fy column, label\)"),
+        (None, np.zeros(48), [("A", "x", ["x"], "F")], r"force arrow 0: expected"),
+    ],
+)
+def test_hostile_forces(eightbar, t, column, arrows, message) -> None:
+    mech, result = eightbar
+    forces = _Forces(result.t if t is None else t, {"x": column}, arrows)
+    if message is None:
+        assert "force:x" in build_payload(mech, result, forces=forces)["data"]["columns"]
+    else:
+        with pytest.raises(ViewError, match=message):
+            build_payload(mech, result, forces=forces)
+
+
 # ------------------------------------------------------------------ command line
 
 
@@ -546,6 +577,47 @@ def test_every_catalog_page_runs_without_error(open_page, tmp_path: Path, path: 
     assert page.locator("circle[data-joint]").count() == len(mech.tracked_points)
     assert page.locator("#error").is_visible() == (error is not None)
     assert o.requests == [] and o.problems == [], o.problems
+
+
+CRANK = """
+name = "crank"
+[joints]
+O = [0, 0]
+A = [1, 0]
+[links]
+ground = { joints = ["O"], ground = true }
+l2 = { joints = ["O", "A"] }
+[[drivers]]
+link = "l2"
+pivot = "O"
+omega = 1.0
+[time]
+start = 0
+stop = 1
+step = 0.1
+"""
+
+
+def test_pages_with_no_loop_or_a_single_sample(open_page, tmp_path: Path) -> None:
+    """A lone crank (no loop at all), and a run whose first sample is already past the limit
+    (nothing solved: the page shows the t = 0 assembly and says so)."""
+    crank = vloop.loads(CRANK, source=str(tmp_path / "crank.toml"))
+    late_text = re.sub(r"\[time\][^\[]*", "[time]\nstart = 2.0\nstop = 2.5\nstep = 0.1\n", STOPPED.read_text())
+    late = vloop.loads(late_text, source=str(STOPPED), base_dir=MECHANISMS)
+    for mech, samples in ((crank, 11), (late, 1)):
+        result, error = solve_for_view(mech)
+        assert len(result) == samples and (error is None) == (mech is crank)
+        o = open_page(write_view(mech, result, tmp_path / f"{mech.name}.html", error=error))
+        page = o.page
+        for layer in ("vel", "acc", "paths", "loops"):
+            page.click(f'[data-overlay="{layer}"]')
+        page.keyboard.press("Space")
+        page.keyboard.press("ArrowRight")
+        assert page.locator("circle[data-joint]").count() == len(mech.tracked_points)
+        if mech is late:
+            assert "shown at the t = 0 assembly" in page.locator("#error").text_content()
+            assert page.locator("[data-plot] circle").count() == 3 * 3  # one dot per link and plot
+        assert o.requests == [] and o.problems == [], o.problems
 
 
 def test_readme_screenshot_is_committed() -> None:

@@ -131,7 +131,7 @@ def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], n
             arrays.append(col)
     matrix = np.empty((len(names), len(result)))
     for k, (name, arr) in enumerate(zip(names, arrays, strict=True)):
-        arr = np.asarray(arr, float)
+        arr = _floats(mech, name, arr)
         if arr.shape != (len(result),):
             raise ViewError(f"{mech.name}: {name} has shape {arr.shape}, expected ({len(result)},)")
         bad = np.flatnonzero(~np.isfinite(arr))
@@ -286,15 +286,31 @@ def _loop(chain: Any) -> dict[str, Any]:
 
 
 def _check_forces(mech: Mechanism, result: Result, forces: Any) -> None:
-    t = np.asarray(forces.t, float)
-    if t.shape != result.t.shape or np.max(np.abs(t - result.t), initial=0.0) > 1e-9 * (1 + np.abs(result.t).max()):
+    """The forces belong to this run: the same samples, named columns, arrows at known points."""
+    t = _floats(mech, "forces.t", forces.t)
+    gap = np.max(np.abs(t - result.t), initial=0.0) if t.shape == result.t.shape else np.inf
+    if not gap <= 1e-9 * (1 + np.abs(result.t).max()):  # also refuses NaN
         raise ViewError(f"{mech.name}: the forces are not given at the result's {len(result)} samples")
-    for point, fx, fy, _label in getattr(forces, "arrows", ()):
+    if not isinstance(forces.columns, dict) or not all(isinstance(k, str) for k in forces.columns):
+        raise ViewError(f"{mech.name}: forces.columns must map column names to arrays")
+    for k, arrow in enumerate(getattr(forces, "arrows", ())):
+        if not isinstance(arrow, (tuple, list)) or len(arrow) != 4 or not all(isinstance(a, str) for a in arrow):
+            raise ViewError(
+                f"{mech.name}: force arrow {k}: expected (point, fx column, fy column, label), got {arrow!r}"
+            )
+        point, fx, fy, _label = arrow
         if point not in mech.tracked_points:
             raise ViewError(f"{mech.name}: force arrow at {point!r}: no such joint or point")
         for col in (fx, fy):
             if col not in forces.columns:
                 raise ViewError(f"{mech.name}: force arrow at {point}: no column {col!r} in the forces")
+
+
+def _floats(mech: Mechanism, name: str, values: Any) -> np.ndarray:
+    try:
+        return np.asarray(values, float)
+    except (TypeError, ValueError, OverflowError):
+        raise ViewError(f"{mech.name}: {name} is not an array of numbers") from None
 
 
 def _force_unit(name: str) -> str:

@@ -595,6 +595,7 @@
         const p = svg("path", { class: "curve", d: curvePath(s.values, sx, sy), "data-series": s.name }, this.svg);
         p.style.stroke = s.style.color;
         if (s.style.dash) p.setAttribute("stroke-dasharray", s.style.dash);
+        if (N === 1) svg("circle", { cx: sx(T[0]), cy: sy(s.values[0]), r: 3.5 * fs }, this.svg).style.fill = s.style.color;
       }
       this.hoverLine = svg("line", { class: "hover", y1: m.t, y2: H - m.b, visibility: "hidden" }, this.svg);
       // the cursor is an HTML element moved by a transform: moving it repaints no curve
@@ -710,9 +711,9 @@
     table(host, "Joints and points", ["point", `x [${U}]`, `y [${U}]`, `vx [${U}/s]`, `vy [${U}/s]`, `ax [${U}/s²]`, `ay [${U}/s²]`],
       D.points.map((n) => [n, cols(n, ["x", "y", "vx", "vy", "ax", "ay"])]));
     const health = [];
-    if (C["health.residual"]) health.push(["loop closure residual (of the size)", [["health.residual"]]]);
-    if (C["health.cond"]) health.push(["condition number", [["health.cond"]]]);
-    if (health.length) table(host, "Health", ["", "value"], health);
+    if (C["health.residual"]) health.push(["closure residual", [["health.residual"]], "of the size"]);
+    if (C["health.cond"]) health.push(["condition number", [["health.cond"]], ""]);
+    if (health.length) table(host, "Health", ["", "value", ""], health);
     if (D.forces) table(host, "Forces", ["", "value", "unit"], D.forces.columns.map((c) => [c, [[`force:${c}`]], D.forces.units[c]]));
   }
 
