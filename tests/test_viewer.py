@@ -270,6 +270,31 @@ def test_view_command_bad_file(tmp_path: Path, capsys) -> None:
     assert not list(tmp_path.glob("*.html"))
 
 
+def test_view_command_opens_the_browser_only_when_asked(tmp_path: Path, monkeypatch) -> None:
+    import webbrowser
+
+    opened: list[str] = []
+    monkeypatch.setattr(webbrowser, "open", lambda uri, *a, **k: opened.append(uri))
+    assert main(["view", str(EIGHTBAR), "--out", str(tmp_path)]) == 0
+    assert opened == []
+    assert main(["view", str(EIGHTBAR), "--out", str(tmp_path), "--open"]) == 0
+    assert opened == [(tmp_path / "eightbar.html").resolve().as_uri()]
+
+
+def test_too_many_samples_refused_before_solving(tmp_path: Path, capsys) -> None:
+    from vloop.view import MAX_SAMPLES
+
+    text = EIGHTBAR.read_text(encoding="utf-8").replace("step = 0.05", f"step = {2.35 / (MAX_SAMPLES + 5)!r}")
+    big = tmp_path / "big.toml"
+    big.write_text(text, encoding="utf-8")
+    assert main(["view", str(big), "--out", str(tmp_path)]) == 2
+    assert f"the viewer takes at most {MAX_SAMPLES}" in capsys.readouterr().err
+    mech = vloop.load(EIGHTBAR)
+    many = vloop.Result("eightbar", "vloop", np.zeros(MAX_SAMPLES + 1), {})
+    with pytest.raises(ViewError, match="samples; the viewer takes at most"):
+        build_payload(mech, many)
+
+
 def _data_of(path: Path) -> dict:
     import json
 

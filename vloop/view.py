@@ -59,6 +59,7 @@ def solve_for_view(mech: Mechanism) -> tuple[Result, str | None]:
     """
     import vloop
 
+    _check_samples(mech.name, len(mech.times))  # before solving, not after
     system = vloop.compile(mech)
     try:
         return vloop.solve(system), None
@@ -76,16 +77,15 @@ def solve_for_view(mech: Mechanism) -> tuple[Result, str | None]:
 def build_payload(
     mech: Mechanism, result: Result, *, forces: Any = None, error: str | None = None, system: Any = None
 ) -> dict[str, Any]:
-    """Everything the page draws, as plain JSON-ready data (see the module docstring)."""
+    """Everything the page draws, as plain JSON-ready data (see the module docstring).
+
+    Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m.
+    """
     import vloop
 
     if not len(result):
         raise ViewError(f"{mech.name}: the result has no sample to show")
-    if len(result) > MAX_SAMPLES:
-        raise ViewError(
-            f"{mech.name}: {len(result)} samples; the viewer takes at most {MAX_SAMPLES} "
-            "(use a coarser [time] step; results.csv holds every sample)"
-        )
+    _check_samples(mech.name, len(result))
     system = system if system is not None else vloop.compile(mech)
     names, matrix = _columns(mech, result, forces)
     chains = loop_chains(system, result)
@@ -114,6 +114,14 @@ def build_payload(
         "drivers": [{"kind": d.kind, "target": d.target, "symbol": d.symbol} for d in mech.drivers],
         "forces": _forces_meta(mech, forces),
     }
+
+
+def _check_samples(name: str, n: int) -> None:
+    if n > MAX_SAMPLES:
+        raise ViewError(
+            f"{name}: {n} samples; the viewer takes at most {MAX_SAMPLES} "
+            "(use a coarser [time] step; vloop run writes every sample to results.csv)"
+        )
 
 
 def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], np.ndarray]:

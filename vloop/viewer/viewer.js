@@ -672,12 +672,19 @@
       if (F.shaking.length) plotGroup("Shaking force", F.shaking.map((c) => ({ label: c, column: "force:" + c })), [["", "F", "N"]]);
     }
     plots.forEach((p) => p.render());
-    let pending = false;
-    new ResizeObserver(() => {
+    // rebuild the plots only when their column changes width; the drawing when its box changes size
+    let pending = false, plotWidth = $("plots").clientWidth;
+    const observer = new ResizeObserver(() => {
       if (pending) return;
       pending = true;
-      requestAnimationFrame(() => { pending = false; plots.forEach((p) => p.render()); resize(); });
-    }).observe(document.body);
+      requestAnimationFrame(() => {
+        pending = false;
+        if ($("plots").clientWidth !== plotWidth) { plotWidth = $("plots").clientWidth; plots.forEach((p) => p.render()); }
+        resize();
+      });
+    });
+    observer.observe($("plots"));
+    observer.observe($("view-wrap"));
   }
 
   // ------------------------------------------------------------------ numbers panel
