@@ -170,7 +170,9 @@
 
   function buildBodies() {
     const sliders = Object.fromEntries(D.sliders.map((s) => [s.name, s]));
-    for (const b of D.bodies) {
+    // slotted links first: what runs in or across a slot is drawn over it
+    const order = [...D.bodies].sort((a, b) => (b.slots || []).length - (a.slots || []).length);
+    for (const b of order) {
       if (b.kind === "ground") continue;
       const parent = b.kind === "block" ? V.layers.blocks : V.layers.bodies;
       const g = svg("g", { "data-body": b.name }, parent);
