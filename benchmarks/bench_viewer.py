@@ -59,7 +59,7 @@ def measure(browser, path: Path, seconds: float) -> dict[str, float]:
     page = browser.new_page(viewport={"width": 1400, "height": 1000})
     t0 = time.perf_counter()
     page.goto(path.as_uri())
-    page.wait_for_function("window.vloopViewer && window.vloopViewer.ready", timeout=60_000)
+    page.wait_for_selector("body[data-ready]", state="attached", timeout=60_000)
     opened = time.perf_counter() - t0
     for layer in ("vel", "acc", "paths"):
         page.click(f'[data-overlay="{layer}"]')

@@ -33,7 +33,7 @@ def main() -> None:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": 1280, "height": 800})
         page.goto(page_file.as_uri())
-        page.wait_for_function("window.vloopViewer && window.vloopViewer.ready")
+        page.wait_for_selector("body[data-ready]", state="attached")
         page.evaluate("vloopViewer.setIndex(20); vloopViewer.setOverlay('vel', true)")
         png = page.screenshot()
         browser.close()
