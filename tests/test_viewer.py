@@ -516,6 +516,49 @@ def test_plots_follow_the_cursor_and_move_the_time(open_page, eightbar_page) -> 
     assert o.requests == [] and o.problems == []
 
 
+def test_playback_zoom_and_single_loops(open_page, eightbar_page, eightbar) -> None:
+    n = len(eightbar[1])
+    o = open_page(eightbar_page)
+    page = o.page
+    page.select_option("#speed", "5")
+    # repeat (on by default): playing past the end starts again from the beginning
+    page.evaluate(f"vloopViewer.setIndex({n - 2}); vloopViewer.play()")
+    page.wait_for_function(f"vloopViewer.index < {n - 2}", timeout=5000)
+    assert page.evaluate("vloopViewer.playing")
+    page.click("#play")
+    assert not page.evaluate("vloopViewer.playing")
+    # without repeat: it stops on the last sample
+    page.click("#repeat")
+    assert page.locator("#repeat").get_attribute("aria-pressed") == "false"
+    page.evaluate(f"vloopViewer.setIndex({n - 4}); vloopViewer.play()")
+    page.wait_for_function("!vloopViewer.playing", timeout=5000)
+    assert page.evaluate("vloopViewer.index") == n - 1
+    # zoom with the wheel about the cursor, pan by dragging, double-click fits again
+    view = page.locator("#view")
+    home = view.get_attribute("viewBox")
+    box = view.bounding_box()
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(cx, cy)
+    page.mouse.wheel(0, -300)
+    zoomed = [float(v) for v in view.get_attribute("viewBox").split()]
+    assert zoomed[2] < float(home.split()[2])
+    page.mouse.down()
+    page.mouse.move(cx + 100, cy + 40)
+    page.mouse.up()
+    panned = [float(v) for v in view.get_attribute("viewBox").split()]
+    assert panned[0] < zoomed[0] and panned[1] < zoomed[1] and panned[2] == zoomed[2]
+    view.dblclick()
+    assert view.get_attribute("viewBox") == home
+    # each loop can be hidden on its own
+    page.click("#loop-details summary")
+    page.click('[data-loop-toggle="2"]')
+    assert page.locator('g[data-loop="2"]').get_attribute("display") == "none"
+    assert page.locator('g[data-loop="1"]').get_attribute("display") != "none"
+    assert page.locator('#loop-legend [data-loop="2"]').is_hidden()
+    assert "b = |A→B (l3)| = 5" in page.locator("#loop-details").text_content()
+    assert o.requests == [] and o.problems == []
+
+
 def test_screenshots_at_three_instants(open_page, eightbar_page, eightbar, tmp_path: Path) -> None:
     from PIL import Image
 
