@@ -10,6 +10,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 _teaching_files(args, mech, partial, out, outputs)
             except VloopError as extra:
                 print(f"vloop: no extras for the partial run: {extra}", file=sys.stderr)
-            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'})")
+            page = ""
+            if args.html and len(partial):
+                page = f" and the viewer page {_view_page(mech, partial, out, str(exc))}"
+            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'}{page})")
         raise
     out.mkdir(parents=True, exist_ok=True)
     result.to_csv(out / "results.csv")
@@ -69,6 +73,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         files += plot_result(mech, result, out)
     files += _teaching_files(args, mech, result, out, outputs)
+    if args.html:
+        files.append(_view_page(mech, result, out))
     asm = system.assembly
     moved = ""
     if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
@@ -120,6 +126,34 @@ def _teaching_files(args: argparse.Namespace, mech, result, out: Path, outputs: 
     from .teaching.report import run_files
 
     return run_files(mech, result, out, extras=args.extras or outputs is not None, plot=args.plot, outputs=outputs)
+
+
+def _view_page(mech: Any, result: Any, out: Path, error: str | None = None) -> Path:
+    """The viewer page of a run, ``out/<safe name>.html`` (``vloop view``, ``vloop run --html``)."""
+    from .output import safe_folder_name
+    from .view import write_view
+
+    return write_view(mech, result, out / f"{safe_folder_name(mech.name)}.html", error=error)
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped)."""
+    from .mechanism import load
+    from .output import default_folder
+    from .view import solve_for_view
+
+    mech = load(args.file)
+    result, error = solve_for_view(mech)
+    out = Path(args.out) if args.out else default_folder(mech.name)
+    page = _view_page(mech, result, out, error)
+    print(f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
+    if args.open:
+        import webbrowser
+
+        webbrowser.open(page.resolve().as_uri())
+    if error:
+        return _fail(f"{error} (the page shows the motion up to its last assembled instant: {page})")
+    return 0
 
 
 def cmd_loops(args: argparse.Namespace) -> int:
@@ -335,7 +369,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="outputs for the velocity ratio and mechanical advantage in extras.csv, comma-separated "
         "(default: every slider and every undriven link pivoted on the ground)",
     )
+    r.add_argument("--html", action="store_true", help="also write the interactive viewer page NAME.html")
     r.set_defaults(func=cmd_run)
+    vw = sub.add_parser("view", help="write one offline HTML page that animates the mechanism (loops, arrows, plots)")
+    vw.add_argument("file")
+    vw.add_argument("--out", help="output folder (default: out/NAME); the page is NAME.html")
+    vw.add_argument("--open", action="store_true", help="open the page in the default web browser")
+    vw.set_defaults(func=cmd_view)
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     lo.add_argument("file")
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
