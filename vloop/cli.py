@@ -23,6 +23,7 @@ def _fail(msg: str) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from .forces import has_forces, write_forces
     from .loops import compile_system
     from .mechanism import load
     from .solver import solve
@@ -50,6 +51,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 from .plots import plot_result
 
                 plot_result(mech, partial, out)
+            if has_forces(mech):
+                write_forces(mech, partial, out, plot=args.plot)
             return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'})")
         raise
     out.mkdir(parents=True, exist_ok=True)
@@ -60,6 +63,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         from .plots import plot_result
 
         files += plot_result(mech, result, out)
+    if has_forces(mech):  # masses or loads: the kinetostatics too
+        files += write_forces(mech, result, out, plot=args.plot)
     asm = system.assembly
     moved = ""
     if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
@@ -251,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="solve P/V/A over the file's time span and write results.csv (and plots)")
     r.add_argument("file")
     r.add_argument("--out", help="output folder (default: out/NAME)")
-    r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png")
+    r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png (and forces.png)")
     r.add_argument(
         "--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only"
     )
