@@ -281,14 +281,19 @@ def _solve_dynamic(
     record: dict[float, tuple[np.ndarray, ...]] = {}
     wanted = {round((tk - t_asm) / base) for tk in times}
 
+    pins = [obj for kind, _, obj in constraint_objects(model) if kind == "pin"]
+
     def post_step(mbs_: Any, t: float) -> bool:
         k = round((t - t_asm) / base)
         if k in wanted and abs(t - (t_asm + k * base)) <= 1e-9 * base:
-            record[k] = tuple(
-                np.array(a)
-                for a in (sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt(),
-                          sd.GetAECoordinates())
-            )  # fmt: skip
+            state = (sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt())
+            lam = np.array(sd.GetAECoordinates())
+            # the revolute joints' own reaction output is their multiplier in global coordinates
+            out = np.concatenate([np.asarray(mbs.GetObjectOutput(o, exu.OutputVariableType.Force))[:2] for o in pins])
+            mine = np.concatenate([lam[list(sd.GetObjectLTGAE(o))] for o in pins]) if pins else out
+            if not np.allclose(out, mine, rtol=1e-12, atol=1e-12 * max(np.max(np.abs(lam), initial=0.0), 1e-300)):
+                raise RuntimeError(f"{mech.name}: Exudyn's joint Force output differs from its multipliers")
+            record[k] = (*(np.array(a) for a in state), lam)
         return True
 
     mbs.SetPostStepUserFunction(post_step)

@@ -149,6 +149,10 @@ class ForceModel:
     apps: tuple[tuple[str, int], ...]  # (point, body) pairs whose arm r_point − r_G the moments use
     blocks: tuple[tuple[np.ndarray, np.ndarray], ...] | None
     factor: float  # metres per file length unit
+    origins: tuple[str, ...] = ()  # per body: the joint at its frame origin
+    # per body, how its frame's x axis is found: (first joint, second joint, their distance) for a link,
+    # (joint, None, fixed angle) for a block on a ground guide, (joint, None, None) when θ must be used
+    axes: tuple[tuple[str, str | None, float | None], ...] = ()
 
     @property
     def n_eq(self) -> int:
@@ -170,20 +174,21 @@ def compile_forces(mech: Mechanism) -> ForceModel:
     inertia = np.array([mech.masses[b].inertia if b in mech.masses else 0.0 for b in bodies])
     entries, apps = _entries(mech, bodies, effects, directions, com / factor)
     blocks = _block_order(3 * len(bodies), len(unknowns), entries["row"], entries["col"])
+    frames = mech.bodies()
+    origins = tuple(frames[b].joints[0] for b in bodies)
     return ForceModel(
-        mech,
-        bodies,
-        tuple(unknowns),
-        tuple(effects),
-        tuple(directions),
-        mass,
-        inertia,
-        com,
-        entries,
-        apps,
-        blocks,
-        factor,
-    )
+        mech, bodies, tuple(unknowns), tuple(effects), tuple(directions), mass, inertia, com, entries, apps, blocks,
+        factor, origins, tuple(_frame_axis(mech, frames[b]) for b in bodies),
+    )  # fmt: skip
+
+
+def _frame_axis(mech: Mechanism, body: Any) -> tuple[str, str | None, float | None]:
+    """How a body frame's x axis is found over the samples (see ForceModel.axes)."""
+    if body.kind == "link" and len(body.joints) >= 2:
+        return body.joints[0], body.joints[1], body.local[body.joints[1]][0]
+    if body.kind == "block" and mech.links[body.guide].ground:
+        return body.joints[0], None, body.theta0
+    return body.joints[0], None, None
 
 
 def _unknowns(mech: Mechanism, index: dict[str, int]) -> tuple[list[str], list[Effect], list[Any]]:
@@ -296,7 +301,13 @@ def _entry_kinds(mech: Mechanism, e: dict[str, np.ndarray], directions: list[Any
         else:
             cross.append(i)
     as_int = {"dtype": int}
+    var_row = np.full(len(e["kind"]), -1, int)  # row in the variable-coefficient table (_coefficients)
+    var_row[np.array(arm + turning + cross, int)] = np.arange(len(arm) + len(turning) + len(cross))
+    fixed = np.zeros(len(e["kind"]))
+    fixed[np.array(const, int)] = const_value
     return {
+        "var_row": var_row,
+        "fixed": fixed,
         "const": np.array(const, **as_int),
         "const_value": np.array(const_value, float),
         "arm": np.array(arm, **as_int),
@@ -354,29 +365,48 @@ def _block_order(n_eq: int, n_unknowns: int, rows: np.ndarray, cols: np.ndarray)
     return tuple(blocks)
 
 
-def _block_plans(entries: dict[str, np.ndarray], blocks: tuple | None) -> tuple[dict[str, np.ndarray], ...]:
-    """Per block: its own coefficients (local row, col) and the coefficients coupling it to earlier blocks."""
+def _block_plans(entries: dict[str, np.ndarray], blocks: tuple | None) -> tuple[dict[str, Any], ...]:
+    """Per diagonal block: its constant coefficients as a matrix, its variable ones as (row, col, table row),
+    and its coupling to the unknowns solved before it (a constant matrix and variable terms)."""
     if blocks is None:
         return ()
     plans = []
     solved = np.zeros(entries["col"].max(initial=-1) + 1, bool)
+    var_row, fixed = entries["var_row"], entries["fixed"]
     for rows, cols in blocks:
         r_local = {int(r): i for i, r in enumerate(rows)}
         c_local = {int(c): i for i, c in enumerate(cols)}
         mine = np.isin(entries["row"], rows)
         inner = np.nonzero(mine & np.isin(entries["col"], cols))[0]
         coupling = np.nonzero(mine & solved[entries["col"]])[0]
-        spread = np.zeros((len(rows), len(coupling)))
-        spread[[r_local[int(r)] for r in entries["row"][coupling]], np.arange(len(coupling))] = 1.0
+        k = len(rows)
+        a_const = np.zeros((k, k))
+        inner_var = []
+        for e in inner:
+            r, c = r_local[int(entries["row"][e])], c_local[int(entries["col"][e])]
+            if var_row[e] < 0:
+                a_const[r, c] = fixed[e]
+            else:
+                inner_var.append((r, c, int(var_row[e])))
+        const_cols = sorted({int(entries["col"][e]) for e in coupling if var_row[e] < 0})
+        c_const = np.zeros((k, len(const_cols)))
+        var_terms = [e for e in coupling if var_row[e] >= 0]
+        spread = np.zeros((k, len(var_terms)))
+        for e in coupling:
+            if var_row[e] < 0:
+                c_const[r_local[int(entries["row"][e])], const_cols.index(int(entries["col"][e]))] += fixed[e]
+        for i, e in enumerate(var_terms):
+            spread[r_local[int(entries["row"][e])], i] = 1.0
         plans.append(
             {
                 "rows": rows,
                 "cols": cols,
-                "inner": inner,
-                "inner_r": np.array([r_local[int(r)] for r in entries["row"][inner]], int),
-                "inner_c": np.array([c_local[int(c)] for c in entries["col"][inner]], int),
-                "coupling": coupling,
-                "coupling_col": entries["col"][coupling],
+                "a_const": a_const,
+                "inner_var": inner_var,
+                "const_cols": np.array(const_cols, int),
+                "c_const": c_const,
+                "var_rows": var_row[np.array(var_terms, int)],
+                "var_cols": entries["col"][np.array(var_terms, int)],
                 "spread": spread,
             }
         )
@@ -497,14 +527,16 @@ def solve_forces(mech_or_system: Any, result: Result, *, model: ForceModel | Non
     mech = mech_or_system if isinstance(mech_or_system, Mechanism) else mech_or_system.mechanism
     model = model if model is not None else compile_forces(mech)
     t = np.asarray(result.t, float)
-    kin = _kinematics(model, result)
-    values = _coefficients(model, kin)
-    rhs = _right_hand_side(model, kin, t)
-    if model.blocks is not None:
-        x, free, message = _solve_blocks(model, values, rhs), np.zeros(len(model.unknowns), bool), ""
-    else:
-        x, free, message = _solve_least_squares(model, values, rhs)
-    out = ForceResult(mech.name, result.engine, t, _columns(model, kin, x, free), message=message)
+    with np.errstate(all="ignore"):  # an overflow shows as a non-finite value: check_finite names it
+        kin = _kinematics(model, result)
+        values = _coefficients(model, kin)
+        rhs = _right_hand_side(model, kin, t)
+        if model.blocks is not None:
+            x, free, message = _solve_blocks(model, values, rhs), np.zeros(len(model.unknowns), bool), ""
+        else:
+            x, free, message = _solve_least_squares(model, values, rhs)
+        columns = _columns(model, kin, x, free)
+    out = ForceResult(mech.name, result.engine, t, columns, message=message)
     out.indeterminate = sorted({u.rsplit(".", 1)[0] for u, f in zip(model.unknowns, free, strict=True) if f})
     out.meta = {"units": {"force": "N", "moment": "N·m"}, "kinematics": result.engine}
     out.check_finite()
@@ -512,59 +544,65 @@ def solve_forces(mech_or_system: Any, result: Result, *, model: ForceModel | Non
 
 
 def _kinematics(model: ForceModel, result: Result) -> dict[str, Any]:
-    """Body angles/rates (bodies × samples), centres of mass, their accelerations, the moment arms of
-    the application points and the positions of the points the ground is loaded at [SI]."""
-    mech, f = model.mechanism, model.factor
+    """Per body (rows: bodies × samples): θ, ω, α, the centre of mass G and its acceleration; the moment
+    arms r_P − r_G of the application points; the positions of the points the ground and the loads
+    act at; the slider directions [SI]. One row at a time: every step is a few passes over the samples."""
+    mech, f, n = model.mechanism, model.factor, len(result.t)
 
-    def col(name: str) -> np.ndarray:
+    def col(name: str, scale: float = 1.0) -> np.ndarray:
         try:
             arr = np.asarray(result[name], float)
         except KeyError:
             raise ForceError(f"{mech.name}: the kinematics have no column '{name}' (forces need it)") from None
-        return arr
-
-    def stack(names: list[str], scale: float = 1.0) -> np.ndarray:
-        arr = np.stack([col(n) for n in names]) if names else np.zeros((0, len(result.t)))
         return arr * scale if scale != 1.0 else arr
 
-    frames = mech.bodies()
-    origin = [frames[b].joints[0] for b in model.bodies]
-    th, om, al = (stack([f"{b}.{q}" for b in model.bodies]) for q in ("theta", "omega", "alpha"))
-    c, s = np.cos(th), np.sin(th)
-    cx, cy = model.com[:, :1], model.com[:, 1:]
-    rx, ry = c * cx - s * cy, s * cx + c * cy  # R(θ)·c: from the frame origin to G
-    gx, gy = stack([f"{p}.x" for p in origin], f) + rx, stack([f"{p}.y" for p in origin], f) + ry
-    om2 = om * om
-    kin = {
-        "n": len(result.t),
-        "theta": th,
-        "omega": om,
-        "alpha": al,
-        "gx": gx,
-        "gy": gy,
-        "agx": stack([f"{p}.ax" for p in origin], f) - al * ry - om2 * rx,
-        "agy": stack([f"{p}.ay" for p in origin], f) + al * rx - om2 * ry,
-    }
-    app_points = [p for p, _ in model.apps]
-    app_bodies = np.array([b for _, b in model.apps], int)
-    arms = np.empty((len(model.apps), 2, len(result.t)))
-    arms[:, 0] = stack([f"{p}.x" for p in app_points], f) - gx[app_bodies]
-    arms[:, 1] = stack([f"{p}.y" for p in app_points], f) - gy[app_bodies]
+    nb = len(model.bodies)
+    kin: dict[str, Any] = {"n": n}
+    for key in ("theta", "omega", "alpha", "gx", "gy", "agx", "agy"):
+        kin[key] = np.empty((nb, n))
+    for i, b in enumerate(model.bodies):
+        th, om, al = col(f"{b}.theta"), col(f"{b}.omega"), col(f"{b}.alpha")
+        kin["theta"][i], kin["omega"][i], kin["alpha"][i] = th, om, al
+        o = model.origins[i]
+        cx, cy = model.com[i]
+        gx, gy, agx, agy = col(f"{o}.x", f), col(f"{o}.y", f), col(f"{o}.ax", f), col(f"{o}.ay", f)
+        if cx or cy:  # G = O + R(θ)·c, a_G = a_O + α k × r − ω² r
+            c, s = _unit(model, i, th, col)
+            rx = c * cx - s * cy if cy else c * cx
+            ry = s * cx + c * cy if cy else s * cx
+            om2 = om * om
+            gx, gy = gx + rx, gy + ry
+            agx, agy = agx - al * ry - om2 * rx, agy + al * rx - om2 * ry
+        kin["gx"][i], kin["gy"][i], kin["agx"][i], kin["agy"][i] = gx, gy, agx, agy
+    arms = np.empty((len(model.apps), 2, n))
+    for k, (p, b) in enumerate(model.apps):
+        arms[k, 0] = col(f"{p}.x", f) - kin["gx"][b]
+        arms[k, 1] = col(f"{p}.y", f) - kin["gy"][b]
     kin["arms"] = arms
     ground_points = {e.point for e in model.effects if e.body < 0 and e.point} | {
         ld.point for ld in mech.loads if ld.point
     }
-    kin["points"] = {p: (col(f"{p}.x") * f, col(f"{p}.y") * f) for p in ground_points}
+    kin["points"] = {p: (col(f"{p}.x", f), col(f"{p}.y", f)) for p in ground_points}
     kin["directions"] = _direction_table(model, kin)
     return kin
+
+
+def _unit(model: ForceModel, i: int, theta: np.ndarray, col: Any) -> tuple[Any, Any]:
+    """(cos θ, sin θ) of body i: from its first two joints for a link (no trigonometry), constants for a
+    block on a ground guide, else from θ."""
+    first, second, length = model.axes[i]
+    if second is not None:
+        return (col(f"{second}.x") - col(f"{first}.x")) / length, (col(f"{second}.y") - col(f"{first}.y")) / length
+    if length is not None:  # a block on a ground guide never turns
+        return math.cos(length), math.sin(length)
+    return np.cos(theta), np.sin(theta)
 
 
 def _direction_table(model: ForceModel, kin: dict[str, Any]) -> np.ndarray:
     """(n_directions, 2, n): world components of x, y and every slider's u and n over the samples."""
     n = kin["n"]
-    out = np.zeros((len(model.directions), 2, n))
-    out[0, 0] = 1.0
-    out[1, 1] = 1.0
+    out = np.empty((len(model.directions), 2, n))
+    out[0, 0], out[0, 1], out[1, 0], out[1, 1] = 1.0, 0.0, 0.0, 1.0
     index = {b: i for i, b in enumerate(model.bodies)}
     for k, d in enumerate(model.directions[2:], start=2):
         const = _constant_direction(model.mechanism, d)
@@ -578,24 +616,35 @@ def _direction_table(model: ForceModel, kin: dict[str, Any]) -> np.ndarray:
 
 
 def _coefficients(model: ForceModel, kin: dict[str, Any]) -> np.ndarray:
-    """(nnz, n): every structurally nonzero coefficient at every sample.
+    """(n_variable, n): the coefficients that change with the positions, every sample (the constant
+    ones, ±1 and a ground slider's axis components, stay in the block plans).
 
-    Constant ones (±1, a ground slider's axis components) are broadcast; the moment of a world x/y
-    force is a signed moment arm (−Δy, Δx); slider directions on a moving guide turn with it.
+    The moment of a world x/y force is a signed moment arm (−Δy, Δx); a slider's directions on a
+    moving guide turn with it, and so do their moments.
     """
     e = model.entries
-    values = np.empty((len(e["row"]), kin["n"]))
-    values[e["const"]] = e["const_value"][:, None]
+    n_var = int(e["var_row"].max(initial=-1)) + 1
+    values = np.empty((n_var, kin["n"]))
     sel = e["arm"]
-    values[sel] = e["arm_coef"][:, None] * kin["arms"][e["app"][sel], e["arm_comp"]]
+    values[e["var_row"][sel]] = e["arm_coef"][:, None] * kin["arms"][e["app"][sel], e["arm_comp"]]
     dirs = kin["directions"]
     sel = e["turning"]
-    values[sel] = e["sign"][sel, None] * dirs[e["dir"][sel], e["kind"][sel]]
+    if len(sel):
+        values[e["var_row"][sel]] = e["sign"][sel, None] * dirs[e["dir"][sel], e["kind"][sel]]
     sel = e["cross"]
     if len(sel):
         a, d = kin["arms"][e["app"][sel]], dirs[e["dir"][sel]]
-        values[sel] = e["sign"][sel, None] * (a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0])
+        values[e["var_row"][sel]] = e["sign"][sel, None] * (a[:, 0] * d[:, 1] - a[:, 1] * d[:, 0])
     return values
+
+
+def _full_values(model: ForceModel, variable: np.ndarray) -> np.ndarray:
+    """(nnz, n): every structurally nonzero coefficient (constant ones broadcast)."""
+    e = model.entries
+    out = np.repeat(e["fixed"][:, None], variable.shape[1], axis=1)
+    var = e["var_row"] >= 0
+    out[var] = variable[e["var_row"][var]]
+    return out
 
 
 def _arm(kin: dict[str, Any], model: ForceModel, point: str, body: int) -> tuple[np.ndarray, np.ndarray]:
@@ -631,27 +680,32 @@ def _solve_blocks(model: ForceModel, values: np.ndarray, rhs: np.ndarray) -> np.
     """Block forward substitution over the diagonal blocks, every sample at once: (n_unknowns, n)."""
     n = rhs.shape[1]
     x = np.zeros((len(model.unknowns), n))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for plan in _plans(model):
-            b = rhs[plan["rows"]]
-            if len(plan["coupling"]):
-                b = b - plan["spread"] @ (values[plan["coupling"]] * x[plan["coupling_col"]])
-            x[plan["cols"]] = _solve_block(plan, values, b)
+    for plan in _plans(model):
+        b = rhs[plan["rows"]]
+        if len(plan["const_cols"]):
+            b = b - plan["c_const"] @ x[plan["const_cols"]]
+        if len(plan["var_cols"]):
+            b = b - plan["spread"] @ (values[plan["var_rows"]] * x[plan["var_cols"]])
+        x[plan["cols"]] = _solve_block(plan, values, b)
     return x
 
 
-def _solve_block(plan: dict[str, np.ndarray], values: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _solve_block(plan: dict[str, Any], values: np.ndarray, b: np.ndarray) -> np.ndarray:
     """One diagonal block for every sample: division, Cramer's rule, or batched LU above 2 × 2."""
     k, n = len(plan["cols"]), b.shape[1]
-    a = np.zeros((k, k, n))
-    a[plan["inner_r"], plan["inner_c"]] = values[plan["inner"]]
-    if k == 1:
-        return b / a[0]
-    if k == 2:
-        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-        return np.array([a[1, 1] * b[0] - a[0, 1] * b[1], a[0, 0] * b[1] - a[1, 0] * b[0]]) / det
+    if k <= 2:  # coefficients as scalars (constant) or rows (variable)
+        a: list[list[Any]] = [[plan["a_const"][r, c] for c in range(k)] for r in range(k)]
+        for r, c, v in plan["inner_var"]:
+            a[r][c] = values[v]
+        if k == 1:
+            return b / a[0][0]
+        det = a[0][0] * a[1][1] - a[0][1] * a[1][0]
+        return np.array([a[1][1] * b[0] - a[0][1] * b[1], a[0][0] * b[1] - a[1][0] * b[0]]) / det
+    full = np.repeat(plan["a_const"][:, :, None], n, axis=2)
+    for r, c, v in plan["inner_var"]:
+        full[r, c] = values[v]
     try:
-        return np.linalg.solve(a.transpose(2, 0, 1), b.T[:, :, None])[:, :, 0].T
+        return np.linalg.solve(full.transpose(2, 0, 1), b.T[:, :, None])[:, :, 0].T
     except np.linalg.LinAlgError:
         return np.full((k, n), np.nan)
 
@@ -675,7 +729,7 @@ def _solve_least_squares(model: ForceModel, values: np.ndarray, rhs: np.ndarray)
     leaves free: those with a component in the null space of the equations at any sample."""
     e, n = model.entries, rhs.shape[1]
     a = np.zeros((n, model.n_eq, len(model.unknowns)))
-    a[:, e["row"], e["col"]] = values.T
+    a[:, e["row"], e["col"]] = _full_values(model, values).T
     u, s, vh = np.linalg.svd(a, full_matrices=True)
     smax = s.max(axis=1, keepdims=True) if s.size else np.zeros((n, 1))
     keep = s > RANK_TOL * smax

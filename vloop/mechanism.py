@@ -965,6 +965,13 @@ def _load_one(d: dict, m: Mechanism, entry: str, base: Path, probs: _Problems) -
     if body is None:
         return None
     if "profile" in d:
+        spec = d["profile"]
+        if isinstance(spec, dict) and not all(
+            isinstance(v, list) and all(_real(x, "profile", entry, _Problems("")) is not None for x in v)
+            for v in spec.values()
+        ):
+            probs.add(entry, "profile columns must be lists of finite numbers")
+            return None
         cols = ("t", "fx", "fy", "") if kind == "force" else ("t", "torque", "", "")
         prof = _read_profile(d["profile"], cols, entry, base, probs)
         if prof is None:
