@@ -262,7 +262,10 @@ def _solve_dynamic(
     model = build(mech)
     kin = vexu._Kinematics(model)
     start = vexu._assemble(kin, mech, t_asm, engine, times)
-    kin_res, _ = _solve_kinematic(mech, times)  # for the step size (rates) only
+    try:
+        kin_res, _ = _solve_kinematic(mech, times)  # for the step size (rates) only
+    except MotionError as exc:  # a run to a limit position: the rates up to it
+        kin_res = exc.partial[0]
     rate = max(
         [1.0]
         + [float(np.max(np.abs(kin_res[f"{b}.omega"]), initial=0.0)) for b in mech.moving_links]
@@ -305,8 +308,17 @@ def _solve_dynamic(
     try:
         with vexu._Quiet():
             mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
-    except Exception as exc:
-        raise MotionError(f"{mech.name}: {engine}: Exudyn's time integration failed: {exc}") from None
+    except Exception as exc:  # Exudyn's SolverError: keep the samples reached before it
+        done = 0
+        while done < len(times) and (round((times[done] - t_asm) / base) in record or times[done] == t_asm):
+            done += 1
+        part = _dynamic_results(mech, engine, model, kin, times[:done], t_asm, base, start, record)
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise MotionError(
+            f"{mech.name}: {engine}: Exudyn's time integration failed before sample {done}: {reason}",
+            sample=done,
+            partial=part,
+        ) from None
     return _dynamic_results(mech, engine, model, kin, times, t_asm, base, start, record)
 
 
