@@ -133,3 +133,20 @@ def test_validators_report_partial_forces_at_a_limit() -> None:
         pinocchio_forces.solve_with_forces(mech)
     kin, frc = exc.value.partial
     assert 0 < len(frc) == len(kin) < len(mech.times)
+
+
+def test_validate_compares_forces_next_to_kinematics() -> None:
+    """``vloop validate`` (the harness): every engine's Result carries its own forces, compared by group."""
+    from validators import harness
+
+    engines = ("vloop", "analytic", "pinocchio", "exudyn-kinematic")
+    item = harness.validate_mechanism(MECH / "fourbar_textbook_dynamics.toml", engines)
+    assert item.passed, [c.message for c in item.checks if not c.passed]
+    for check in item.checks:
+        groups = {e.group for e in check.comparison.errors}
+        assert {"force", "moment", "acceleration"} <= groups, (check.engine, check.reference, groups)
+        forces = [e for e in check.comparison.errors if e.group in ("force", "moment")]
+        assert len(forces) == 1 + 4 * 3 + 3 and max(e.rel for e in forces) < 1e-11
+    summary = harness.to_summary(harness.Validation([item], engines, "now", 0.0, {}))
+    quantities = {q["quantity"] for c in summary["mechanisms"][0]["comparisons"] for q in c["quantities"]}
+    assert {"l2.torque", "B:l3>l4.mag", "shaking.moment"} <= quantities

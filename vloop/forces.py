@@ -153,6 +153,7 @@ class ForceModel:
     # per body, how its frame's x axis is found: (first joint, second joint, their distance) for a link,
     # (joint, None, fixed angle) for a block on a ground guide, (joint, None, None) when θ must be used
     axes: tuple[tuple[str, str | None, float | None], ...] = ()
+    plans: tuple[dict[str, Any], ...] = ()  # per block: how to assemble and solve it (_block_plans)
 
     @property
     def n_eq(self) -> int:
@@ -178,7 +179,7 @@ def compile_forces(mech: Mechanism) -> ForceModel:
     origins = tuple(frames[b].joints[0] for b in bodies)
     return ForceModel(
         mech, bodies, tuple(unknowns), tuple(effects), tuple(directions), mass, inertia, com, entries, apps, blocks,
-        factor, origins, tuple(_frame_axis(mech, frames[b]) for b in bodies),
+        factor, origins, tuple(_frame_axis(mech, frames[b]) for b in bodies), _block_plans(entries, blocks),
     )  # fmt: skip
 
 
@@ -285,36 +286,37 @@ def _entries(
 
 def _entry_kinds(mech: Mechanism, e: dict[str, np.ndarray], directions: list[Any]) -> dict[str, np.ndarray]:
     """Split the coefficients by how they are evaluated (see :func:`_coefficients`)."""
-    const, const_value, arm, arm_coef, arm_comp, turning, cross = [], [], [], [], [], [], []
+    const: dict[int, float] = {}  # entry -> its value
+    arm: dict[int, tuple[float, int]] = {}  # entry -> (coefficient, arm component)
+    turning, cross = [], []
     for i, (kind, d, sign) in enumerate(zip(e["kind"], e["dir"], e["sign"], strict=True)):
+        c = _constant_direction(mech, directions[d]) if kind in (0, 1) else None
         if kind == 3:
-            const.append(i), const_value.append(sign)
+            const[i] = sign
+        elif kind in (0, 1) and c is not None:
+            const[i] = sign * c[kind]
         elif kind in (0, 1):
-            c = _constant_direction(mech, directions[d])
-            if c is None:
-                turning.append(i)
-            else:
-                const.append(i), const_value.append(sign * c[kind])
+            turning.append(i)
         elif directions[d] in ("x", "y"):  # moment of a world x / y force: −Δy·Fx, +Δx·Fy
-            arm.append(i), arm_coef.append(-sign if directions[d] == "x" else sign)
-            arm_comp.append(1 if directions[d] == "x" else 0)
+            arm[i] = (-sign, 1) if directions[d] == "x" else (sign, 0)
         else:
             cross.append(i)
-    as_int = {"dtype": int}
+    const_idx, arm_idx = list(const), list(arm)
+    variable = arm_idx + turning + cross
     var_row = np.full(len(e["kind"]), -1, int)  # row in the variable-coefficient table (_coefficients)
-    var_row[np.array(arm + turning + cross, int)] = np.arange(len(arm) + len(turning) + len(cross))
+    var_row[np.array(variable, int)] = np.arange(len(variable))
     fixed = np.zeros(len(e["kind"]))
-    fixed[np.array(const, int)] = const_value
+    fixed[np.array(const_idx, int)] = list(const.values())
     return {
         "var_row": var_row,
         "fixed": fixed,
-        "const": np.array(const, **as_int),
-        "const_value": np.array(const_value, float),
-        "arm": np.array(arm, **as_int),
-        "arm_coef": np.array(arm_coef, float),
-        "arm_comp": np.array(arm_comp, **as_int),
-        "turning": np.array(turning, **as_int),
-        "cross": np.array(cross, **as_int),
+        "const": np.array(const_idx, int),
+        "const_value": np.array(list(const.values()), float),
+        "arm": np.array(arm_idx, int),
+        "arm_coef": np.array([a for a, _ in arm.values()], float),
+        "arm_comp": np.array([k for _, k in arm.values()], int),
+        "turning": np.array(turning, int),
+        "cross": np.array(cross, int),
     }
 
 
@@ -531,10 +533,13 @@ def solve_forces(mech_or_system: Any, result: Result, *, model: ForceModel | Non
         kin = _kinematics(model, result)
         values = _coefficients(model, kin)
         rhs = _right_hand_side(model, kin, t)
-        if model.blocks is not None:
-            x, free, message = _solve_blocks(model, values, rhs), np.zeros(len(model.unknowns), bool), ""
-        else:
+        x = _solve_blocks(model, values, rhs) if model.blocks is not None else None
+        if x is not None and np.all(np.isfinite(x)):
+            free, message = np.zeros(len(model.unknowns), bool), ""
+        elif np.all(np.isfinite(rhs)):  # redundant, or a block singular at some sample: least squares says which
             x, free, message = _solve_least_squares(model, values, rhs)
+        else:
+            x, free, message = np.full((len(model.unknowns), len(t)), np.nan), np.zeros(len(model.unknowns), bool), ""
         columns = _columns(model, kin, x, free)
     out = ForceResult(mech.name, result.engine, t, columns, message=message)
     out.indeterminate = sorted({u.rsplit(".", 1)[0] for u, f in zip(model.unknowns, free, strict=True) if f})
@@ -680,7 +685,7 @@ def _solve_blocks(model: ForceModel, values: np.ndarray, rhs: np.ndarray) -> np.
     """Block forward substitution over the diagonal blocks, every sample at once: (n_unknowns, n)."""
     n = rhs.shape[1]
     x = np.zeros((len(model.unknowns), n))
-    for plan in _plans(model):
+    for plan in model.plans:
         b = rhs[plan["rows"]]
         if len(plan["const_cols"]):
             b = b - plan["c_const"] @ x[plan["const_cols"]]
@@ -708,20 +713,6 @@ def _solve_block(plan: dict[str, Any], values: np.ndarray, b: np.ndarray) -> np.
         return np.linalg.solve(full.transpose(2, 0, 1), b.T[:, :, None])[:, :, 0].T
     except np.linalg.LinAlgError:
         return np.full((k, n), np.nan)
-
-
-_PLAN_CACHE: dict[int, tuple[ForceModel, tuple]] = {}
-
-
-def _plans(model: ForceModel) -> tuple:
-    """The block plans of a model (built on first use, kept with the model)."""
-    hit = _PLAN_CACHE.get(id(model))
-    if hit is None or hit[0] is not model:
-        if len(_PLAN_CACHE) > 64:
-            _PLAN_CACHE.clear()
-        hit = (model, _block_plans(model.entries, model.blocks))
-        _PLAN_CACHE[id(model)] = hit
-    return hit[1]
 
 
 def _solve_least_squares(model: ForceModel, values: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
