@@ -2,7 +2,7 @@
 
 * Closed forms derived by hand (validators/analytic_forces.py: slider-crank and four-bar) match vloop's
   driver torque, pin forces, slider normal force and moment to 1e-9 of each quantity's peak
-  (measured ≤ 3e-14).
+  (measured ≤ 4e-14).
 * The power balance on every catalog file with masses (and a driven-slider variant): Σ τ·ω + f·ṡ =
   dT/dt − P_gravity − P_loads at every sample, with T, dT/dt = Σ m·v_G·a_G + I·ω·α, the gravity and
   load powers all computed here from the P/V/A results alone, to 1e-9 of the peak input power

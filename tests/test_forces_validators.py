@@ -7,7 +7,7 @@
 * Exudyn dynamic: the multipliers of Exudyn's generalized-α time integration (its joint reactions).
 
 Tolerances (|a − b| ≤ rtol·peak + floor·group peak, vloop.compare): Pinocchio and Exudyn kinematic
-1e-9 (measured ≤ 5e-13 of each quantity's peak over the catalog with masses); Exudyn dynamic 2e-5
+1e-9 (measured ≤ 1e-12 of each quantity's peak over the catalog with masses); Exudyn dynamic 2e-5
 (validators/tolerances.py; measured ≤ 2e-6 of the group peak on the catalog files with masses).
 Every catalog file is also checked with masses, centres of mass off the link lines, gravity, a
 point load and a torque added (moving guides, ternary links, order-3 pins, two cranks, Newton
