@@ -159,9 +159,7 @@ class OutputSet:
         """Stage ``name`` by calling ``fill(file_object)``."""
         target = self.path(name)
         try:
-            with open(
-                target, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": ""})
-            ) as fh:
+            with open(target, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": ""})) as fh:
                 fill(fh)
         except OSError as exc:
             raise OutputError(f"cannot write {self.folder / name}: {describe_os_error(exc)}", entry="out") from None
