@@ -37,6 +37,7 @@ from vloop.result import Result
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velocity", "acceleration")
+GROUPS += ("force", "moment")  # kinetostatics, for mechanisms with masses (validators/forces_engines.py)
 MAX_FRAMES = 40  # animated GIF frames per mechanism
 LINKS_PER_FIGURE = 6  # more rotating links than this are spread over several history figures
 WORST_SHOWN = 4  # quantities per engine in the error-vs-time plots
@@ -456,6 +457,30 @@ def _histories(mech: Mechanism, runs: list[EngineRun]) -> list[Image]:
     return out
 
 
+def _force_histories(mech: Mechanism, runs: list[EngineRun]) -> list[Image]:
+    """Driver torques/forces and the pin reactions' magnitudes, every engine overlaid (mechanisms with masses)."""
+    runs = [r for r in runs if r.result is not None and len(r.result)]
+    drivers = [c for c in (runs[0].result.columns if runs else {}) if c.endswith((".torque", ".force"))]
+    if not drivers:
+        return []
+    pins = [c for c in runs[0].result.columns if c.endswith(".mag")]
+    pins = sorted(pins, key=lambda c: -float(np.max(np.abs(runs[0].result[c]))))[:LINKS_PER_FIGURE]
+    fig = _new_figure(8.8, 6.0)
+    axes = fig.subplots(2, 1, sharex=True)
+    for ax, names, label in ((axes[0], drivers, "driver [N·m or N]"), (axes[1], pins, "pin force |F| [N]")):
+        for ei, r in enumerate(runs):
+            st = _style(r.engine, ei, len(r.result), len(runs))
+            for ni, n in enumerate(names):
+                if n in r.result:
+                    ax.plot(r.result.t, r.result[n], color=_COLORS[ni % len(_COLORS)], **st)
+        ax.set_ylabel(label)
+        ent = [Line2D([], [], color=_COLORS[i % len(_COLORS)], lw=2.5, label=n) for i, n in enumerate(names)]
+        ax.legend(handles=ent, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=8)
+    axes[-1].set_xlabel("t [s]")
+    axes[0].set_title("Forces: driver torque and pin reactions (every engine overlaid)")
+    return [_png(fig, f"{mech.name}: driver torque and pin reaction magnitudes")]
+
+
 # ------------------------------------------------------------------ errors
 
 
@@ -768,7 +793,7 @@ def _mechanism_section(
         drawing_note=geo.note,
         equations=equations,
         equations_error=equations_error,
-        histories=_histories(mech, runs),
+        histories=_histories(mech, runs) + _force_histories(mech, runs),
         errors=_error_figure(item),
         group_rows=_group_rows(item),
         runs=[

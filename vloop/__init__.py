@@ -4,6 +4,7 @@ mech = vloop.load("mechanisms/eightbar.toml")
 res = vloop.solve(mech)            # times default to the file's [time]
 res.link("l3").theta, res.slider("l4").v, res.point("C").ay
 res.to_csv("results.csv")
+forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ __all__ = [
     "mechanical_advantage",
     "save",
     "solve",
+    "solve_forces",
     "stroke",
     "time_ratio",
     "transmission_angles",
@@ -86,3 +88,11 @@ def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options
     else:
         system = compile_system(mechanism, method)
     return solve_system(system, times, **options)
+
+
+def solve_forces(mechanism: Mechanism | Any, result: Result) -> Any:
+    """Driver torques [N·m] / forces [N], pin and slider reactions and the shaking force at every sample
+    of ``result`` (a ForceResult; see :mod:`vloop.forces` for the columns and sign conventions)."""
+    from .forces import solve_forces as _solve_forces
+
+    return _solve_forces(mechanism, result)

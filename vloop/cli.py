@@ -28,6 +28,7 @@ def _fail(msg: str) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from .compiler import compile_system
+    from .forces import has_forces, write_forces
     from .mechanism import load
     from .solver import solve
 
@@ -62,6 +63,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             page = ""
             if args.html and len(partial):
                 page = f" and the viewer page {_view_page(mech, partial, out, str(exc))}"
+            if has_forces(mech):
+                write_forces(mech, partial, out, plot=args.plot)
             return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'}{page})")
         raise
     out.mkdir(parents=True, exist_ok=True)
@@ -73,6 +76,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         files += plot_result(mech, result, out)
     files += _teaching_files(args, mech, result, out, outputs)
+    if has_forces(mech):  # masses or loads: the kinetostatics too
+        files += write_forces(mech, result, out, plot=args.plot)
     if args.html:
         files.append(_view_page(mech, result, out))
     asm = system.assembly
@@ -349,7 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="solve P/V/A over the file's time span and write results.csv (and plots)")
     r.add_argument("file")
     r.add_argument("--out", help="output folder (default: out/NAME)")
-    r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png")
+    r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png (and forces.png)")
     r.add_argument(
         "--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only"
     )

@@ -119,6 +119,54 @@ class Body:
 
 
 @dataclass(frozen=True)
+class MassProperties:
+    """Mass [kg], inertia [kg·m²] about the centre of mass, and the centre of mass (x, y) in world
+    coordinates at t = 0 [the file's length units]."""
+
+    mass: float
+    inertia: float
+    com: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class LoadProfile:
+    """A tabulated load: times ``t`` [s] and ``values`` (rows; columns ``fx, fy`` [N] or ``torque`` [N·m]),
+    linearly interpolated between rows."""
+
+    t: np.ndarray
+    values: np.ndarray
+    columns: tuple[str, ...]
+    source: str = "inline"
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, LoadProfile)
+            and self.columns == other.columns
+            and np.array_equal(self.t, other.t)
+            and np.array_equal(self.values, other.values)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
+class Load:
+    """An external load on a moving body.
+
+    ``kind == "force"``: ``value`` = (fx, fy) [N, world frame] applied at joint/point ``point`` of
+    body ``body``; ``kind == "torque"``: ``value`` = τ [N·m, CCW positive] on ``body``. With a
+    ``profile`` the value follows the table over time (``value`` is then None).
+    """
+
+    kind: str
+    body: str
+    value: tuple[float, float] | float | None
+    point: str | None = None
+    profile: LoadProfile | None = None
+    entry: str = "loads"
+
+
+@dataclass(frozen=True)
 class Mechanism:
     """A planar linkage as described by its file. Immutable; engines read it."""
 
@@ -133,6 +181,10 @@ class Mechanism:
     units: str = "m"
     source: str = ""
     options: dict[str, Any] = field(default_factory=dict)
+    # kinetostatics (README "Masses and loads"): bodies without an entry are massless
+    masses: dict[str, MassProperties] = field(default_factory=dict)
+    gravity: tuple[float, float] | None = None  # m/s², world frame
+    loads: tuple[Load, ...] = ()
 
     # ----- derived views (pure functions of the description) -----
     @property
@@ -242,6 +294,8 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
 # ---------------------------------------------------------------- loading
 
 _TOP_KEYS = {"name", "title", "units", "joints", "links", "sliders", "points", "drivers", "time", "solver"}
+_TOP_KEYS |= {"gravity", "loads"}  # kinetostatics
+_MASS_KEYS = {"mass", "inertia", "com"}
 
 
 class _Problems:
@@ -361,7 +415,7 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None
         if not isinstance(val, dict):
             probs.add(entry, f"expected a table {{ joints = [...] }}, got {val!r}")
             continue
-        _check_keys(val, {"joints", "ground", "length"}, entry, probs)
+        _check_keys(val, {"joints", "ground", "length", *_MASS_KEYS}, entry, probs)
         jl = val.get("joints", [])
         if not isinstance(jl, list) or not all(isinstance(j, str) for j in jl):
             probs.add(entry, "'joints' must be a list of joint names")
@@ -407,7 +461,7 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None
         if not isinstance(val, dict):
             probs.add(entry, f"expected a table {{ joint, guide, axis }}, got {val!r}")
             continue
-        _check_keys(val, {"joint", "guide", "axis"}, entry, probs)
+        _check_keys(val, {"joint", "guide", "axis", *_MASS_KEYS}, entry, probs)
         if sn in links:
             probs.add(entry, f"duplicate name: '{sn}' is also a link (a slider's name is its block's name)")
             continue
@@ -470,10 +524,13 @@ def from_dict(data: dict, *, source: str = "<dict>", base_dir: str | Path | None
     probs.raise_if_any()
     times = _load_time(data.get("time"), drivers, probs)
     options = _load_solver(data.get("solver", {}), probs)
+    dynamics = _load_dynamics(data, proto, base, probs)
     probs.raise_if_any()
     times.flags.writeable = False
 
-    mech = Mechanism(name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options)
+    mech = Mechanism(
+        name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options, **dynamics
+    )
     if mech.gruebler()[2] > len(drivers):  # fewer drivers than Gruebler's count: never enough to fix the motion
         raise MechanismError(mobility_message(mech), entry="drivers")
     return mech  # Gruebler's count below the drivers may be a redundant linkage: the compiler decides by rank
@@ -787,6 +844,173 @@ def _load_solver(raw: Any, probs: _Problems) -> dict[str, Any]:
     return out
 
 
+# ---------------------------------------------------------------- masses, gravity, loads (kinetostatics)
+
+# Length units the force analysis knows (factor to metres): masses are in kg, forces in N, so the
+# file's lengths must be converted; a file with masses or loads in other units is refused.
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
+
+
+def length_factor(units: str) -> float:
+    """Metres per length unit of the file (KeyError for a unit vloop does not know)."""
+    return LENGTH_UNITS[units.strip().lower()]
+
+
+def _real(value: Any, what: str, entry: str, probs: _Problems) -> float | None:
+    """A finite real number, or None after recording why not (bools, strings, 10**400, nan, inf)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        probs.add(entry, f"'{what}' must be a number, got {value!r}")
+        return None
+    try:
+        x = float(value)
+    except OverflowError:
+        probs.add(entry, f"'{what}' is too large ({str(value)[:20]}...)")
+        return None
+    if not math.isfinite(x):
+        probs.add(entry, f"'{what}' is not finite ({value!r})")
+        return None
+    return x + 0.0  # -0.0 → 0.0
+
+
+def _real_pair(value: Any, what: str, entry: str, probs: _Problems) -> tuple[float, float] | None:
+    if not isinstance(value, list) or len(value) != 2:
+        probs.add(entry, f"'{what}' must be a pair of numbers [x, y], got {value!r}")
+        return None
+    xy = [_real(v, what, entry, probs) for v in value]
+    return None if None in xy else (xy[0], xy[1])  # type: ignore[return-value]
+
+
+def _load_dynamics(data: dict, m: Mechanism, base: Path, probs: _Problems) -> dict[str, Any]:
+    """Mechanism fields ``masses``, ``gravity``, ``loads`` (all optional) from the file."""
+    masses = _load_masses(data, m, probs)
+    gravity = None
+    if "gravity" in data:
+        gravity = _real_pair(data["gravity"], "gravity", "gravity", probs)
+    loads = _load_loads(data.get("loads"), m, base, probs)
+    if (masses or loads or gravity) and m.units.strip().lower() not in LENGTH_UNITS:
+        probs.add(
+            "units",
+            f"forces need a length unit vloop knows ({', '.join(LENGTH_UNITS)}), got {m.units!r}",
+        )
+    return {"masses": masses, "gravity": gravity, "loads": tuple(loads)}
+
+
+def _load_masses(data: dict, m: Mechanism, probs: _Problems) -> dict[str, MassProperties]:
+    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks."""
+    out: dict[str, MassProperties] = {}
+    tables = [("links", n, v) for n, v in (data.get("links") or {}).items()]
+    tables += [("sliders", n, v) for n, v in (data.get("sliders") or {}).items()]
+    for section, name, val in tables:
+        if not isinstance(val, dict) or not _MASS_KEYS & set(val):
+            continue
+        entry = f"{section}.{name}"
+        if section == "links" and m.links[name].ground:
+            probs.add(entry, "the ground does not move: it takes no mass, inertia or com")
+            continue
+        mass = _real(val.get("mass", 0.0), "mass", entry, probs)
+        inertia = _real(val.get("inertia", 0.0), "inertia", entry, probs)
+        joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
+        mean = (
+            sum(m.joints[j][0] for j in joints) / len(joints),
+            sum(m.joints[j][1] for j in joints) / len(joints),
+        )
+        com = _real_pair(val["com"], "com", entry, probs) if "com" in val else mean
+        for what, x in (("mass", mass), ("inertia", inertia)):
+            if x is not None and x < 0:
+                probs.add(entry, f"'{what}' must not be negative, got {x:g}")
+        if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
+            out[name] = MassProperties(mass, inertia, com)
+    return out
+
+
+def _load_loads(raw: Any, m: Mechanism, base: Path, probs: _Problems) -> list[Load]:
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        probs.add("loads", "must be an array of tables [[loads]]")
+        return []
+    out = []
+    for i, d in enumerate(raw):
+        entry = f"loads[{i}]"
+        if not isinstance(d, dict):
+            probs.add(entry, "must be a table")
+            continue
+        _check_keys(d, {"point", "link", "force", "torque", "profile"}, entry, probs)
+        load = _load_one(d, m, entry, base, probs)
+        if load is not None:
+            out.append(load)
+    return out
+
+
+def _load_body(d: dict, m: Mechanism, entry: str, probs: _Problems) -> tuple[str | None, str | None]:
+    """(point, body) of a load: the body defaults to the point's link, or the slider block at a joint."""
+    point, body = d.get("point"), d.get("link")
+    moving = set(m.body_names[1:])
+    if point is not None and (not isinstance(point, str) or (point not in m.joints and point not in m.points)):
+        probs.add(entry, f"unknown point {point!r} (a joint or a tracer point)")
+        return None, None
+    if body is not None and (not isinstance(body, str) or body not in m.body_names):
+        probs.add(entry, f"unknown link {body!r}")
+        return None, None
+    if body is not None and body not in moving:
+        probs.add(entry, f"'{body}' is the ground: a load on it moves nothing")
+        return None, None
+    if point is None:
+        return None, body
+    carriers = (m.points[point].link,) if point in m.points else m.bodies_at(point)
+    if body is None:
+        blocks = [s.name for s in m.sliders.values() if s.joint == point]
+        body = blocks[0] if blocks else next((b for b in carriers if b in moving), None)
+        if body is None:
+            probs.add(entry, f"'{point}' is on the ground only: a load there moves nothing")
+    elif body not in carriers:
+        probs.add(entry, f"'{point}' is not on '{body}' (it is on {', '.join(carriers)})")
+        body = None
+    return point, body
+
+
+def _load_one(d: dict, m: Mechanism, entry: str, base: Path, probs: _Problems) -> Load | None:
+    point, body = _load_body(d, m, entry, probs)
+    given = [k for k in ("force", "torque", "profile") if k in d]
+    if "profile" in d and len(given) > 1:
+        probs.add(entry, f"'{given[0]}' and 'profile' both given: the profile sets the load")
+        return None
+    if len(given) != 1:
+        probs.add(entry, "give one of force = [fx, fy] (with point), torque = T (with link) or a profile")
+        return None
+    kind = "force" if point is not None else "torque"
+    if ("force" in d and point is None) or ("torque" in d and point is not None):
+        probs.add(entry, "a force needs a point (and optionally a link); a torque needs a link and no point")
+        return None
+    if kind == "torque" and body is None and "link" not in d:
+        probs.add(entry, "a torque load needs the link it acts on")
+    if body is None:
+        return None
+    if "profile" in d:
+        spec = d["profile"]
+        if isinstance(spec, dict) and not all(
+            isinstance(v, list) and all(_real(x, "profile", entry, _Problems("")) is not None for x in v)
+            for v in spec.values()
+        ):
+            probs.add(entry, "profile columns must be lists of finite numbers")
+            return None
+        cols = ("t", "fx", "fy", "") if kind == "force" else ("t", "torque", "", "")
+        prof = _read_profile(d["profile"], cols, entry, base, probs)
+        if prof is None:
+            return None
+        if kind == "force" and prof.v is None:
+            probs.add(entry, "a force profile needs columns 't', 'fx' and 'fy'")
+            return None
+        columns = ("fx", "fy") if kind == "force" else ("torque",)
+        values = np.column_stack([prof.x, prof.v] if kind == "force" else [prof.x])
+        return Load(kind, body, None, point, LoadProfile(prof.t, values, columns, prof.source), entry)
+    if kind == "force":
+        value: Any = _real_pair(d["force"], "force", entry, probs)
+    else:
+        value = _real(d["torque"], "torque", entry, probs)
+    return None if value is None else Load(kind, body, value, point, None, entry)
+
+
 # ---------------------------------------------------------------- saving
 
 
@@ -839,7 +1063,32 @@ def to_dict(mech: Mechanism) -> dict[str, Any]:
         for key in ("branches", "change_points"):
             if key in out["solver"]:
                 out["solver"][key] = {str(k): v for k, v in out["solver"][key].items()}
+    _dynamics_to_dict(mech, out)
     return out
+
+
+def _dynamics_to_dict(mech: Mechanism, out: dict[str, Any]) -> None:
+    """Add masses (on their link/slider tables), gravity and loads to a to_dict structure."""
+    for name, mp in mech.masses.items():
+        table = out["links"][name] if name in mech.links else out["sliders"][name]
+        table.update(mass=mp.mass, inertia=mp.inertia, com=list(mp.com))
+    if mech.gravity is not None:
+        out["gravity"] = list(mech.gravity)
+    loads = []
+    for ld in mech.loads:
+        entry: dict[str, Any] = {"link": ld.body}
+        if ld.point is not None:
+            entry["point"] = ld.point
+        if ld.profile is not None:
+            p = ld.profile
+            entry["profile"] = {"t": p.t.tolist(), **{c: p.values[:, i].tolist() for i, c in enumerate(p.columns)}}
+        elif ld.kind == "force":
+            entry["force"] = list(ld.value)  # type: ignore[arg-type]
+        else:
+            entry["torque"] = ld.value
+        loads.append(entry)
+    if loads:
+        out["loads"] = loads
 
 
 def dumps(mech: Mechanism) -> str:
