@@ -13,7 +13,7 @@ import numpy as np
 from .drivers import evaluate_all
 from .errors import MechanismError
 from .loops import LoopSystem, loop_jacobian, loop_residual, term_values
-from .mechanism import mobility_message
+from .model import mobility_message
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size

@@ -1,7 +1,8 @@
-"""Command line: ``vloop run|loops|info FILE``.
+"""Command line: ``vloop run | view | loops | info | validate``. One function per command.
 
-Exit codes: 0 success; 2 bad input or a motion that cannot be completed (one line
-on stderr, no traceback; ``run`` still writes every row solved before the failure).
+Exit codes: 0 success; 1 a validation that fails its tolerances; 2 bad input, an output that cannot be
+written, or a motion that cannot be completed (one line on stderr, no traceback; ``run`` still writes
+every row solved before the failure); 130 interrupted (Ctrl-C: nothing half-written is left behind).
 """
 
 from __future__ import annotations
@@ -26,60 +27,105 @@ def _fail(msg: str) -> int:
     return 2
 
 
+# ---------------------------------------------------------------- shared option handling
+
+
+def _load(args: argparse.Namespace) -> Any:
+    """The mechanism file named on the command line (profiles outside its folder only if allowed)."""
+    from .fileformat import load
+
+    return load(args.file, allow_external_profiles=getattr(args, "allow_external_profiles", False))
+
+
+def _out_folder(args: argparse.Namespace, mech: Any) -> Path:
+    """--out, else out/<safe name> (a name can never lead outside out/)."""
+    from .output import default_folder
+
+    return Path(args.out) if args.out else default_folder(mech.name)
+
+
+def _add_file(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", help="mechanism file (TOML)")
+    p.add_argument(
+        "--allow-external-profiles",
+        action="store_true",
+        help="read tabulated profiles outside the mechanism file's folder (refused by default)",
+    )
+
+
+# ---------------------------------------------------------------- run
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    """Solve the file's motion; write results.csv, health.csv and what the options ask, as one set."""
     from .compiler import compile_system
-    from .forces import has_forces, write_forces
-    from .mechanism import load
+    from .output import OutputSet
     from .solver import solve
 
-    mech = load(args.file)
+    mech = _load(args)
     outputs = _teaching_outputs(args, mech)
-    out = Path(args.out) if args.out else Path("out") / mech.name
     if args.sweep:
-        from .sweep import rocking
-
-        mech = rocking(mech)
-        lo, hi = mech.options.get("sweep", (None, None))
-        if lo is not None:
-            d = mech.drivers[0]
-            print(f"{mech.name}: {d.symbol} rocks between its limits {lo:.10g} and {hi:.10g}")
+        mech = _rocking(mech)
     system = compile_system(mech, args.method)
+    out = _out_folder(args, mech)
+    error: VloopError | None = None
     try:
         result = solve(system)
-    except VloopError as exc:
-        partial = exc.partial
-        if partial is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            partial.to_csv(out / "results.csv")
-            partial.to_csv(out / "health.csv", health=True)
-            if args.plot:
-                from .plots import plot_result
+    except MotionError as exc:
+        if exc.partial is None:
+            raise
+        result, error = exc.partial, exc
+    with OutputSet(out) as files:
+        _write_run(files.stage, args, mech, result, outputs, error)
+    if error is not None:
+        return _fail(f"{error} (wrote {len(result)} rows to {out / 'results.csv'})")
+    _print_summary(system, result)
+    print("wrote " + ", ".join(str(f) for f in files.published))
+    return 0
 
-                plot_result(mech, partial, out)
-            try:
-                _teaching_files(args, mech, partial, out, outputs)
-            except VloopError as extra:
-                print(f"vloop: no extras for the partial run: {extra}", file=sys.stderr)
-            page = ""
-            if args.html and len(partial):
-                page = f" and the viewer page {_view_page(mech, partial, out, str(exc))}"
-            if has_forces(mech):
-                write_forces(mech, partial, out, plot=args.plot)
-            return _fail(f"{exc} (wrote {len(partial)} rows to {out / 'results.csv'}{page})")
-        raise
-    out.mkdir(parents=True, exist_ok=True)
-    result.to_csv(out / "results.csv")
-    result.to_csv(out / "health.csv", health=True)
-    files = [out / "results.csv", out / "health.csv"]
-    if args.plot:
+
+def _rocking(mech: Any) -> Any:
+    from .sweep import rocking
+
+    mech = rocking(mech)
+    lo, hi = mech.options.get("sweep", (None, None))
+    if lo is not None:
+        print(f"{mech.name}: {mech.drivers[0].symbol} rocks between its limits {lo:.10g} and {hi:.10g}")
+    return mech
+
+
+def _write_run(stage: Path, args: argparse.Namespace, mech: Any, result: Result, outputs: Any, error: Any) -> None:
+    """Every file of one run, into the staging folder (published together by OutputSet)."""
+    result.to_csv(stage / "results.csv")
+    result.to_csv(stage / "health.csv", health=True)
+    if args.plot and len(result):
         from .plots import plot_result
 
-        files += plot_result(mech, result, out)
-    files += _teaching_files(args, mech, result, out, outputs)
-    if has_forces(mech):  # masses or loads: the kinetostatics too
-        files += write_forces(mech, result, out, plot=args.plot)
+        plot_result(mech, result, stage)
+    if len(result):
+        try:
+            _teaching_files(args, mech, result, stage, outputs)
+        except VloopError as extra:
+            if error is None:
+                raise
+            print(f"vloop: no extras for the partial run: {extra}", file=sys.stderr)
+    forces = _forces(mech, result, stage, args.plot)
     if args.html:
-        files.append(_view_page(mech, result, out))
+        _view_page(mech, result, stage, str(error) if error else None, forces)
+
+
+def _forces(mech: Any, result: Result, stage: Path, plot: bool) -> Any:
+    """forces.csv (and forces.png) when the file has masses or loads; returns the ForceResult (or None)."""
+    from .forces import has_forces, solve_forces, write_forces
+
+    if not has_forces(mech) or not len(result):
+        return None
+    write_forces(mech, result, stage, plot=plot)
+    return solve_forces(mech, result)
+
+
+def _print_summary(system: Any, result: Result) -> None:
+    mech = system.mechanism
     asm = system.assembly
     moved = ""
     if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
@@ -92,12 +138,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     for line in health_notes(result):
         print(line)
-    print("wrote " + ", ".join(str(f) for f in files))
-    return 0
 
 
 def health_notes(result: Result, redundancy: bool = True) -> list[str]:
-    """Lines that say what health.csv flags: change points passed, ill-conditioned samples kept."""
+    """Lines that say what health.csv flags: redundancy, change points passed, ill-conditioned samples kept."""
     lines = []
     if redundancy and "redundancy" in result.meta:
         lines.append("  " + result.meta["redundancy"])
@@ -133,24 +177,29 @@ def _teaching_files(args: argparse.Namespace, mech, result, out: Path, outputs: 
     return run_files(mech, result, out, extras=args.extras or outputs is not None, plot=args.plot, outputs=outputs)
 
 
-def _view_page(mech: Any, result: Any, out: Path, error: str | None = None) -> Path:
-    """The viewer page of a run, ``out/<safe name>.html`` (``vloop view``, ``vloop run --html``)."""
+def _view_page(mech: Any, result: Any, folder: Path, error: str | None = None, forces: Any = None) -> Path:
+    """The viewer page of a run, ``folder/<safe name>.html`` (``vloop view``, ``vloop run --html``)."""
     from .output import safe_folder_name
     from .view import write_view
 
-    return write_view(mech, result, out / f"{safe_folder_name(mech.name)}.html", error=error)
+    return write_view(mech, result, folder / f"{safe_folder_name(mech.name)}.html", error=error, forces=forces)
+
+
+# ---------------------------------------------------------------- view, loops, info
 
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped)."""
-    from .mechanism import load
-    from .output import default_folder
+    from .output import OutputSet
     from .view import solve_for_view
 
-    mech = load(args.file)
+    mech = _load(args)
     result, error = solve_for_view(mech)
-    out = Path(args.out) if args.out else default_folder(mech.name)
-    page = _view_page(mech, result, out, error)
+    out = _out_folder(args, mech)
+    with OutputSet(out) as files:
+        forces = _forces_quiet(mech, result)
+        _view_page(mech, result, files.stage, error, forces)
+    (page,) = files.published
     print(f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
     if args.open:
         import webbrowser
@@ -161,104 +210,130 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _forces_quiet(mech: Any, result: Result) -> Any:
+    from .forces import has_forces, solve_forces
+
+    return solve_forces(mech, result) if has_forces(mech) and len(result) else None
+
+
 def cmd_loops(args: argparse.Namespace) -> int:
+    """Print the loop equations as the paper writes them (or LaTeX)."""
     from .compiler import compile_system
     from .equations import describe
-    from .mechanism import load
 
-    print(describe(compile_system(load(args.file)), latex=args.latex))
+    print(describe(compile_system(_load(args)), latex=args.latex))
     return 0
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    """Links, joints, sliders, points, drivers; mobility and redundancy; loops, blocks, branches; the motion."""
     from .compiler import compile_system
-    from .equations import grashof
-    from .loops import loop_jacobian
-    from .mechanism import load
+    from .teaching.report import info_lines
 
-    mech = load(args.file)
+    mech = _load(args)
     system = compile_system(mech)
+    for part in (_info_parts(mech), _info_mobility(system), _info_loops(system), _info_motion(system)):
+        print("\n".join(part))
+    print("\n".join(info_lines(mech)))
+    return 0
+
+
+def _info_parts(mech: Any) -> list[str]:
     bodies = mech.bodies()
-    L, J, M = mech.gruebler()
-    print(f"{mech.name}: {mech.title}" if mech.title else mech.name)
-    print(f"  source: {mech.source}   units: {mech.units}")
-    print(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
+    kinds = {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}
+    lines = [
+        f"{mech.name}: {mech.title}" if mech.title else mech.name,
+        f"  source: {mech.source}   units: {mech.units}",
+    ]
+    lines.append(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
     for name, lk in mech.links.items():
-        b = bodies[name]
-        kind = (
-            "ground"
-            if lk.ground
-            else {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}.get(len(lk.joints), f"{len(lk.joints)}-joint")
-        )
-        extra = ""
-        if len(lk.joints) == 2 and not lk.ground:
-            extra = f", length {b.local[lk.joints[1]][0]:.6g}"
-        print(f"  {name:12s} {kind:10s} joints {', '.join(lk.joints)}{extra}")
-    print(f"\njoints ({len(mech.joints)}):")
+        kind = "ground" if lk.ground else kinds.get(len(lk.joints), f"{len(lk.joints)}-joint")
+        extra = f", length {bodies[name].local[lk.joints[1]][0]:.6g}" if len(lk.joints) == 2 and not lk.ground else ""
+        lines.append(f"  {name:12s} {kind:10s} joints {', '.join(lk.joints)}{extra}")
+    lines.append(f"\njoints ({len(mech.joints)}):")
     for j, (x, y) in mech.joints.items():
-        at = mech.bodies_at(j)
-        order = mech.pin_order(j)
+        at, order = mech.bodies_at(j), mech.pin_order(j)
         what = f"pin of order {order} ({', '.join(at)})" if order else f"point of {at[0]}"
-        print(f"  {j:8s} ({x:.6g}, {y:.6g})  {what}")
+        lines.append(f"  {j:8s} ({x:.6g}, {y:.6g})  {what}")
     if mech.sliders:
-        print(f"\nsliders ({len(mech.sliders)}):")
+        lines.append(f"\nsliders ({len(mech.sliders)}):")
         for s in mech.sliders.values():
             inv = " (inverse slider)" if not mech.links[s.guide].ground else ""
-            print(f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g})")
+            lines.append(f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g})")
     if mech.points:
-        print(f"\npoints ({len(mech.points)}):")
-        for p in mech.points.values():
-            print(f"  {p.name:8s} on {p.link} at ({p.at[0]:.6g}, {p.at[1]:.6g})")
-    print("\ndrivers:")
+        lines.append(f"\npoints ({len(mech.points)}):")
+        lines += [f"  {p.name:8s} on {p.link} at ({p.at[0]:.6g}, {p.at[1]:.6g})" for p in mech.points.values()]
+    lines.append("\ndrivers:")
     for d in mech.drivers:
         if d.profile is not None:
-            print(f"  {d.symbol}: profile {d.profile.source} ({len(d.profile.t)} rows)")
+            lines.append(f"  {d.symbol}: profile {d.profile.source} ({len(d.profile.t)} rows)")
         else:
             unit = "rad" if d.kind == "crank" else mech.units
-            print(f"  {d.symbol}(t) = {d.x0:.6g} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}]")
+            lines.append(f"  {d.symbol}(t) = {d.x0:.6g} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}]")
+    return lines
+
+
+def _info_mobility(system: Any) -> list[str]:
+    from .assembly import redundancy_text
+    from .loops import loop_jacobian
+
+    mech = system.mechanism
+    L, J, M = mech.gruebler()
     unk = list(system.unknowns)
-    rank = (
-        int(np.linalg.matrix_rank(loop_jacobian(system, system.q0, list(range(len(system.loops))), unk))) if unk else 0
-    )
+    rows = list(range(len(system.loops)))
+    rank = int(np.linalg.matrix_rank(loop_jacobian(system, system.q0, rows, unk))) if unk else 0
     full = "full rank: the drivers fix the motion" if rank == len(unk) else "rank deficient"
-    print(
+    lines = [
         f"\nmobility: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, drivers: {len(mech.drivers)}; "
         f"loop Jacobian at t = 0: rank {rank} of {len(unk)} unknowns ({full})"
-    )
+    ]
     if "redundancy" in system.assembly:
-        from .assembly import redundancy_text
+        lines.append(redundancy_text(system.assembly["redundancy"], system))
+    return lines
 
-        print(redundancy_text(system.assembly["redundancy"], system))
-    print(f"loops: {len(system.loops)} (J - L + 1 = {J - L + 1})")
-    for lp in system.loops:
-        print(f"  loop {lp.index + 1}: {lp.label}")
-    print("solving order: " + " -> ".join(f"{[i + 1 for i in b.loops]} {b.kind}" for b in system.blocks))
+
+def _info_loops(system: Any) -> list[str]:
+    from .equations import grashof
     from .loops import branch_name
 
+    mech = system.mechanism
+    L, J, _ = mech.gruebler()
+    lines = [f"loops: {len(system.loops)} (J - L + 1 = {J - L + 1})"]
+    lines += [f"  loop {lp.index + 1}: {lp.label}" for lp in system.loops]
+    lines.append("solving order: " + " -> ".join(f"{[i + 1 for i in b.loops]} {b.kind}" for b in system.blocks))
     for b in system.blocks:
         if b.kind in ("RRR", "RRP", "RPR"):
             lp = system.loops[b.loops[0]]
             name = branch_name(system, system.q0, lp)
-            named = f" ({name})" if name else ""
-            print(f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}{named}")
+            lines.append(
+                f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}{f' ({name})' if name else ''}"
+            )
     for li, cls, (g, p1, c, p2) in grashof(system):
-        print(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
-    n = len(mech.times)
-    print(f"time: {n} samples, t = {mech.times[0]:g}..{mech.times[-1]:g} s")
-    if n <= INFO_SOLVE_LIMIT:  # change points and kept ill-conditioned samples show only along the motion
-        from .solver import solve
+        lines.append(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
+    return lines
 
+
+def _info_motion(system: Any) -> list[str]:
+    """The time grid; change points and kept ill-conditioned samples (they show only along the motion)."""
+    from .solver import solve
+
+    mech = system.mechanism
+    n = len(mech.times)
+    lines = [f"time: {n} samples, t = {mech.times[0]:g}..{mech.times[-1]:g} s"]
+    if n <= INFO_SOLVE_LIMIT:
         try:
             notes = health_notes(solve(system), redundancy=False)
         except MotionError as exc:
             notes = [*health_notes(exc.partial, redundancy=False), f"  the motion stops: {exc}"]
-        print("\n".join(["motion:", *notes]) if notes else "motion: no change point, no ill-conditioned sample")
+        lines += ["motion:", *notes] if notes else ["motion: no change point, no ill-conditioned sample"]
     if system.assembly.get("moved", 0) > 1e-12 * mech.scale:
-        print(f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops")
-    from .teaching.report import info_lines
+        lines.append(
+            f"t = 0 assembly: joints moved by up to {system.assembly['moved']:.3g} {mech.units} to close the loops"
+        )
+    return lines
 
-    print("\n".join(info_lines(mech)))
-    return 0
+
+# ---------------------------------------------------------------- validate
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -352,7 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"vloop {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="solve P/V/A over the file's time span and write results.csv (and plots)")
-    r.add_argument("file")
+    _add_file(r)
     r.add_argument("--out", help="output folder (default: out/NAME)")
     r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png (and forces.png)")
     r.add_argument(
@@ -377,12 +452,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--html", action="store_true", help="also write the interactive viewer page NAME.html")
     r.set_defaults(func=cmd_run)
     vw = sub.add_parser("view", help="write one offline HTML page that animates the mechanism (loops, arrows, plots)")
-    vw.add_argument("file")
+    _add_file(vw)
     vw.add_argument("--out", help="output folder (default: out/NAME); the page is NAME.html")
     vw.add_argument("--open", action="store_true", help="open the page in the default web browser")
     vw.set_defaults(func=cmd_view)
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
-    lo.add_argument("file")
+    _add_file(lo)
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
     lo.set_defaults(func=cmd_loops)
     v = sub.add_parser("validate", help="run every engine on mechanisms, compare, write summary.json and a report")
@@ -400,12 +475,13 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--animate", action="store_true", help="add an animated GIF per mechanism to the report")
     v.set_defaults(func=cmd_validate)
     i = sub.add_parser("info", help="links, joints, pin orders, mobility, loops, Grashof class")
-    i.add_argument("file")
+    _add_file(i)
     i.set_defaults(func=cmd_info)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; every failure a user can cause ends in one line on stderr and its exit code."""
     args = build_parser().parse_args(argv)
     try:
         with np.errstate(all="ignore"):
@@ -413,10 +489,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except VloopError as exc:
         return _fail(str(exc))
     except KeyboardInterrupt:
-        return _fail("interrupted")
+        print("vloop: interrupted (nothing half-written was left behind)", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # the reader went away (vloop ... | head): nothing left to say
         sys.stderr.close()
         return 0
+    except MemoryError:
+        return _fail("out of memory: use a larger step or a shorter run (or the streamed output of vloop run)")
+    except OSError as exc:  # an output or input the operating system refused, outside vloop's own checks
+        from .output import describe_os_error
+
+        where = exc.filename if exc.filename is not None else "a file"
+        return _fail(f"{where}: {describe_os_error(exc)}")
 
 
 if __name__ == "__main__":

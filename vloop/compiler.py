@@ -17,7 +17,7 @@ from .assembly import assemble, moved
 from .errors import MechanismError
 from .graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
 from .loops import Block, LoopSystem, branch_name
-from .mechanism import Mechanism
+from .model import Mechanism
 from .solver import assemble_blocks
 from .structure import analyse, block_structure
 

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from .errors import VloopError
-from .mechanism import Load, Mechanism, length_factor
+from .model import Load, Mechanism, length_factor
 from .result import Result
 
 SHAKING = "shaking"

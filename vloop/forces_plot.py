@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .forces import ForceResult
-from .mechanism import Mechanism
+from .model import Mechanism
 from .output import atomic_write
 
 TOP_PINS = 6  # reaction magnitudes drawn (the largest)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .mechanism import Mechanism
+from .model import Mechanism
 from .result import Result
 
 _EQUATION = re.compile(r"^loop (\d+) \((.*)\):  (.*) = 0$")

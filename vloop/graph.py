@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 
-from .mechanism import Body, Mechanism
+from .model import Body, Mechanism
 
 ORIGIN = "@O"  # the world origin node on the ground
 EXACT_BASIS_MAX_LOOPS = 12  # up to this many loops the exact minimum cycle basis (networkx) is cheap

@@ -15,7 +15,7 @@ import networkx as nx
 import numpy as np
 
 from .graph import ORIGIN, Loop
-from .mechanism import Mechanism
+from .model import Mechanism
 
 __all__ = [
     "ORIGIN",

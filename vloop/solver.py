@@ -31,7 +31,7 @@ from .assembly import redundancy_text
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
 from .loops import Block, LoopSystem
-from .mechanism import Mechanism
+from .model import Mechanism
 from .result import Result
 
 EPS = float(np.finfo(float).eps)

@@ -17,7 +17,7 @@ import numpy as np
 
 from .compiler import compile_system
 from .errors import MechanismError, MotionError
-from .mechanism import Driver, Mechanism, Profile
+from .model import Driver, Mechanism, Profile
 from .result import Result
 from .solver import solve
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from .errors import MotionError, VloopError
 from .geometry import equation_legend, loop_chains
-from .mechanism import Mechanism
+from .model import Mechanism
 from .result import Result
 
 ASSETS = Path(__file__).resolve().parent / "viewer"

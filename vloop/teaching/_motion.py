@@ -15,7 +15,7 @@ import numpy as np
 
 from ..drivers import evaluate, evaluate_all
 from ..errors import MechanismError
-from ..mechanism import Mechanism, Profile
+from ..model import Mechanism, Profile
 from ..result import Result
 
 

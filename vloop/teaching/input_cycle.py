@@ -31,7 +31,7 @@ import numpy as np
 
 from ..drivers import evaluate
 from ..errors import MechanismError, MotionError
-from ..mechanism import Mechanism
+from ..model import Mechanism
 from ..result import Result
 from . import _motion
 from .ratios import default_outputs, output_rate_column

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MechanismError
-from ..mechanism import Mechanism
+from ..model import Mechanism
 from ..result import Result
 from . import _motion
 

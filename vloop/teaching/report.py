@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import VloopError
-from ..mechanism import Mechanism
+from ..model import Mechanism
 from ..result import Result
 from .centres import instant_centres, kennedy_centres
 from .ratios import default_outputs, mechanical_advantage, velocity_ratio

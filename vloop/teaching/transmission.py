@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..mechanism import Mechanism
+from ..model import Mechanism
 from ..result import Result
 from . import _motion
 
