@@ -115,13 +115,21 @@ def _write_run(stage: Path, args: argparse.Namespace, mech: Any, result: Result,
 
 
 def _forces(mech: Any, result: Result, stage: Path, plot: bool) -> Any:
-    """forces.csv (and forces.png) when the file has masses or loads; returns the ForceResult (or None)."""
-    from .forces import has_forces, solve_forces, write_forces
+    """forces.csv (and forces.png) when the file has masses or loads; returns the ForceResult (or None).
+    Reactions a redundant linkage leaves undetermined get no column, and a line on stderr says which."""
+    from .forces import has_forces, solve_forces
 
     if not has_forces(mech) or not len(result):
         return None
-    write_forces(mech, result, stage, plot=plot)
-    return solve_forces(mech, result)
+    forces = solve_forces(mech, result)
+    forces.to_csv(stage / "forces.csv")
+    if plot:
+        from .forces_plot import plot_forces
+
+        plot_forces(mech, forces, stage)
+    if forces.message:
+        print(f"vloop: {forces.message}: {', '.join(forces.indeterminate)} (no number in forces.csv)", file=sys.stderr)
+    return forces
 
 
 def _print_summary(system: Any, result: Result) -> None:

@@ -792,20 +792,3 @@ def _shaking(model: ForceModel, kin: dict[str, Any], x: np.ndarray) -> dict[str,
         fy += gy
         mz += px * gy - py * gx
     return {f"{SHAKING}.fx": fx, f"{SHAKING}.fy": fy, f"{SHAKING}.moment": mz}
-
-
-def write_forces(mech_or_system: Any, result: Result, folder: str | Path, *, plot: bool = False) -> list[Path]:
-    """``vloop run``'s force output: forces.csv (and forces.png with ``plot``) in ``folder``, written
-    atomically; prints the statically indeterminate reactions, if any, on stderr."""
-    import sys
-
-    mech = mech_or_system if isinstance(mech_or_system, Mechanism) else mech_or_system.mechanism
-    forces = solve_forces(mech, result)
-    files = [forces.to_csv(Path(folder) / "forces.csv")]
-    if plot:
-        from .forces_plot import plot_forces
-
-        files += plot_forces(mech, forces, folder)
-    if forces.message:
-        print(f"vloop: {forces.message}: {', '.join(forces.indeterminate)} (no number in forces.csv)", file=sys.stderr)
-    return files

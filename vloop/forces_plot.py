@@ -6,12 +6,15 @@ over the run)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .forces import ForceResult
 from .model import Mechanism
 from .output import atomic_write
+
+if TYPE_CHECKING:  # the plot reads a ForceResult; vloop.forces imports this module lazily
+    from .forces import ForceResult
 
 TOP_PINS = 6  # reaction magnitudes drawn (the largest)
 

@@ -57,16 +57,17 @@ def solve_for_view(mech: Mechanism) -> tuple[Result, str | None]:
 
     Where a motion stops before its first sample, the page shows the t = 0 assembly instead.
     """
-    import vloop
+    from .compiler import compile_system
+    from .solver import solve
 
     _check_samples(mech.name, len(mech.times))  # before solving, not after
-    system = vloop.compile(mech)
+    system = compile_system(mech)
     try:
-        return vloop.solve(system), None
+        return solve(system), None
     except MotionError as exc:
         partial = exc.partial
         if partial is None or not len(partial):
-            partial = vloop.solve(system, times=np.zeros(1))
+            partial = solve(system, times=np.zeros(1))
             return partial, f"{exc} (no requested sample could be solved: shown at the t = 0 assembly)"
         return partial, str(exc)
 
@@ -81,12 +82,12 @@ def build_payload(
 
     Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m.
     """
-    import vloop
+    from .compiler import compile_system
 
     if not len(result):
         raise ViewError(f"{mech.name}: the result has no sample to show")
     _check_samples(mech.name, len(result))
-    system = system if system is not None else vloop.compile(mech)
+    system = system if system is not None else compile_system(mech)
     names, matrix = _columns(mech, result, forces)
     chains = loop_chains(system, result)
     bodies = mech.bodies()
