@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import io
+import itertools
 import math
 import tempfile
 from collections.abc import Iterable, Sequence
@@ -36,10 +37,12 @@ from vloop.result import Result
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velocity", "acceleration")
+GROUPS += ("force", "moment")  # kinetostatics, for mechanisms with masses (validators/forces_engines.py)
 MAX_FRAMES = 40  # animated GIF frames per mechanism
 LINKS_PER_FIGURE = 6  # more rotating links than this are spread over several history figures
 WORST_SHOWN = 4  # quantities per engine in the error-vs-time plots
 DPI = 96
+VIEWER_FOLDER = "viewer"  # one interactive page per mechanism, next to report.html
 GIF_DPI = 72
 
 # Each engine keeps one look in every plot, so curves that lie on top of each other stay visible.
@@ -138,37 +141,23 @@ def _geometry(mech: Mechanism, system: Any) -> _Geometry:
     pos = {n: complex(*xy) for n, xy in mech.joints.items()} | {p.name: complex(*p.at) for p in mech.points.values()}
     if system is None:
         return _Geometry(pos, theta, {}, note="loops not available: the mechanism did not compile")
-    from vloop.loops import ORIGIN, term_values
+    import vloop
+    from vloop.geometry import loop_chains
 
-    z = term_values(system, system.q0)
-    pos = dict(zip(system.point_names, (z @ system.path).tolist(), strict=True))
-    na = system.n_angles
-    s0 = {n: float(system.q0[na + i]) for i, n in enumerate(system.slider_names)}
+    try:
+        at0 = vloop.solve(system, times=np.zeros(1))  # the t = 0 assembly, through the public API
+    except vloop.VloopError as exc:
+        return _Geometry(pos, theta, {}, note=f"loops not available: {exc}")
+    pos = {p: complex(at0[f"{p}.x"][0], at0[f"{p}.y"][0]) for p in mech.tracked_points}
+    s0 = {n: float(at0[f"{n}.s"][0]) for n in mech.sliders}
     tiny = 1e-9 * mech.scale
     loops = []
     origin_used = False
-    for lp in system.loops:
-        nodes = list(lp.nodes)
-
-        def at(node: tuple[str, str]) -> complex:
-            return 0j if node[1] == ORIGIN else pos[node[1]]
-
-        p = at(nodes[0])
-        segs: list[tuple[complex, complex]] = []
-        for u, v in zip(nodes, nodes[1:] + nodes[:1], strict=True):
-            origin_used |= ORIGIN in (u[1], v[1])
-            try:  # the edge's own vectors (a slider edge is its s vector plus its offset)
-                data = system.graph.edges[u, v]
-                vecs = [s * z[t] for t, s in data["terms"]]
-                if data["start"] != u:
-                    vecs = [-w for w in reversed(vecs)]
-            except (KeyError, TypeError):
-                vecs = [at(v) - at(u)]
-            for w in vecs:
-                if abs(w) > tiny:
-                    segs.append((p, p + w))
-                    p += w
-        loops.append((f"loop {lp.index + 1} ({lp.label})", segs))
+    for chain in loop_chains(system, at0):  # each loop's vectors head to tail, as the paper draws them
+        z = chain.vertices[0]
+        segs = [(complex(a), complex(b)) for a, b in itertools.pairwise(z) if abs(b - a) > tiny]
+        origin_used |= chain.start is None
+        loops.append((f"loop {chain.number} ({chain.label})", segs))
     return _Geometry(pos, theta, s0, loops, origin_used)
 
 
@@ -466,6 +455,30 @@ def _histories(mech: Mechanism, runs: list[EngineRun]) -> list[Image]:
             )
         )
     return out
+
+
+def _force_histories(mech: Mechanism, runs: list[EngineRun]) -> list[Image]:
+    """Driver torques/forces and the pin reactions' magnitudes, every engine overlaid (mechanisms with masses)."""
+    runs = [r for r in runs if r.result is not None and len(r.result)]
+    drivers = [c for c in (runs[0].result.columns if runs else {}) if c.endswith((".torque", ".force"))]
+    if not drivers:
+        return []
+    pins = [c for c in runs[0].result.columns if c.endswith(".mag")]
+    pins = sorted(pins, key=lambda c: -float(np.max(np.abs(runs[0].result[c]))))[:LINKS_PER_FIGURE]
+    fig = _new_figure(8.8, 6.0)
+    axes = fig.subplots(2, 1, sharex=True)
+    for ax, names, label in ((axes[0], drivers, "driver [N·m or N]"), (axes[1], pins, "pin force |F| [N]")):
+        for ei, r in enumerate(runs):
+            st = _style(r.engine, ei, len(r.result), len(runs))
+            for ni, n in enumerate(names):
+                if n in r.result:
+                    ax.plot(r.result.t, r.result[n], color=_COLORS[ni % len(_COLORS)], **st)
+        ax.set_ylabel(label)
+        ent = [Line2D([], [], color=_COLORS[i % len(_COLORS)], lw=2.5, label=n) for i, n in enumerate(names)]
+        ax.legend(handles=ent, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=8)
+    axes[-1].set_xlabel("t [s]")
+    axes[0].set_title("Forces: driver torque and pin reactions (every engine overlaid)")
+    return [_png(fig, f"{mech.name}: driver torque and pin reaction magnitudes")]
 
 
 # ------------------------------------------------------------------ errors
@@ -780,7 +793,7 @@ def _mechanism_section(
         drawing_note=geo.note,
         equations=equations,
         equations_error=equations_error,
-        histories=_histories(mech, runs),
+        histories=_histories(mech, runs) + _force_histories(mech, runs),
         errors=_error_figure(item),
         group_rows=_group_rows(item),
         runs=[
@@ -795,8 +808,30 @@ def _mechanism_section(
             for r in runs
         ],
         animation=_animation(mech, geo, runs) if animate else None,
+        viewer=f"{VIEWER_FOLDER}/{sec['anchor']}.html" if _viewer_source(item) else None,
     )
     return sec
+
+
+def _viewer_source(item: MechanismValidation) -> tuple[Result, str | None] | None:
+    """vloop's run of a mechanism for its viewer page (the samples before a stop, with the message), if any."""
+    run = item.runs.get("vloop")
+    if item.mechanism is None or run is None or run.result is None or not len(run.result):
+        return None
+    return run.result, (run.message or "motion stopped") if run.status == "stopped" else None
+
+
+def write_viewer_pages(validation: Validation, out_dir: Path) -> list[Path]:
+    """One interactive viewer page per mechanism vloop solved, ``out_dir/viewer/<anchor>.html``."""
+    from vloop.view import write_view
+
+    pages = []
+    for index, item in enumerate(validation.items):
+        source = _viewer_source(item)
+        if source is not None:
+            path = Path(out_dir) / VIEWER_FOLDER / f"{_anchor(item.name, index)}.html"
+            pages.append(write_view(item.mechanism, source[0], path, error=source[1]))
+    return pages
 
 
 def render(validation: Validation, summary: dict[str, Any], *, animate: bool = False) -> str:
@@ -838,9 +873,10 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
 
 
 def write_report(validation: Validation, summary: dict[str, Any], out_dir: Path, *, animate: bool = False) -> Path:
-    """Write ``out_dir/report.html`` (self-contained) and return its path."""
+    """Write ``out_dir/report.html`` (self-contained) and the viewer pages it links; return its path."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "report.html"
     path.write_text(render(validation, summary, animate=animate), encoding="utf-8")
+    write_viewer_pages(validation, out_dir)  # linked from each mechanism's section
     return path

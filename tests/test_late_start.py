@@ -45,7 +45,8 @@ def drag_link(ground: float, crank: float, coupler: float, follower: float, th2:
 def compare_late(mech: vloop.Mechanism, t0: float, h: float, n: int = 8) -> None:
     late_times = t0 + h * np.arange(n)
     late = vloop.solve(mech, times=late_times)
-    coarse = np.arange(0.0, t0, max(h, t0 / 50)) if t0 > 0 else np.zeros(0)
+    coarse = np.unique(np.linspace(0.0, t0, 50, endpoint=False))
+    coarse = coarse[coarse < t0]
     early = vloop.solve(mech, times=np.concatenate([coarse, late_times]))
     for c in late.columns:
         a, b = late[c], early[c][-n:]

@@ -77,10 +77,25 @@ def test_report_is_self_contained(built: Built) -> None:
     sources = re.findall(r'\bsrc="([^"]*)"', text)
     assert sources and all(s.startswith(("data:image/png;base64,", "data:image/gif;base64,")) for s in sources)
     hrefs = re.findall(r'\bhref="([^"]*)"', text)
-    assert hrefs and all(h.startswith("#") for h in hrefs), "only links inside the page"
-    for h in hrefs[1:]:
+    inside = [h for h in hrefs if h.startswith("#")]
+    viewers = [h for h in hrefs if not h.startswith("#")]
+    assert inside and all(re.fullmatch(r"viewer/m\d+-[\w-]+\.html", h) for h in viewers), "links inside the page only"
+    for h in inside[1:]:
         assert f'id="{h[1:]}"' in text, f"dangling link {h}"
     assert built.path.stat().st_size < 4e6
+
+
+def test_each_solved_mechanism_links_its_viewer_page(built: Built) -> None:
+    for item in built.validation.items:
+        links = re.findall(r'href="(viewer/[^"]+)"', _section(built.text, item.name))
+        if item.error:
+            assert not links
+            continue
+        assert len(links) == 1
+        page = (built.path.parent / links[0]).read_text(encoding="utf-8")
+        assert f'"name":"{item.name}"' in page and "default-src 'none'" in page
+        stopped = item.runs["vloop"].status == "stopped"
+        assert ('"error":null' not in page) == stopped
 
 
 def test_front_page(built: Built) -> None:

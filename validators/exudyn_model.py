@@ -197,8 +197,12 @@ def _to_body(body: Body, world_xy: tuple[float, float]) -> np.ndarray:
     return rot(body.theta0).T @ d
 
 
-def build(mech: Mechanism) -> ExudynModel:
-    """Create and assemble the Exudyn system of ``mech`` (positions = file coordinates, all at rest)."""
+def build(mech: Mechanism, masses: dict[str, tuple[float, np.ndarray, float]] | None = None) -> ExudynModel:
+    """Create and assemble the Exudyn system of ``mech`` (positions = file coordinates, all at rest).
+
+    ``masses``: body → (mass, centre of mass in the body frame, inertia about it), in the file's
+    units; when given it replaces the rod-frame masses below, and a body it omits is massless.
+    """
     import exudyn as exu
     from exudyn.itemInterface import (
         CoordinateConstraint,
@@ -228,7 +232,10 @@ def build(mech: Mechanism) -> ExudynModel:
     moving: dict[str, BodyModel] = {}
     for name in mech.moving_links:
         b = bodies[name]
-        if b.kind == "block":
+        if masses is not None:
+            mass, com, inertia = masses.get(name, (0.0, np.zeros(2), 0.0))
+            com = np.asarray(com, float)
+        elif b.kind == "block":
             mass = LINEAR_DENSITY * BLOCK_SIZE * size
             com = np.zeros(2)
             inertia = mass * (BLOCK_SIZE * size) ** 2 / 6.0
@@ -277,7 +284,8 @@ def build(mech: Mechanism) -> ExudynModel:
                 MarkerBodyRigid(bodyNumber=obj_of(sl.guide), localPosition=p3(model.local_rel_com(sl.guide, on_line)))
             )
         )
-        m_block = int(mbs.AddMarker(MarkerBodyRigid(bodyNumber=moving[sl.name].obj, localPosition=[0.0, 0.0, 0.0])))
+        at_joint = p3(model.local_rel_com(sl.name, (0.0, 0.0)))  # the block frame's origin is its joint
+        m_block = int(mbs.AddMarker(MarkerBodyRigid(bodyNumber=moving[sl.name].obj, localPosition=at_joint)))
         mbs.AddObject(
             ObjectJointPrismatic2D(
                 markerNumbers=[m_guide, m_block],
@@ -306,7 +314,7 @@ def build(mech: Mechanism) -> ExudynModel:
                     MarkerBodiesRelativeTranslationCoordinate(
                         bodyNumbers=[obj_of(sl.guide), moving[sl.name].obj],
                         localPosition0=p3(model.local_rel_com(sl.guide, origin)),
-                        localPosition1=[0.0, 0.0, 0.0],
+                        localPosition1=p3(model.local_rel_com(sl.name, (0.0, 0.0))),
                         axis0=p3(axis),
                         offset=0.0,
                     )

@@ -29,6 +29,7 @@ from vloop.errors import MechanismError, MotionError, VloopError
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
+from .forces_engines import with_forces
 from .tolerances import TOLERANCES, tolerance
 
 SCHEMA = "vloop-validation-summary/1"
@@ -143,7 +144,7 @@ def run_engine(name: str, mech: Mechanism) -> EngineRun:
         return EngineRun(name, "skipped", message="no closed form for this structure")
     t0 = time.perf_counter()
     try:
-        res = _engine_fn(name)(mech)
+        res = with_forces(name, _engine_fn(name))(mech)
         return EngineRun(name, "ok", res, seconds=time.perf_counter() - t0)
     except MotionError as exc:
         return EngineRun(name, "stopped", exc.partial, str(exc), time.perf_counter() - t0)

@@ -716,6 +716,8 @@ def _collect(solver: _Solver, t: np.ndarray, states: list[_State]) -> Result:
         "iterations": np.array([s.iterations for s in states], float),
     }
     meta = {"root": pm.plan.root, "cuts": [f"{j}:{a}-{b}" for j, a, b in pm.plan.cuts], "nv": pm.nv}
+    # the tree's joint coordinates, rates and accelerations per sample (validators.pinocchio_forces uses them)
+    meta.update({k: np.array([getattr(s, k) for s in states]).reshape(n, pm.nv) for k in ("q", "v", "a")})
     return Result.from_arrays(
         mech.name,
         ENGINE,

@@ -4,6 +4,7 @@ mech = vloop.load("mechanisms/eightbar.toml")
 res = vloop.solve(mech)            # times default to the file's [time]
 res.link("l3").theta, res.slider("l4").v, res.point("C").ay
 res.to_csv("results.csv")
+forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
 """
 
 from __future__ import annotations
@@ -26,29 +27,78 @@ __all__ = [
     "VloopError",
     "__version__",
     "compile",
+    "dead_centres",
     "dumps",
     "from_dict",
+    "instant_centres",
     "load",
     "loads",
+    "mechanical_advantage",
     "save",
     "solve",
+    "solve_forces",
+    "stroke",
+    "time_ratio",
+    "transmission_angles",
+    "velocity_ratio",
 ]
 
+# teaching quantities (vloop.teaching), imported on first use to keep `import vloop` light
+_TEACHING = (
+    "dead_centres", "instant_centres", "mechanical_advantage", "stroke", "time_ratio", "transmission_angles",
+    "velocity_ratio",
+)  # fmt: skip
 
-def compile(mechanism: Mechanism) -> Any:
-    """Build the immutable LoopSystem (graph, loops, unknowns, blocks) of a mechanism."""
-    from .loops import compile_system
 
-    return compile_system(mechanism)
+def __getattr__(name: str) -> Any:
+    if name in _TEACHING:
+        from . import teaching
+
+        return getattr(teaching, name)
+    raise AttributeError(f"module 'vloop' has no attribute {name!r}")
+
+
+def compile(mechanism: Mechanism, method: str | None = None) -> Any:
+    """Build the immutable LoopSystem (graph, loops, unknowns, blocks, t = 0 assembly) of a mechanism.
+
+    ``method``: "auto" (closed-form dyads where possible) or "newton"; default: the file's [solver] method.
+    """
+    from .compiler import compile_system
+
+    return compile_system(mechanism, method)
 
 
 def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options: Any) -> Result:
-    """Positions, velocities and accelerations over ``times`` (default: the file's [time]).
+    """Positions, velocities and accelerations over ``times`` [s] (default: the file's [time]).
 
     ``mechanism`` may be a Mechanism or an already compiled LoopSystem.
-    Options: ``method="auto"|"newton"``, ``tol``, ``max_iter``.
-    Raises MotionError (with ``.partial``) if the motion cannot be completed.
+    Options: ``method="auto"|"newton"`` (a LoopSystem compiled otherwise keeps its variant), ``tol``,
+    ``max_iter``, ``rtol``, ``memory_budget`` (bytes or "2G": a run whose results would not fit is refused,
+    see vloop.budget). Raises MotionError (with ``.partial``) if the motion cannot be completed.
     """
-    from .solver import solve as _solve
+    from .compiler import compile_system
+    from .loops import LoopSystem
+    from .solver import solve as solve_system
 
-    return _solve(mechanism, times, **options)
+    method = options.pop("method", None)
+    unknown = set(options) - {"tol", "max_iter", "rtol", "memory_budget"}
+    if unknown:
+        raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}")
+    if isinstance(mechanism, LoopSystem):
+        system = mechanism
+        if method not in (None, mechanism.method):  # the other method's variant, compiled once per system
+            key = f"method:{method}"
+            if key not in mechanism.cache:
+                mechanism.cache[key] = compile_system(mechanism.mechanism, method)
+            system = mechanism.cache[key]
+    else:
+        system = compile_system(mechanism, method)
+    return solve_system(system, times, **options)
+
+
+def solve_forces(mechanism: Mechanism | Any, result: Result) -> Any:
+    """Driver torques [N·m] / forces [N], pin and slider reactions and the shaking force at every sample
+    of ``result`` (a ForceResult; see :mod:`vloop.forces` for the columns and sign conventions)."""
+    from .forces import solve_forces as _solve_forces
+
+    return _solve_forces(mechanism, result)

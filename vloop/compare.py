@@ -33,6 +33,14 @@ _GROUP = {
     "ax": ("acceleration", "ax"),
     "ay": ("acceleration", "ay"),
     "a": ("acceleration", "acceleration"),
+    # forces (vloop.forces): N and N·m
+    "fx": ("force", "fx"),
+    "fy": ("force", "fy"),
+    "mag": ("force", "magnitude"),
+    "force": ("force", "driver force"),
+    "normal": ("force", "normal force"),
+    "torque": ("moment", "driver torque"),
+    "moment": ("moment", "moment"),
 }
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import MechanismError
-from .mechanism import Driver, Mechanism
+from .model import Driver, Mechanism
 
 
 def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

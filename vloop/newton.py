@@ -54,7 +54,7 @@ class Factor:
     J: np.ndarray  # (rows, 2m, nu)
     inv: np.ndarray  # (rows, nu, 2m): J⁻¹, or (JᵀJ)⁻¹Jᵀ for a rectangular block (least squares)
     cond: np.ndarray  # condition number, angle columns divided by the mechanism size (see _condition)
-    sign: np.ndarray  # sign of det J (of the square sub-block chosen at the first row if rectangular)
+    sign: np.ndarray  # sign of det J (+1 for a rectangular block: no branch sign)
 
 
 class _Block:
@@ -80,7 +80,6 @@ class _Block:
         self.D = D.reshape(2 * nt, -1)
         self.colscale = np.where([v < na for v in unk], 1.0 / run.scale, 1.0)
         self.scale = run.scale
-        self.rows_sq: np.ndarray | None = None  # equations of the square sub-block that gives the branch sign
 
     def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
         x = np.empty((len(rows), self.nu))
@@ -113,11 +112,10 @@ class _Block:
         return _solve_rows(J, -F)
 
     def sign(self, J: np.ndarray) -> np.ndarray:
+        """det J's sign per row (the assembly branch); a rectangular (redundant) block has none: +1."""
         if self.square:
             return np.sign(np.linalg.det(J))
-        if self.rows_sq is None:  # the first row seen picks the equations of the square sub-block
-            self.rows_sq = _pivoted_rows(J[0])
-        return np.sign(np.linalg.det(J[:, self.rows_sq]))
+        return np.ones(len(J))
 
     def factor(self, st: _State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
         """The Factor at the state's rows, the closure residual of each (fraction of the size) and whether
@@ -126,9 +124,10 @@ class _Block:
         F, J = self.residual_jacobian(st, rows)
         if self.square:
             inv = _invert_rows(J)
-        else:
-            Jt = J.transpose(0, 2, 1)
-            inv = _solve_rows(Jt @ J, Jt)
+        else:  # the pseudo-inverse by SVD: normal equations would square the condition number
+            finite = np.all(np.isfinite(J), axis=(1, 2))
+            inv = np.full(J.transpose(0, 2, 1).shape, np.nan)
+            inv[finite] = np.linalg.pinv(J[finite])
         cond = _condition(J * self.colscale, inv / self.colscale[:, None], rtol)
         res = np.max(np.abs(F), axis=1, initial=0.0) / self.scale
         dx = -(inv @ F[..., None])[..., 0]
@@ -155,25 +154,6 @@ class _Block:
         sign[exact] = self.sign(J[exact])
         last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
         return sign[last]
-
-
-def _pivoted_rows(J: np.ndarray) -> np.ndarray:
-    """Indices of nu well-chosen independent equations of a tall Jacobian (Gram–Schmidt on its rows)."""
-    chosen: list[int] = []
-    basis: list[np.ndarray] = []
-    rows = [r / (np.linalg.norm(r) or 1.0) for r in J]
-    while len(chosen) < J.shape[1]:
-        best, best_norm, best_vec = -1, -1.0, None
-        for k, r in enumerate(rows):
-            if k in chosen:
-                continue
-            v = r - sum((b @ r) * b for b in basis) if basis else r
-            nv = float(np.linalg.norm(v))
-            if nv > best_norm:
-                best, best_norm, best_vec = k, nv, v
-        chosen.append(best)
-        basis.append(best_vec / (best_norm or 1.0))
-    return np.array(sorted(chosen), int)
 
 
 def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -524,7 +504,7 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     if not conv[0]:
         return None
     _, J = ctx.blk.residual_jacobian(trial, np.array([1]))
-    return float(np.linalg.det(J[0] if ctx.blk.square else J[0][ctx.blk.rows_sq]))
+    return float(np.linalg.det(J[0])) if ctx.blk.square else 1.0
 
 
 def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -130,37 +130,31 @@ class OutputSet:
     """A run's output files, published together.
 
         with OutputSet(folder) as out:
-            out.write("results.csv", lambda fh: ...)     # staged in a private folder
+            result.to_csv(out.stage / "results.csv")       # any writer, into the private staging folder
             out.write_text("notes.txt", "...")
-        # on leaving without an exception: every staged file renamed into folder, under a lock
+        # on leaving without an exception: every staged file renamed into folder, under a folder lock
 
-    If the block raises (Ctrl-C included), nothing staged is published and the stage is removed.
-    ``published`` lists the final paths.
+    If the block raises (Ctrl-C included), nothing staged is published and the stage is removed,
+    so the folder keeps the previous run's complete set (or nothing). ``published`` lists the paths.
     """
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = ensure_folder(folder)
         self.published: list[Path] = []
-        self._names: list[str] = []
         try:
-            self._stage = Path(tempfile.mkdtemp(prefix=".vloop-stage-", dir=self.folder))
+            self.stage = Path(tempfile.mkdtemp(prefix=".vloop-stage-", dir=self.folder))
         except OSError as exc:
             raise OutputError(f"cannot write to {self.folder}: {describe_os_error(exc)}", entry="out") from None
 
     def path(self, name: str) -> Path:
         """Where a file is staged (for writers that want a path, e.g. matplotlib or pyarrow)."""
-        if name not in self._names:
-            if (self.folder / name).is_dir():
-                raise OutputError(f"cannot write {self.folder / name}: a folder of that name is in the way")
-            self._names.append(name)
-        return self._stage / name
+        return self.stage / name
 
     def write(self, name: str, fill: Callable[[IO[Any]], None], binary: bool = False) -> Path:
         """Stage ``name`` by calling ``fill(file_object)``."""
-        target = self.path(name)
         text = {} if binary else {"encoding": "utf-8", "newline": ""}
         try:
-            with open(target, "wb" if binary else "w", **text) as fh:
+            with open(self.stage / name, "wb" if binary else "w", **text) as fh:
                 fill(fh)
         except OSError as exc:
             raise OutputError(f"cannot write {self.folder / name}: {describe_os_error(exc)}", entry="out") from None
@@ -173,15 +167,20 @@ class OutputSet:
         """Rename every staged file into the folder, holding an exclusive lock on the folder."""
         import fcntl
 
+        names = sorted(p.name for p in self.stage.iterdir())
+        for name in names:
+            if (self.folder / name).is_dir():
+                self.discard()
+                raise OutputError(
+                    f"cannot write {self.folder / name}: a folder of that name is in the way", entry="out"
+                )
         try:
             fd = os.open(self.folder, os.O_RDONLY)  # the folder itself is the lock: no lock file left behind
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX)
-                for name in self._names:
-                    src = self._stage / name
-                    if src.exists():
-                        os.replace(src, self.folder / name)
-                        self.published.append(self.folder / name)
+                for name in names:
+                    os.replace(self.stage / name, self.folder / name)
+                    self.published.append(self.folder / name)
             finally:
                 os.close(fd)  # closing releases the lock
         except OSError as exc:
@@ -191,7 +190,7 @@ class OutputSet:
         return self.published
 
     def discard(self) -> None:
-        shutil.rmtree(self._stage, ignore_errors=True)
+        shutil.rmtree(self.stage, ignore_errors=True)
 
     def __enter__(self) -> OutputSet:
         return self

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .mechanism import Mechanism
+from .model import Mechanism
 from .result import Result
 
 

@@ -29,10 +29,11 @@ from typing import Any
 import numpy as np
 
 from . import budget, newton
+from .assembly import redundancy_text
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
-from .loops import Block, LoopSystem, compile_system
-from .mechanism import Mechanism
+from .loops import Block, LoopSystem
+from .model import Mechanism
 from .result import Result
 
 EPS = float(np.finfo(float).eps)
@@ -346,7 +347,22 @@ def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols
         out[:, 1] = cross(c1, R0) / det
         return out
     rhs = np.concatenate([R.real, R.imag], axis=1)
-    return np.linalg.solve(J, rhs[..., None])[..., 0]
+    return _solve_block(J, rhs)
+
+
+def _solve_block(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve J·x = rhs (batched over leading axes); a block with more equations than unknowns (redundant
+    constraints) by least squares with the pseudo-inverse (exact when the equations are consistent)."""
+    if J.shape[-1] == J.shape[-2]:
+        return np.linalg.solve(J, rhs[..., None])[..., 0]
+    return (np.linalg.pinv(J) @ rhs[..., None])[..., 0]
+
+
+def _det_sign(J: np.ndarray) -> np.ndarray:
+    """Sign of det J (the assembly branch); a rectangular (redundant) block has no branch sign: +1."""
+    if J.shape[-1] == J.shape[-2]:
+        return np.sign(np.linalg.det(J))
+    return np.ones(J.shape[:-2])
 
 
 def _columns(p: _Plan, st: _State, k: slice) -> tuple[np.ndarray, np.ndarray]:
@@ -388,7 +404,7 @@ def _block_health(
     J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
     colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
     Js = J * colscale
-    return np.linalg.cond(Js), np.sign(np.linalg.det(J))
+    return np.linalg.cond(Js), _det_sign(J)
 
 
 # ------------------------------------------------------------------ run context
@@ -926,62 +942,60 @@ def _initial_state(sys: LoopSystem, n: int) -> _State:
 # ------------------------------------------------------------------ solve
 
 
-def solve(mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, **options: Any) -> Result:
-    """Solve P/V/A at ``times`` [s] (default: the mechanism's). Raises MotionError with ``partial``.
+def solve(
+    system: LoopSystem,
+    times: np.ndarray | None = None,
+    *,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    rtol: float | None = None,
+    memory_budget: Any = None,
+) -> Result:
+    """P/V/A of a compiled system at ``times`` [s] (default: the file's). Raises MotionError with ``partial``.
 
-    Options: ``method`` ("auto"|"newton"), ``tol`` (Newton step, relative), ``max_iter``,
-    ``rtol`` (accuracy asked of every output: samples whose error bound cond²·ε exceeds it are refused),
-    ``memory_budget`` (bytes or "2G"; see vloop.budget: a run whose results would not fit is refused).
+    ``tol``: Newton step tolerance (relative); ``max_iter``; ``rtol``: accuracy asked of every output
+    (samples whose error bound cond²·ε exceeds it are refused). The file's [solver] values win for tol
+    and max_iter; an ``rtol`` given here wins over the file's. ``memory_budget`` (bytes or "2G"; see
+    vloop.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
     """
-    run, times = _prepare(mechanism, times, options)
+    run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
     budget.check(run.sys, len(times), False, CHUNK_ROWS, run.memory_budget)
     with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
         return _solve(run, times)
 
 
 def solve_iter(
-    mechanism: Mechanism | LoopSystem, times: np.ndarray | None = None, chunk: int | None = None, **options: Any
+    system: LoopSystem,
+    times: np.ndarray | None = None,
+    *,
+    chunk: int | None = None,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    rtol: float | None = None,
+    memory_budget: Any = None,
 ) -> Iterator[Result]:
-    """Solve as :func:`solve` but yield the run in chunks of about ``chunk`` samples (memory bounded by a chunk,
-    whatever the run's length). A failure raises MotionError whose ``partial`` holds the failing chunk's rows."""
-    run, times = _prepare(mechanism, times, options)
+    """As :func:`solve`, but yield the run in chunks of about ``chunk`` samples: memory is bounded by a chunk
+    whatever the run's length. A failure raises MotionError whose ``partial`` holds the failing chunk's rows."""
+    run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
     budget.check(run.sys, len(times), True, CHUNK_ROWS, run.memory_budget)
     with np.errstate(all="ignore"):
         yield from solve_chunks(run, times, chunk or CHUNK)
 
 
-def _prepare(mechanism: Mechanism | LoopSystem, times: np.ndarray | None, options: dict) -> tuple[_Run, np.ndarray]:
+def _prepare(
+    system: LoopSystem, times: np.ndarray | None, tol: Any, max_iter: Any, rtol: Any, memory_budget: Any
+) -> tuple[_Run, np.ndarray]:
     """The run context and checked times of a solve."""
-    options = dict(options)
-    method = options.pop("method", None)
-    explicit = options.pop("memory_budget", None)
-    given = {k: options.pop(k) for k in ("tol", "max_iter", "rtol") if k in options}
-    if options:
-        raise TypeError(f"unknown solver option(s): {', '.join(options)}")
-    sys = compiled(mechanism, method)
-    mech = sys.mechanism
-    tol = float(mech.options.get("tol", given.get("tol", DEFAULT_TOL)))
-    max_iter = int(mech.options.get("max_iter", given.get("max_iter", DEFAULT_MAX_ITER)))
-    rtol = float(given.get("rtol", mech.options.get("rtol", DEFAULT_RTOL)))
+    mech = system.mechanism
+    tol = float(mech.options.get("tol", DEFAULT_TOL if tol is None else tol))
+    max_iter = int(mech.options.get("max_iter", DEFAULT_MAX_ITER if max_iter is None else max_iter))
+    rtol = float(rtol if rtol is not None else mech.options.get("rtol", DEFAULT_RTOL))
     times = np.asarray(mech.times if times is None else times, float)
     if times.ndim != 1 or len(times) == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise MotionError("times must be a non-empty, finite, strictly increasing 1-D array", entry="time")
-    run = _Run(sys, _Inputs(mech), mech.scale, tol, max_iter, rtol)
-    run.memory_budget = explicit
+    run = _Run(system, _Inputs(mech), mech.scale, tol, max_iter, rtol)
+    run.memory_budget = memory_budget
     return run, times
-
-
-def compiled(mechanism: Mechanism | LoopSystem, method: str | None = None) -> LoopSystem:
-    """The LoopSystem to solve: ``mechanism`` itself if compiled for ``method``, else compiled (a system
-    keeps its other-method variant in its cache, so it is compiled once)."""
-    if not isinstance(mechanism, LoopSystem):
-        return compile_system(mechanism, method)
-    if method is None or method == mechanism.method:
-        return mechanism
-    key = f"method:{method}"
-    if key not in mechanism.cache:
-        mechanism.cache[key] = compile_system(mechanism.mechanism, method)
-    return mechanism.cache[key]
 
 
 @dataclass(frozen=True)
@@ -1019,8 +1033,8 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
         units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
         h = np.diff(times)[:, None]
         travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
-        with np.errstate(invalid="ignore"):
-            need = np.ceil(np.nan_to_num(travel.max(axis=1), nan=1.0, posinf=1.0) / MAX_INPUT_STEP)
+        need = np.ceil(travel.max(axis=1) / MAX_INPUT_STEP)
+        need = np.where(np.isfinite(need) & (need <= MAX_INSERTED), need, 1.0)  # absurd inputs: refused later
         if need.sum() - len(need) > MAX_INSERTED:
             raise MotionError(
                 f"{mech.name}: the inputs travel {float(travel.sum(axis=0).max()):.4g} rad (or sizes) over the run; "
@@ -1029,17 +1043,13 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
                 entry="time",
             )
         steps = np.maximum(need, 1).astype(np.int64)
-    if n > 1:  # the fraction of its interval of every internal row: 0, 1/m, 2/m, ... for an interval of m steps
-        first = np.repeat(np.cumsum(steps) - steps, steps)
-        frac = (np.arange(int(steps.sum())) - first) / np.repeat(steps, steps)
-    else:
-        frac = np.zeros(0)
-    start = np.repeat(times[:-1], steps)
-    width = np.repeat(np.diff(times), steps)
-    inner = np.append(start + frac * width, times[-1]) if n > 1 else times.copy()
-    inner[np.concatenate([[0], np.cumsum(steps)])] = times  # the requested times exactly
-    out = len(lead) + np.concatenate([[0], np.cumsum(steps)]) if n > 1 else np.array([len(lead)])
-    return _Grid(np.concatenate([lead, inner]), out)
+    starts = np.concatenate([[0], np.cumsum(steps)])  # internal index of each requested sample
+    k = np.arange(starts[-1])
+    seg = np.repeat(np.arange(len(steps)), steps)
+    frac = (k - starts[seg]) / steps[seg]
+    inner = np.append(times[seg] + frac * (times[seg + 1] - times[seg]), times[-1]) if n > 1 else times.copy()
+    inner[starts] = times  # the requested times exactly
+    return _Grid(np.concatenate([lead, inner]), len(lead) + starts)
 
 
 CHUNK = 16_384  # requested samples solved together: the state stays in cache, memory stays bounded
@@ -1258,7 +1268,12 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
         t,
         cols,
         _health(run, st, grid.t[grid.out[: grid.skip + len(rows)]], rows, solved, loops),
-        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, span)},
+        {
+            "blocks": [b.kind for b in sys.blocks],
+            "assembly": sys.assembly,
+            **_events_meta(run, span),
+            **_redundancy(sys),
+        },
     )
 
 
@@ -1286,6 +1301,12 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
         "ill_conditioned": ((_error_bound(cond) > ILL_FRACTION * run.rtol) & ~at_change).astype(np.int8),
         "change_point": change.astype(np.int8),
     }
+
+
+def _redundancy(sys: LoopSystem) -> dict[str, str]:
+    """For a redundant linkage, the line that says so (its reactions are indeterminate)."""
+    info = sys.assembly.get("redundancy")
+    return {"redundancy": redundancy_text(info, sys)} if info else {}
 
 
 def _events_meta(run: _Run, t: np.ndarray) -> dict[str, Any]:

@@ -15,9 +15,9 @@ import math
 
 import numpy as np
 
+from .compiler import compile_system
 from .errors import MechanismError, MotionError
-from .loops import compile_system
-from .mechanism import Driver, Mechanism, Profile
+from .model import Driver, Mechanism, Profile
 from .result import Result
 from .solver import solve
 

@@ -1,0 +1,36 @@
+"""The layering is enforced: import-linter's contracts (pyproject.toml, [tool.importlinter]) must be kept.
+
+One direction of flow — file → Mechanism → LoopSystem → Result → consumers → CLI — with no import
+cycles between vloop's modules, validators and reports using vloop's public API only, and nothing in
+vloop importing validators or reports except the CLI.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[1]
+
+
+def test_import_contracts_are_kept():
+    exe = shutil.which("lint-imports") or str(Path(sys.executable).with_name("lint-imports"))
+    if not Path(exe).exists():
+        pytest.skip("import-linter is not installed (pip install -e '.[dev]')")
+    proc = subprocess.run([exe, "--no-cache"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "BROKEN" not in proc.stdout and "Contracts: 3 kept, 0 broken." in proc.stdout
+
+
+def test_import_vloop_is_light():
+    """`import vloop` loads neither the solver's heavy dependencies nor the optional engines."""
+    code = (
+        "import sys, vloop; heavy = [m for m in ('scipy', 'matplotlib', 'pandas', 'networkx', 'pinocchio', "
+        "'exudyn', 'dask', 'pyarrow', 'jinja2') if m in sys.modules]; print(','.join(heavy))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "", out.stdout + out.stderr

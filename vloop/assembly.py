@@ -1,0 +1,169 @@
+"""Assembly at t = 0: close the loops from the file's coordinates (drivers at their t = 0 values).
+
+The typed coordinates may close the loops only approximately (rounded numbers, stated lengths,
+a driver's theta0): within ``assembly_tolerance`` of the mechanism size they are assembled to full
+precision by Newton (least squares on all loop equations) and the distance every joint moved is
+reported; beyond it the file is refused, naming the loop and the closure error.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .drivers import evaluate_all
+from .errors import MechanismError
+from .loops import LoopSystem, loop_jacobian, loop_residual, term_values
+from .model import mobility_message
+from .structure import Structure
+
+DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size
+SINGULAR_RCOND = 1e-10  # smallest/largest singular value below this: singular Jacobian
+
+
+def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
+    """Close the loops at t = 0, group by group in solving order; check the rank (mobility) there.
+
+    Returns the assembled variables and a report: Newton iterations, closure, how far the typed
+    joints moved, and for a redundant linkage what is redundant (``report["redundancy"]``).
+    """
+    mech = sys.mechanism
+    q = sys.coords_q.copy()
+    if mech.drivers:
+        q[list(sys.drivers)] = evaluate_all(mech, np.zeros(1))[0][0]
+    if not sys.loops:
+        return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}
+    initial = _check_typed_closure(sys, q)
+    iterations = sum(_close(sys, q, list(loops), list(unknowns)) for loops, unknowns in structure.groups)
+    closure = float(np.max(np.abs(loop_residual(sys, q)))) / mech.scale
+    if closure > 1e-11:
+        raise MechanismError(
+            f"{mech.source}: [joints] cannot assemble the mechanism at t = 0 from the given coordinates "
+            f"(closure {closure:.2g} of its size after {iterations} Newton steps){_over_note(sys)}",
+            entry="joints",
+        )
+    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q)}
+    for loops, unknowns in structure.groups:
+        _check_rank(sys, q, list(loops), list(unknowns))
+    if structure.over_determined:
+        report["redundancy"] = redundancy(sys, q)
+    return q, report
+
+
+def _check_typed_closure(sys: LoopSystem, q: np.ndarray) -> float:
+    """The typed coordinates' closure (fraction of the size); refused beyond ``assembly_tolerance``."""
+    mech = sys.mechanism
+    tol = mech.options.get("assembly_tolerance", DEFAULT_ASSEMBLY_TOL)
+    res0 = np.abs(loop_residual(sys, q))
+    worst = int(np.argmax(res0))
+    if res0[worst] > tol * mech.scale:
+        lp = sys.loops[worst]
+        why = ""
+        if any(abs(q[v] - sys.coords_q[v]) > 1e-12 for v in sys.drivers):
+            why = " with the drivers' t = 0 values (theta0/s0 differ from the coordinates)"
+        raise MechanismError(
+            f"{mech.source}: [joints] the t = 0 coordinates do not close loop {lp.index + 1} ({lp.label}){why}: "
+            f"off by {res0[worst]:.4g} {mech.units} ({res0[worst] / mech.scale:.2g} of the mechanism size; "
+            f"accepted up to {tol:g}){_over_note(sys)}",
+            entry="joints",
+        )
+    return float(res0.max()) / mech.scale
+
+
+def _over_note(sys: LoopSystem) -> str:
+    """Where Gruebler's count is below the drivers, a failure to close says why it matters."""
+    mech = sys.mechanism
+    M = mech.gruebler()[2]
+    if M >= len(mech.drivers):
+        return ""
+    return (
+        f" (Gruebler M = {M} with {len(mech.drivers)} driver{'s' if len(mech.drivers) != 1 else ''}: the linkage is "
+        "over-constrained and can move only if its dimensions are exact)"
+    )
+
+
+def _close(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]) -> int:
+    """Newton (least squares) on ``loops`` for ``unknowns``, the other variables held; returns the iterations."""
+    if not unknowns:
+        return 0
+    for it in range(1, 51):
+        F = loop_residual(sys, q, loops)
+        J = loop_jacobian(sys, q, loops, unknowns)
+        step = np.linalg.lstsq(J, -np.concatenate([F.real, F.imag]), rcond=None)[0]
+        q[unknowns] += step
+        if np.max(np.abs(step), initial=0.0) <= 1e-14 * (1 + np.max(np.abs(q[unknowns]), initial=0.0)):
+            return it
+    return 50
+
+
+def _check_rank(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]) -> None:
+    """A group's Jacobian must have full column rank at t = 0 (else a dead point or toggle)."""
+    if not unknowns:
+        return
+    sv = np.linalg.svd(loop_jacobian(sys, q, loops, unknowns), compute_uv=False)
+    if sv[-1] < SINGULAR_RCOND * sv[0]:
+        mech = sys.mechanism
+        raise MechanismError(
+            f"{mech.source}: [joints] the loop Jacobian is singular at t = 0 "
+            f"(rank {int(np.sum(sv >= SINGULAR_RCOND * sv[0]))} of {len(unknowns)}): the mechanism is at a dead "
+            f"point or toggle at t = 0, or some of its constraints are redundant; Gruebler's count "
+            f"M = {mech.gruebler()[2]} does not see this",
+            entry="joints",
+        )
+
+
+def redundancy(sys: LoopSystem, q: np.ndarray) -> dict:
+    """Mobility from the rank of the full loop Jacobian (all variables, driven ones included) at ``q``.
+
+    Gruebler's count below the number of drivers is then either a redundant linkage — the rank leaves
+    exactly as many freedoms as drivers (it moves, but only because its dimensions are exact) — or a
+    structure that cannot move (raised here). Returns the rank, the equations and the loops whose
+    equations are redundant (the rows a pivoted QR leaves out).
+    """
+    import scipy.linalg
+
+    mech = sys.mechanism
+    rows = list(range(len(sys.loops)))
+    n_vars = sys.n_vars
+    J = loop_jacobian(sys, q, rows, list(range(n_vars)))
+    sv = np.linalg.svd(J, compute_uv=False)
+    rank = int(np.sum(sv >= SINGULAR_RCOND * sv[0])) if len(sv) else 0
+    mobility = n_vars - rank
+    M = mech.gruebler()[2]
+    if mobility != len(mech.drivers):
+        raise MechanismError(
+            mobility_message(
+                mech, f" (the loop Jacobian at t = 0 has rank {rank} of {n_vars} variables: actual mobility {mobility})"
+            ),
+            entry="drivers",
+        )
+    _, _, piv = scipy.linalg.qr(J.T, pivoting=True)  # independent equations first
+    dependent = sorted({int(r) % len(sys.loops) for r in piv[rank:]})
+    return {
+        "gruebler": M,
+        "mobility": mobility,
+        "equations": 2 * len(sys.loops),
+        "rank": rank,
+        "redundant_equations": 2 * len(sys.loops) - rank,
+        "loops": [li + 1 for li in dependent],
+    }
+
+
+def redundancy_text(info: dict, sys: LoopSystem) -> str:
+    """The one line vloop prints for a redundant linkage."""
+    where = ", ".join(f"{n} ({sys.loops[n - 1].label})" for n in info["loops"])
+    return (
+        f"redundant constraint in loop {where}: Gruebler M = {info['gruebler']}, actual mobility {info['mobility']} "
+        f"(loop Jacobian rank {info['rank']} of {info['equations']} equations): it moves only because its "
+        "dimensions are exact; its reactions are statically indeterminate"
+    )
+
+
+def moved(sys: LoopSystem, q: np.ndarray) -> dict:
+    """How far the assembly at ``q`` moved each point from the typed coordinates."""
+    z0 = term_values(sys, sys.coords_q)
+    z1 = term_values(sys, q)
+    dist = np.abs((z1 - z0) @ sys.path) if len(sys.point_names) else np.zeros(0)
+    return {
+        "moved": float(dist.max(initial=0.0)),
+        "moved_by_point": dict(zip(sys.point_names, dist.tolist(), strict=True)),
+    }

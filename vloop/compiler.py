@@ -1,0 +1,97 @@
+"""Compile a Mechanism into its immutable LoopSystem: a short pipeline of named steps.
+
+    graph → loops → unknowns → assembly at t = 0 → block structure → branches asked for in the file
+
+Each step is a function of its own module (:mod:`vloop.graph`, :mod:`vloop.assembly`,
+:mod:`vloop.structure`); this module only strings them together. The last step re-assembles
+t = 0 with the solver's closed forms when the file asks for another assembly branch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .assembly import assemble, moved
+from .errors import MechanismError
+from .graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
+from .loops import Block, LoopSystem, branch_name
+from .model import Mechanism
+from .solver import assemble_blocks
+from .structure import analyse, block_structure
+
+
+def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
+    """Graph → loops → unknowns → assembly at t = 0 → block structure → branches. Raises MechanismError.
+
+    ``method``: "auto" (closed-form dyads where the structure allows, Newton elsewhere) or
+    "newton" (one Newton block for the whole system); default from the file's [solver] table, else "auto".
+    """
+    method = method or mech.options.get("method", "auto")
+    mg = build_graph(mech, mech.bodies())
+    loops, C = build_loops(mg, mech, cycle_basis(mg.G))
+    system = _unknowns(mech, mg, loops, C)
+    structure = analyse(system)
+    q0, report = assemble(system, structure)
+    blocks = block_structure(system, structure, q0, method)
+    if mech.options.get("branches"):
+        blocks, q0, report = _choose_branches(system, blocks, q0, report)
+    return dataclasses.replace(system, blocks=blocks, q0=q0, assembly=report, method=method, cache={})
+
+
+def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray) -> LoopSystem:
+    """The variables (rotating links' angles, then slider displacements), the driven ones, the unknowns,
+    and a LoopSystem without blocks, assembled at the typed coordinates."""
+    ang, sl, r, delta = mg.terms.arrays()
+    na = len(mg.angle_links)
+    bodies = mech.bodies()
+    driven = tuple(
+        mg.angle_links.index(d.target) if d.kind == "crank" else na + mg.slider_names.index(d.target)
+        for d in mech.drivers
+    )
+    coords_q = np.array([bodies[n].theta0 for n in mg.angle_links] + mg.coords_s, float)
+    unknowns = tuple(v for v in range(na + len(mg.slider_names)) if v not in driven)
+    link_outputs = tuple((name, *mg.owner[name]) for name in mech.moving_links)
+    return LoopSystem(
+        mech, mg.angle_links, mg.slider_names, ang, sl, r, delta, tuple(mg.terms.label), loops, C,
+        mech.tracked_points, point_paths(mg.G, mech, len(r)), link_outputs, driven, unknowns, (), coords_q,
+        coords_q, mg.G,
+    )  # fmt: skip
+
+
+def _choose_branches(
+    sys: LoopSystem, blocks: tuple[Block, ...], q0: np.ndarray, report: dict
+) -> tuple[tuple[Block, ...], np.ndarray, dict]:
+    """Put the dyads the file names in [solver] branches on the requested branch, then re-assemble t = 0."""
+    mech = sys.mechanism
+    wanted: dict[int, str] = mech.options["branches"]
+    by_loop = {b.loops[0]: i for i, b in enumerate(blocks) if len(b.loops) == 1}
+    new = list(blocks)
+    for number, choice in sorted(wanted.items()):
+        li = number - 1
+        if li >= len(sys.loops):
+            raise MechanismError(f"{mech.source}: [solver] branches: there is no loop {number}", entry="solver")
+        i = by_loop.get(li)
+        if i is None or blocks[i].kind not in ("RRR", "RRP", "RPR"):
+            raise MechanismError(
+                f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a dyad with two "
+                "assembly branches",
+                entry="solver",
+            )
+        flip = choice == "flip"
+        if choice in ("open", "crossed"):
+            now = branch_name(sys, q0, sys.loops[li])
+            if now is None:
+                raise MechanismError(
+                    f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a four-joint "
+                    "loop; 'open'/'crossed' name a four-bar's branches — use 'flip' or 'keep'",
+                    entry="solver",
+                )
+            flip = now != choice
+        if flip:
+            new[i] = dataclasses.replace(blocks[i], sigma=-blocks[i].sigma)
+    if new == list(blocks):
+        return blocks, q0, report
+    q1 = assemble_blocks(sys, tuple(new), q0)
+    return tuple(new), q1, {**report, **moved(sys, q1), "branches_flipped": True}

@@ -1,0 +1,914 @@
+"""Reading and writing mechanism files: TOML → Mechanism (one small reader per section) and back.
+
+The keys each reader accepts come from :mod:`vloop.schema`. Every problem is a
+:class:`~vloop.errors.MechanismError` naming the file, the entry and what is wrong, never a
+traceback: non-finite or huge numbers, deep nesting, unsafe names, files that are not regular
+files, profiles outside the mechanism's folder (unless allowed), oversized inputs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import stat
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import MechanismError
+from .model import (
+    LENGTH_UNITS,
+    Driver,
+    Link,
+    Load,
+    LoadProfile,
+    MassProperties,
+    Mechanism,
+    Point,
+    Profile,
+    Slider,
+    mobility_message,
+)
+from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
+
+MAX_SAMPLES = 10**12  # a ceiling for absurd counts; the limit that applies is the memory budget (_time_limit)
+TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.budget)
+
+
+def _time_limit(n: float) -> str | None:
+    """Why a time grid of n samples is refused (it alone would exceed the memory budget), or None."""
+    from .budget import budget, fmt_size
+
+    limit, source = budget()
+    if n <= MAX_SAMPLES and n * TIME_BYTES <= limit:
+        return None
+    return (
+        f"{n:,.0f} samples: the time grid alone needs {fmt_size(n * TIME_BYTES)}, more than the memory budget of "
+        f"{fmt_size(limit)} ({source}); use a larger step or a shorter run, or raise VLOOP_MEMORY_BUDGET"
+    )
+
+
+MAX_FILE_BYTES = 64 * 2**20  # a mechanism file larger than this is refused before reading
+MAX_PROFILE_BYTES = 2**30  # a profile CSV larger than this is refused before reading
+MAX_PROFILE_ROWS = 10_000_000
+COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
+BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
+CHANGE_POINT_CHOICES = ("smooth", "other")
+
+
+@dataclass(frozen=True)
+class _Context:
+    source: str
+    base: Path
+    allow_external_profiles: bool
+
+
+# ---------------------------------------------------------------- entry points
+
+
+def load(path: str | Path, *, allow_external_profiles: bool = False) -> Mechanism:
+    """Read and validate a mechanism file. Raises :class:`MechanismError` on any problem.
+
+    Profiles (CSV) must lie inside the file's folder unless ``allow_external_profiles``.
+    """
+    path = Path(path)
+    text = _read_text_file(path, MAX_FILE_BYTES, what="file", entry=str(path))
+    return loads(text, source=str(path), base_dir=path.parent, allow_external_profiles=allow_external_profiles)
+
+
+def loads(
+    text: str, *, source: str = "<string>", base_dir: str | Path | None = None, allow_external_profiles: bool = False
+) -> Mechanism:
+    """Parse and validate a mechanism from TOML text (see :func:`load`). A leading byte-order mark is ignored."""
+    try:
+        data = tomllib.loads(text.removeprefix("\ufeff"))
+    except tomllib.TOMLDecodeError as exc:
+        raise MechanismError(f"{source}: TOML syntax error: {exc}", entry="toml") from None
+    except RecursionError:
+        raise MechanismError(
+            f"{source}: TOML nested too deeply (arrays or tables inside each other)", entry="toml"
+        ) from None
+    return from_dict(data, source=source, base_dir=base_dir, allow_external_profiles=allow_external_profiles)
+
+
+def from_dict(
+    data: dict, *, source: str = "<dict>", base_dir: str | Path | None = None, allow_external_profiles: bool = False
+) -> Mechanism:
+    """Build and validate a Mechanism from the parsed TOML structure: one reader per section, in order."""
+    ctx = _Context(source, Path(base_dir) if base_dir is not None else Path.cwd(), allow_external_profiles)
+    probs = Problems(source)
+    if not isinstance(data, dict):
+        raise MechanismError(f"{source}: expected a TOML table at top level", entry="file")
+    check_keys(data, "file", "file", probs, extra=TOP_LEVEL)
+    name, title, units = read_meta(data, source, probs)
+    joints = read_joints(data.get("joints"), probs)
+    links = read_links(data.get("links"), joints, probs)
+    sliders = read_sliders(data.get("sliders", {}), joints, links, probs)
+    points = read_points(data.get("points", {}), joints, links, sliders, probs)
+    probs.raise_if_any()
+    proto = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    check_topology(proto, probs)
+    probs.raise_if_any()
+    drivers = read_drivers(data.get("drivers"), proto, ctx, probs)
+    probs.raise_if_any()
+    times = read_time(data.get("time"), drivers, probs)
+    options = read_solver(data.get("solver", {}), probs)
+    dynamics = read_dynamics(data, proto, ctx, probs)
+    probs.raise_if_any()
+    times.flags.writeable = False
+    mech = Mechanism(
+        name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options, **dynamics
+    )
+    if mech.gruebler()[2] > len(drivers):  # fewer drivers than Gruebler's count: never enough to fix the motion
+        raise MechanismError(mobility_message(mech), entry="drivers")
+    return mech  # Gruebler's count below the drivers may be a redundant linkage: the compiler decides by rank
+
+
+def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
+    """A regular file's UTF-8 text (a byte-order mark dropped), refused if larger than ``limit`` bytes."""
+    if "\x00" in str(path):
+        raise MechanismError(f"{show(str(path))}: a path cannot contain a NUL character", entry=entry)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise MechanismError(
+            f"{path}: cannot read {what} ({(exc.strerror or str(exc)).lower()})", entry=entry
+        ) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise MechanismError(f"{path}: not a regular file (a folder, pipe or device)", entry=entry)
+    if st.st_size > limit:
+        raise MechanismError(f"{path}: {st.st_size:,} bytes, more than the {limit:,} vloop reads", entry=entry)
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(limit + 1)
+    except OSError as exc:
+        raise MechanismError(
+            f"{path}: cannot read {what} ({(exc.strerror or str(exc)).lower()})", entry=entry
+        ) from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise MechanismError(f"{path}: not a UTF-8 text file", entry=entry) from None
+
+
+# ---------------------------------------------------------------- sections
+
+
+def read_meta(data: dict, source: str, probs: Problems) -> tuple[str, str, str]:
+    """name (default: the file's name), title, units."""
+    default = Path(source).stem if source not in ("<string>", "<dict>") else "mechanism"
+    name = data.get("name", default)
+    if not isinstance(name, str) or not name.strip() or "\x00" in name or len(name) > 200:
+        probs.add("name", f"must be a non-empty string without NUL, at most 200 characters, got {show(name)}")
+        name = "mechanism"
+    title, units = data.get("title", ""), data.get("units", "m")
+    for key, val in (("title", title), ("units", units)):
+        if not isinstance(val, str) or "\x00" in val:
+            probs.add(key, f"must be a string, got {show(val)}")
+    return name, title if isinstance(title, str) else "", units if isinstance(units, str) else "m"
+
+
+def _names(table: Any, section: str, probs: Problems) -> dict:
+    """A section's table with only its well-named entries (problems recorded for the others)."""
+    out = {}
+    for key, val in table.items():
+        why = name_problem(key)
+        if why:
+            probs.add(section, why)
+        else:
+            out[key] = val
+    return out
+
+
+def read_joints(raw: Any, probs: Problems) -> dict[str, tuple[float, float]]:
+    """[joints] NAME = [x, y]."""
+    if not isinstance(raw, dict) or not raw:
+        probs.add("joints", "missing or empty: give every pin/slider point as NAME = [x, y]")
+        return {}
+    joints = {}
+    for jn, val in _names(raw, "joints", probs).items():
+        xy = pair(val, "coordinate", f"joints.{jn}", probs)
+        if xy is not None:
+            joints[jn] = xy
+    return joints
+
+
+def read_links(raw: Any, joints: dict, probs: Problems) -> dict[str, Link]:
+    """[links] NAME = { joints, ground, length } (masses are read with the dynamics)."""
+    if not isinstance(raw, dict) or not raw:
+        probs.add("links", "missing or empty: give each link as NAME = { joints = [...] }")
+        return {}
+    links: dict[str, Link] = {}
+    for ln, val in _names(raw, "links", probs).items():
+        link = _read_link(ln, {"joints": val} if isinstance(val, list) else val, joints, probs)
+        if link is not None:
+            links[ln] = link
+    grounds = [n for n, lk in links.items() if lk.ground]
+    if links and not grounds:
+        probs.add("links", "no ground link: mark the frame with ground = true")
+    elif len(grounds) > 1:
+        probs.add("links", f"more than one ground link ({', '.join(grounds)}): list every fixed joint on one ground")
+    return links
+
+
+def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
+    entry = f"links.{ln}"
+    if not isinstance(val, dict):
+        probs.add(entry, f"expected a table {{ joints = [...] }}, got {show(val)}")
+        return None
+    check_keys(val, "links", entry, probs)
+    jl = val.get("joints", [])
+    if not isinstance(jl, list) or not all(isinstance(j, str) for j in jl):
+        probs.add(entry, "'joints' must be a list of joint names")
+        return None
+    if not jl:
+        probs.add(entry, "has no joints")
+        return None
+    if len(set(jl)) != len(jl):
+        probs.add(entry, f"names joint {', '.join(sorted({j for j in jl if jl.count(j) > 1}))} twice")
+        return None
+    for j in jl:
+        if j not in joints:
+            probs.add(entry, f"unknown joint {show(j)} (known: {', '.join(list(joints)[:20]) or 'none'})")
+    ground = val.get("ground", False)
+    if not isinstance(ground, bool):
+        probs.add(entry, "'ground' must be true or false")
+        ground = False
+    length = number(val, "length", entry, probs)
+    if length is not None and len(jl) != 2:
+        probs.add(entry, "'length' is only for binary links (two joints)")
+        length = None
+    elif length is not None and length <= 0:
+        probs.add(entry, f"'length' must be positive, got {length:g}")
+        length = None
+    return Link(ln, tuple(jl), ground, length)
+
+
+def read_sliders(raw: Any, joints: dict, links: dict[str, Link], probs: Problems) -> dict[str, Slider]:
+    """[sliders] NAME = { joint, guide, axis }."""
+    if not isinstance(raw, dict):
+        probs.add("sliders", "must be a table of NAME = { joint, guide, axis }")
+        return {}
+    ground = next((n for n, lk in links.items() if lk.ground), None)
+    sliders: dict[str, Slider] = {}
+    for sn, val in _names(raw, "sliders", probs).items():
+        slider = _read_slider(sn, val, joints, links, ground, probs)
+        if slider is not None:
+            sliders[sn] = slider
+    return sliders
+
+
+def _read_slider(
+    sn: str, val: Any, joints: dict, links: dict[str, Link], ground: str | None, probs: Problems
+) -> Slider | None:
+    entry = f"sliders.{sn}"
+    if not isinstance(val, dict):
+        probs.add(entry, f"expected a table {{ joint, guide, axis }}, got {show(val)}")
+        return None
+    check_keys(val, "sliders", entry, probs)
+    if sn in links:
+        probs.add(entry, f"duplicate name: '{sn}' is also a link (a slider's name is its block's name)")
+        return None
+    j = val.get("joint")
+    if not isinstance(j, str) or j not in joints:
+        probs.add(entry, f"unknown joint {show(j)}" if isinstance(j, str) else "missing 'joint'")
+        return None
+    guide = val.get("guide", "ground")
+    if guide == "ground" and ground is not None:
+        guide = ground
+    if not isinstance(guide, str) or guide not in links:
+        probs.add(entry, f"unknown guide link {show(guide)} (a guide is a link or 'ground')")
+        return None
+    if j in links[guide].joints:
+        probs.add(
+            entry, f"the guide '{guide}' names the slider's joint '{j}': a block cannot be pinned to its own guide"
+        )
+        return None
+    if "axis" not in val:
+        probs.add(entry, "missing 'axis'")
+        return None
+    axis = direction(val["axis"], "axis", entry, probs)
+    return None if axis is None else Slider(sn, j, guide, axis)
+
+
+def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems) -> dict[str, Point]:
+    """[points] NAME = { link, at }."""
+    if not isinstance(raw, dict):
+        probs.add("points", "must be a table of NAME = { link, at }")
+        return {}
+    points: dict[str, Point] = {}
+    for pn, val in _names(raw, "points", probs).items():
+        entry = f"points.{pn}"
+        if not isinstance(val, dict):
+            probs.add(entry, f"expected a table {{ link, at }}, got {show(val)}")
+            continue
+        check_keys(val, "points", entry, probs)
+        if pn in joints:
+            probs.add(entry, f"duplicate name: '{pn}' is also a joint")
+            continue
+        lk = val.get("link")
+        if not isinstance(lk, str) or (lk not in links and lk not in sliders):
+            probs.add(entry, f"unknown link {show(lk)}")
+            continue
+        at = pair(val.get("at"), "at", entry, probs)
+        if at is not None:
+            points[pn] = Point(pn, lk, at)
+    return points
+
+
+def check_topology(m: Mechanism, probs: Problems) -> None:
+    """Joints named by nobody, coincident joints on a link, single-joint moving links, disconnected parts."""
+    scale = m.scale
+    named = {j for lk in m.links.values() for j in lk.joints} | {s.joint for s in m.sliders.values()}
+    for j in m.joints:
+        if j not in named:
+            probs.add(f"joints.{j}", "is named by no link or slider")
+    guides = {s.guide for s in m.sliders.values()}
+    for lk in m.links.values():
+        pts = [m.joints[j] for j in lk.joints]
+        for i in range(len(pts)):
+            for k in range(i + 1, len(pts)):
+                if math.dist(pts[i], pts[k]) <= COINCIDENT_TOL * scale:
+                    probs.add(
+                        f"links.{lk.name}", f"joints {lk.joints[i]} and {lk.joints[k]} coincide (zero-length link)"
+                    )
+        if not lk.ground and len(lk.joints) == 1 and lk.name not in guides:
+            probs.add(
+                f"links.{lk.name}",
+                "has a single joint: a moving link needs two (add its tip as a joint) unless it guides a slider",
+            )
+    if not probs.items:
+        _check_connected(m, probs)
+
+
+def _check_connected(m: Mechanism, probs: Problems) -> None:
+    parent = {b: b for b in m.body_names}
+
+    def find(b: str) -> str:
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        return b
+
+    at: dict[str, list[str]] = {}
+    for n, lk in m.links.items():
+        for j in lk.joints:
+            at.setdefault(j, []).append(n)
+    for s in m.sliders.values():
+        at.setdefault(s.joint, []).append(s.name)
+        parent[find(s.name)] = find(s.guide)
+    for bs in at.values():
+        for b in bs[1:]:
+            parent[find(b)] = find(bs[0])
+    g = find(m.ground)
+    loose = [b for b in m.body_names if find(b) != g]
+    if loose:
+        probs.add("links", f"disconnected mechanism: {', '.join(loose[:10])} not connected to the ground '{m.ground}'")
+
+
+# ---------------------------------------------------------------- drivers and profiles
+
+
+def read_drivers(raw: Any, m: Mechanism, ctx: _Context, probs: Problems) -> list[Driver]:
+    """[[drivers]]: cranks (link = ...) and linear actuators (slider = ...)."""
+    if raw is None:
+        probs.add("drivers", "missing: give at least one [[drivers]] entry (a crank or a driven slider)")
+        return []
+    if isinstance(raw, dict):
+        raw = [raw]
+    if not isinstance(raw, list):
+        probs.add("drivers", "must be an array of tables [[drivers]]")
+        return []
+    bodies = m.bodies()
+    out: list[Driver] = []
+    seen: set[str] = set()
+    for i, d in enumerate(raw):
+        if not isinstance(d, dict):
+            probs.add(f"drivers[{i}]", "must be a table")
+            continue
+        if "link" in d:
+            drv = _read_crank(i, d, m, bodies, ctx, probs)
+        elif "slider" in d:
+            drv = _read_actuator(i, d, m, bodies, ctx, probs)
+        else:
+            probs.add(f"drivers[{i}]", "needs 'link' (a crank) or 'slider' (a linear actuator)")
+            continue
+        if drv is None:
+            continue
+        if (drv.kind, drv.target) in seen:
+            probs.add(drv.entry, f"{drv.target} is driven twice")
+            continue
+        seen.add((drv.kind, drv.target))
+        out.append(drv)
+    return out
+
+
+def _read_crank(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, probs: Problems) -> Driver | None:
+    check_keys(d, "crank", f"drivers[{i}]", probs)
+    ln = d["link"]
+    entry = f"drivers[{i}] (link {show(ln, 30)})"
+    if isinstance(ln, str) and ln in m.sliders:
+        probs.add(
+            entry, f"'{ln}' is a slider block, which cannot turn relative to its guide; drive it with slider = '{ln}'"
+        )
+        return None
+    if not isinstance(ln, str) or ln not in m.links:
+        probs.add(entry, f"unknown link {show(ln)}")
+        return None
+    lk = m.links[ln]
+    if lk.ground:
+        probs.add(entry, f"'{ln}' is the ground, which cannot be driven")
+        return None
+    pivot = d.get("pivot", lk.joints[0])
+    if pivot not in lk.joints:
+        probs.add(entry, f"pivot {show(pivot)} is not a joint of link '{ln}'")
+        return None
+    if pivot != lk.joints[0]:
+        probs.add(entry, f"pivot '{pivot}' must be the first joint listed for link '{ln}' (its θ is measured from it)")
+        return None
+    keys, cols = ("theta0", "omega", "alpha"), ("t", "theta", "omega", "alpha")
+    x0, v0, a0, prof = _motion(d, keys, cols, bodies[ln].theta0, entry, ctx, probs)
+    return Driver("crank", ln, x0, v0, a0, pivot, prof, entry)
+
+
+def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, probs: Problems) -> Driver | None:
+    check_keys(d, "actuator", f"drivers[{i}]", probs)
+    sn = d["slider"]
+    entry = f"drivers[{i}] (slider {show(sn, 30)})"
+    if not isinstance(sn, str) or sn not in m.sliders:
+        probs.add(entry, f"unknown slider {show(sn)}")
+        return None
+    sl = m.sliders[sn]
+    gb = bodies[sl.guide]
+    p = m.joints[sl.joint]
+    s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
+    x0, v0, a0, prof = _motion(d, ("s0", "v", "a"), ("t", "s", "v", "a"), s_coords, entry, ctx, probs)
+    return Driver("slider", sn, x0, v0, a0, None, prof, entry)
+
+
+def _motion(
+    d: dict,
+    keys: tuple[str, str, str],
+    cols: tuple[str, ...],
+    x_coords: float,
+    entry: str,
+    ctx: _Context,
+    probs: Problems,
+) -> tuple[float, float, float, Profile | None]:
+    """A driver's x0 (default: from the coordinates), rate and acceleration, or its profile."""
+    x0 = number(d, keys[0], entry, probs, x_coords)
+    v0 = number(d, keys[1], entry, probs, 0.0)
+    a0 = number(d, keys[2], entry, probs, 0.0)
+    prof = None
+    if "profile" in d:
+        for k in keys:
+            if k in d:
+                probs.add(entry, f"'{k}' and 'profile' both given: the profile sets the motion")
+        table = read_table(d["profile"], entry, ctx, probs)
+        source = str(d["profile"]) if isinstance(d["profile"], str) else "inline"
+        prof = _profile(table, cols, entry, probs, source) if table is not None else None
+        x0 = float(prof.x[0]) if prof is not None else x0
+    return x0, v0, a0, prof
+
+
+def read_table(spec: Any, entry: str, ctx: _Context, probs: Problems) -> dict[str, np.ndarray] | None:
+    """A profile's columns (lower-case names → arrays) from an inline table of lists or a CSV file."""
+    if isinstance(spec, dict):
+        table = {}
+        for k, v in spec.items():
+            if not isinstance(v, list) or len(v) > MAX_PROFILE_ROWS:
+                probs.add(entry, f"profile column {show(k)} must be a list of at most {MAX_PROFILE_ROWS:,} numbers")
+                return None
+            vals = [real(x, "profile", entry, Problems("")) for x in v]
+            if None in vals:
+                probs.add(entry, f"profile column {show(k, 20)} must be a list of finite numbers")
+                return None
+            table[str(k).strip().lower()] = np.asarray(vals, float)
+        return table
+    if isinstance(spec, str):
+        return _read_csv(spec, entry, ctx, probs)
+    probs.add(entry, "'profile' must be a CSV file name or a table of columns")
+    return None
+
+
+def _read_csv(spec: str, entry: str, ctx: _Context, probs: Problems) -> dict[str, np.ndarray] | None:
+    """A CSV profile with a header row: a regular file inside the mechanism's folder (unless allowed),
+    of bounded size; its content is never echoed in a message."""
+    path = _profile_path(spec, entry, ctx, probs)
+    if path is None:
+        return None
+    try:
+        text = _read_text_file(path, MAX_PROFILE_BYTES, what="profile", entry=entry)
+    except MechanismError as exc:
+        probs.add(entry, f"profile {show(spec)}: {str(exc).split(': ', 1)[-1]}")
+        return None
+    lines = text.splitlines()
+    header = [h.strip().lower() for h in lines[0].split(",")] if lines else []
+    if len(lines) < 3 or len(set(header)) != len(header) or not all(header):
+        probs.add(entry, f"profile {show(spec)} needs a header row of distinct column names and at least two data rows")
+        return None
+    if len(lines) - 1 > MAX_PROFILE_ROWS:
+        probs.add(entry, f"profile {show(spec)} has more than {MAX_PROFILE_ROWS:,} rows")
+        return None
+    try:
+        data = np.loadtxt(lines[1:], delimiter=",", ndmin=2, dtype=float)
+    except ValueError:
+        probs.add(entry, f"profile {show(spec)}: every data row must be {len(header)} numbers separated by commas")
+        return None
+    if data.shape[1] != len(header):
+        probs.add(entry, f"profile {show(spec)}: its rows have {data.shape[1]} values, its header {len(header)} names")
+        return None
+    return {h: data[:, i] for i, h in enumerate(header)}
+
+
+def _profile_path(spec: str, entry: str, ctx: _Context, probs: Problems) -> Path | None:
+    if "\x00" in spec or not spec.strip():
+        probs.add(entry, f"profile path {show(spec)} is not a file name")
+        return None
+    path = ctx.base / spec
+    if not ctx.allow_external_profiles:
+        outside = Path(spec).is_absolute() or not path.resolve().is_relative_to(ctx.base.resolve())
+        if outside:
+            probs.add(
+                entry,
+                f"profile {show(spec)} is outside the mechanism file's folder: vloop reads only files beside it "
+                "(allow others with --allow-external-profiles, or load(..., allow_external_profiles=True))",
+            )
+            return None
+    return path
+
+
+def _profile(
+    table: dict[str, np.ndarray], cols: tuple[str, ...], entry: str, probs: Problems, source: str = "inline"
+) -> Profile | None:
+    """Columns t, x[, v, a] of a driver's profile, checked: finite, same length, strictly increasing time."""
+    tcol, xcol, vcol, acol = cols
+    if tcol not in table or xcol not in table:
+        probs.add(entry, f"profile needs columns '{tcol}' and '{xcol}' (has {', '.join(list(table)[:8])})")
+        return None
+    t = table[tcol]
+    n = len(t)
+    for k in (tcol, xcol, vcol, acol):
+        if k in table and (len(table[k]) != n or not np.all(np.isfinite(table[k]))):
+            probs.add(entry, f"profile column '{k}' has missing or non-finite values")
+            return None
+    if n < 2:
+        probs.add(entry, "profile needs at least two rows")
+        return None
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        probs.add(entry, f"profile time is not strictly increasing (row {k + 1}: t = {t[k]:g} after {t[k - 1]:g})")
+        return None
+    return Profile(t, table[xcol], table.get(vcol), table.get(acol), source)
+
+
+# ---------------------------------------------------------------- time and solver
+
+
+def read_time(raw: Any, drivers: list[Driver], probs: Problems) -> np.ndarray:
+    """[time] start, stop, step — or times = [...]; with no [time], a profile's own times."""
+    if raw is None:
+        profs = [d.profile for d in drivers if d.profile is not None]
+        if profs:
+            return np.array(profs[0].t, float)
+        probs.add("time", "missing: give [time] start, stop, step (or times = [...])")
+        return np.zeros(1)
+    if not isinstance(raw, dict):
+        probs.add("time", "must be a table")
+        return np.zeros(1)
+    check_keys(raw, "time", "time", probs)
+    if "times" in raw:
+        return _explicit_times(raw["times"], probs)
+    start = number(raw, "start", "time", probs, 0.0)
+    stop = number(raw, "stop", "time", probs)
+    step = number(raw, "step", "time", probs)
+    if stop is None or step is None:
+        if not probs.items:
+            probs.add("time", "needs 'stop' and 'step' (or 'times')")
+        return np.zeros(1)
+    if step <= 0:
+        probs.add("time", f"step must be positive, got {step:g}")
+        return np.zeros(1)
+    if stop < start:
+        probs.add("time", f"stop ({stop:g}) is before start ({start:g})")
+        return np.zeros(1)
+    count = (stop - start) / step  # may overflow to inf for a subnormal step
+    if not math.isfinite(count) or _time_limit(count + 1):
+        why = _time_limit(count + 1) if math.isfinite(count) else "too many samples to count"
+        probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {why}")
+        return np.zeros(1)
+    n = math.floor(count + 1e-9) + 1  # up to and including stop, never past it
+    t = start + step * np.arange(n)
+    if n > 1 and np.any(np.diff(t) <= 0):
+        probs.add("time", f"step {step:g} is too small to separate samples near t = {start:g}")
+    return t
+
+
+def _explicit_times(ts: Any, probs: Problems) -> np.ndarray:
+    if not isinstance(ts, list) or not ts:
+        probs.add("time", "'times' must be a non-empty list of numbers")
+        return np.zeros(1)
+    if _time_limit(len(ts)):
+        probs.add("time", f"'times' has {_time_limit(len(ts))}")
+        return np.zeros(1)
+    vals = [real(x, "times", "time", probs) for x in ts]
+    if None in vals:
+        return np.zeros(1)
+    t = np.asarray(vals, float)
+    if np.any(np.diff(t) <= 0):
+        probs.add("time", "'times' must be strictly increasing")
+    return t
+
+
+def read_solver(raw: Any, probs: Problems) -> dict[str, Any]:
+    """[solver]: method, tol, rtol, max_iter, assembly_tolerance, branches, change_points, memory_budget."""
+    if not isinstance(raw, dict):
+        probs.add("solver", "must be a table")
+        return {}
+    check_keys(raw, "solver", "solver", probs)
+    out: dict[str, Any] = {}
+    if "method" in raw:
+        if raw["method"] not in ("auto", "newton"):
+            probs.add("solver", "method must be 'auto' or 'newton'")
+        else:
+            out["method"] = raw["method"]
+    for k in ("tol", "rtol", "assembly_tolerance"):
+        v = number(raw, k, "solver", probs)
+        if v is not None:
+            if not 0 < v < 1:
+                probs.add("solver", f"{k} must be between 0 and 1 (a fraction), got {v:g}")
+            out[k] = v
+    if "memory_budget" in raw:  # bytes or a size such as "2G" (vloop.budget)
+        from .budget import parse_size
+
+        try:
+            out["memory_budget"] = parse_size(raw["memory_budget"], "memory_budget")
+        except ValueError as exc:
+            probs.add("solver", str(exc))
+    if "max_iter" in raw:
+        mi = raw["max_iter"]
+        if isinstance(mi, bool) or not isinstance(mi, int) or not 1 <= mi <= 10_000:
+            probs.add("solver", "max_iter must be an integer from 1 to 10000")
+        else:
+            out["max_iter"] = mi
+    for key, choices, example in (
+        ("branches", BRANCH_CHOICES, "crossed"),
+        ("change_points", CHANGE_POINT_CHOICES, "other"),
+    ):
+        if key in raw:
+            table = _per_loop(raw[key], choices, key == "change_points")
+            if table is None:
+                probs.add(
+                    "solver",
+                    f"{key} must map loop numbers to one of {', '.join(choices)}"
+                    f'{" (or a list of them)" if key == "change_points" else ""}, e.g. {{ 1 = "{example}" }}',
+                )
+            else:
+                out[key] = table
+    return out
+
+
+def _per_loop(table: Any, choices: tuple[str, ...], lists: bool) -> dict[int, Any] | None:
+    if not isinstance(table, dict):
+        return None
+    out = {}
+    for k, v in table.items():
+        ok = (
+            v in choices if isinstance(v, str) else lists and isinstance(v, list) and v and all(x in choices for x in v)
+        )
+        if not (isinstance(k, str) and k.isdigit() and len(k) < 7 and int(k) >= 1 and ok):
+            return None
+        out[int(k)] = v
+    return out
+
+
+# ---------------------------------------------------------------- masses, gravity, loads (kinetostatics)
+
+
+def read_dynamics(data: dict, m: Mechanism, ctx: _Context, probs: Problems) -> dict[str, Any]:
+    """Mechanism fields ``masses``, ``gravity``, ``loads`` (all optional) from the file."""
+    masses = read_masses(data, m, probs)
+    gravity = pair(data["gravity"], "gravity", "gravity", probs) if "gravity" in data else None
+    loads = read_loads(data.get("loads"), m, ctx, probs)
+    if (masses or loads or gravity) and m.units.strip().lower() not in LENGTH_UNITS:
+        probs.add("units", f"forces need a length unit vloop knows ({', '.join(LENGTH_UNITS)}), got {show(m.units)}")
+    return {"masses": masses, "gravity": gravity, "loads": tuple(loads)}
+
+
+def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProperties]:
+    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks."""
+    out: dict[str, MassProperties] = {}
+    tables = [("links", n, v) for n, v in (data.get("links") or {}).items() if n in m.links]
+    tables += [("sliders", n, v) for n, v in (data.get("sliders") or {}).items() if n in m.sliders]
+    for section, name, val in tables:
+        if not isinstance(val, dict) or not {"mass", "inertia", "com"} & set(val):
+            continue
+        entry = f"{section}.{name}"
+        if section == "links" and m.links[name].ground:
+            probs.add(entry, "the ground does not move: it takes no mass, inertia or com")
+            continue
+        mass = real(val.get("mass", 0.0), "mass", entry, probs)
+        inertia = real(val.get("inertia", 0.0), "inertia", entry, probs)
+        joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
+        mean = (sum(m.joints[j][0] for j in joints) / len(joints), sum(m.joints[j][1] for j in joints) / len(joints))
+        com = pair(val["com"], "com", entry, probs) if "com" in val else mean
+        for what, x in (("mass", mass), ("inertia", inertia)):
+            if x is not None and x < 0:
+                probs.add(entry, f"'{what}' must not be negative, got {x:g}")
+        if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
+            out[name] = MassProperties(mass, inertia, com)
+    return out
+
+
+def read_loads(raw: Any, m: Mechanism, ctx: _Context, probs: Problems) -> list[Load]:
+    """[[loads]]: a force at a point, or a torque on a link, constant or tabulated."""
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        probs.add("loads", "must be an array of tables [[loads]]")
+        return []
+    out = []
+    for i, d in enumerate(raw):
+        entry = f"loads[{i}]"
+        if not isinstance(d, dict):
+            probs.add(entry, "must be a table")
+            continue
+        check_keys(d, "loads", entry, probs)
+        load = _read_load(d, m, entry, ctx, probs)
+        if load is not None:
+            out.append(load)
+    return out
+
+
+def _load_body(d: dict, m: Mechanism, entry: str, probs: Problems) -> tuple[str | None, str | None]:
+    """(point, body) of a load: the body defaults to the point's link, or the slider block at a joint."""
+    point, body = d.get("point"), d.get("link")
+    moving = set(m.body_names[1:])
+    if point is not None and (not isinstance(point, str) or (point not in m.joints and point not in m.points)):
+        probs.add(entry, f"unknown point {show(point)} (a joint or a tracer point)")
+        return None, None
+    if body is not None and (not isinstance(body, str) or body not in m.body_names):
+        probs.add(entry, f"unknown link {show(body)}")
+        return None, None
+    if body is not None and body not in moving:
+        probs.add(entry, f"'{body}' is the ground: a load on it moves nothing")
+        return None, None
+    if point is None:
+        return None, body
+    carriers = (m.points[point].link,) if point in m.points else m.bodies_at(point)
+    if body is None:
+        blocks = [s.name for s in m.sliders.values() if s.joint == point]
+        body = blocks[0] if blocks else next((b for b in carriers if b in moving), None)
+        if body is None:
+            probs.add(entry, f"'{point}' is on the ground only: a load there moves nothing")
+    elif body not in carriers:
+        probs.add(entry, f"'{point}' is not on '{body}' (it is on {', '.join(carriers)})")
+        body = None
+    return point, body
+
+
+def _read_load(d: dict, m: Mechanism, entry: str, ctx: _Context, probs: Problems) -> Load | None:
+    point, body = _load_body(d, m, entry, probs)
+    given = [k for k in ("force", "torque", "profile") if k in d]
+    if "profile" in d and len(given) > 1:
+        probs.add(entry, f"'{given[0]}' and 'profile' both given: the profile sets the load")
+        return None
+    if len(given) != 1:
+        probs.add(entry, "give one of force = [fx, fy] (with point), torque = T (with link) or a profile")
+        return None
+    kind = "force" if point is not None else "torque"
+    if ("force" in d and point is None) or ("torque" in d and point is not None):
+        probs.add(entry, "a force needs a point (and optionally a link); a torque needs a link and no point")
+        return None
+    if kind == "torque" and body is None and "link" not in d:
+        probs.add(entry, "a torque load needs the link it acts on")
+    if body is None:
+        return None
+    if "profile" in d:
+        return _load_profile(d["profile"], kind, body, point, entry, ctx, probs)
+    value: Any = (
+        pair(d["force"], "force", entry, probs) if kind == "force" else real(d["torque"], "torque", entry, probs)
+    )
+    return None if value is None else Load(kind, body, value, point, None, entry)
+
+
+def _load_profile(
+    spec: Any, kind: str, body: str, point: str | None, entry: str, ctx: _Context, probs: Problems
+) -> Load | None:
+    table = read_table(spec, entry, ctx, probs)
+    if table is None:
+        return None
+    columns = ("fx", "fy") if kind == "force" else ("torque",)
+    if "t" not in table or columns[0] not in table:
+        probs.add(entry, f"profile needs columns 't' and '{columns[0]}' (has {', '.join(list(table)[:8])})")
+        return None
+    if any(c not in table for c in columns):
+        probs.add(entry, "a force profile needs columns 't', 'fx' and 'fy'")
+        return None
+    prof = _profile({"t": table["t"], "x": table[columns[0]]}, ("t", "x", "", ""), entry, probs)
+    if prof is None or any(len(table[c]) != len(prof.t) or not np.all(np.isfinite(table[c])) for c in columns):
+        if prof is not None:
+            probs.add(entry, f"profile columns {', '.join(columns)} have missing or non-finite values")
+        return None
+    values = np.column_stack([table[c] for c in columns])
+    source = spec if isinstance(spec, str) else "inline"
+    return Load(kind, body, None, point, LoadProfile(prof.t, values, columns, source), entry)
+
+
+# ---------------------------------------------------------------- writing
+
+
+def to_dict(mech: Mechanism) -> dict[str, Any]:
+    """The TOML structure of a Mechanism (:func:`from_dict` reads it back to an equal Mechanism).
+
+    Tabulated profiles are written inline (``profile = { t = [...], theta = [...] }``);
+    the time grid as an explicit ``times`` list.
+    """
+    out: dict[str, Any] = {"name": mech.name}
+    if mech.title:
+        out["title"] = mech.title
+    out["units"] = mech.units
+    out["joints"] = {j: list(xy) for j, xy in mech.joints.items()}
+    out["links"] = {n: _link_dict(lk) for n, lk in mech.links.items()}
+    if mech.sliders:
+        out["sliders"] = {
+            n: {"joint": s.joint, "guide": s.guide, "axis": list(s.axis)} for n, s in mech.sliders.items()
+        }
+    if mech.points:
+        out["points"] = {n: {"link": p.link, "at": list(p.at)} for n, p in mech.points.items()}
+    out["drivers"] = [_driver_dict(d) for d in mech.drivers]
+    out["time"] = {"times": mech.times.tolist()}
+    if mech.options:
+        out["solver"] = dict(mech.options)
+        for key in ("branches", "change_points"):
+            if key in out["solver"]:
+                out["solver"][key] = {str(k): v for k, v in out["solver"][key].items()}
+    _dynamics_to_dict(mech, out)
+    return out
+
+
+def _link_dict(lk: Link) -> dict[str, Any]:
+    entry: dict[str, Any] = {"joints": list(lk.joints)}
+    if lk.ground:
+        entry["ground"] = True
+    if lk.length is not None:
+        entry["length"] = lk.length
+    return entry
+
+
+def _driver_dict(d: Driver) -> dict[str, Any]:
+    names = ("theta0", "omega", "alpha") if d.kind == "crank" else ("s0", "v", "a")
+    cols = ("t", "theta", "omega", "alpha") if d.kind == "crank" else ("t", "s", "v", "a")
+    entry: dict[str, Any] = {"link": d.target, "pivot": d.pivot} if d.kind == "crank" else {"slider": d.target}
+    if d.profile is None:
+        entry.update(zip(names, (d.x0, d.v0, d.a0), strict=True))
+        return entry
+    p = d.profile
+    prof = {cols[0]: p.t.tolist(), cols[1]: p.x.tolist()}
+    if p.v is not None:
+        prof[cols[2]] = p.v.tolist()
+    if p.a is not None:
+        prof[cols[3]] = p.a.tolist()
+    entry["profile"] = prof
+    return entry
+
+
+def _dynamics_to_dict(mech: Mechanism, out: dict[str, Any]) -> None:
+    """Add masses (on their link/slider tables), gravity and loads to a to_dict structure."""
+    for name, mp in mech.masses.items():
+        table = out["links"][name] if name in mech.links else out["sliders"][name]
+        table.update(mass=mp.mass, inertia=mp.inertia, com=list(mp.com))
+    if mech.gravity is not None:
+        out["gravity"] = list(mech.gravity)
+    loads = []
+    for ld in mech.loads:
+        entry: dict[str, Any] = {"link": ld.body}
+        if ld.point is not None:
+            entry["point"] = ld.point
+        if ld.profile is not None:
+            p = ld.profile
+            entry["profile"] = {"t": p.t.tolist(), **{c: p.values[:, i].tolist() for i, c in enumerate(p.columns)}}
+        elif ld.kind == "force":
+            entry["force"] = list(ld.value)  # type: ignore[arg-type]
+        else:
+            entry["torque"] = ld.value
+        loads.append(entry)
+    if loads:
+        out["loads"] = loads
+
+
+def dumps(mech: Mechanism) -> str:
+    """The mechanism as TOML text (see :func:`to_dict`)."""
+    import tomli_w
+
+    return tomli_w.dumps(to_dict(mech))
+
+
+def save(mech: Mechanism, path: str | Path) -> None:
+    """Write the mechanism atomically to a TOML file that :func:`load` reads back to an equal Mechanism."""
+    from .output import write_text
+
+    write_text(path, dumps(mech))

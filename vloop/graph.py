@@ -1,0 +1,368 @@
+"""The paper's graph of a mechanism, its vector terms, its loops and the paths to every point.
+
+One node per (body, joint) incidence plus the world origin on the ground; an edge inside each
+body from its reference node to each other node (a star: a body adds no cycle of its own); an
+edge between the nodes of the bodies that share a pin (a star per pin); an edge from a guide's
+reference node to the block it carries (the slider vector, plus the constant offset of the
+sliding line). Every edge carries *terms*, complex vectors z = (r + s)·e^{j(φ_a + δ)} with φ_a the
+angle of rotating link a (φ ≡ 0 for the ground) and s a slider displacement (absent for rigid
+vectors). A cycle basis gives J − L + 1 independent loops.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import networkx as nx
+import numpy as np
+
+from .model import Body, Mechanism
+
+ORIGIN = "@O"  # the world origin node on the ground
+EXACT_BASIS_MAX_LOOPS = 12  # up to this many loops the exact minimum cycle basis (networkx) is cheap
+
+
+@dataclass
+class Terms:
+    """The vector terms, as growing lists while the graph is built (arrays via :meth:`arrays`)."""
+
+    ang: list[int] = field(default_factory=list)  # angle variable turning the term, -1 = fixed (ground)
+    sl: list[int] = field(default_factory=list)  # slider index whose s the term carries, -1 = none
+    r: list[float] = field(default_factory=list)  # constant magnitude
+    delta: list[float] = field(default_factory=list)  # constant angle offset [rad]
+    label: list[str] = field(default_factory=list)
+
+    def add(self, ang: int, sl: int, r: float, delta: float, label: str) -> int:
+        if r < 0:
+            r, delta = -r, delta + math.pi
+        self.ang.append(ang)
+        self.sl.append(sl)
+        self.r.append(r)
+        self.delta.append(delta % (2 * math.pi))
+        self.label.append(label)
+        return len(self.r) - 1
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return (
+            np.array(self.ang, int),
+            np.array(self.sl, int),
+            np.array(self.r, float),
+            np.array(self.delta, float),
+        )
+
+
+@dataclass
+class MechanismGraph:
+    """The graph with its terms, the angle variable of each rotating link and the sliders' t = 0 s."""
+
+    G: nx.Graph
+    terms: Terms
+    angle_links: tuple[str, ...]
+    slider_names: tuple[str, ...]
+    coords_s: list[float]
+    owner: dict[str, tuple[int, float]]  # body → (angle variable turning it or -1, constant frame offset)
+
+
+def build_graph(mech: Mechanism, bodies: dict[str, Body]) -> MechanismGraph:
+    """Step 1: nodes, body stars, pin stars and slider edges, with their vector terms."""
+    angle_links = tuple(n for n, lk in mech.links.items() if not lk.ground)
+    avar = {n: i for i, n in enumerate(angle_links)}
+    owner = {name: _owner(bodies, avar, name) for name in mech.body_names}
+    G = nx.Graph()
+    terms = Terms()
+    ref = _reference_nodes(mech, bodies, G)
+    _add_body_stars(mech, bodies, G, terms, ref, owner)
+    for j in mech.joints:
+        at = mech.bodies_at(j)
+        for other in at[1:]:
+            G.add_edge((at[0], j), (other, j), terms=(), start=(at[0], j), kind="pin")
+    coords_s = _add_slider_edges(mech, bodies, G, terms, ref, owner)
+    return MechanismGraph(G, terms, angle_links, tuple(mech.sliders), coords_s, owner)
+
+
+def _owner(bodies: dict[str, Body], avar: dict[str, int], body: str) -> tuple[int, float]:
+    """Angle variable that turns ``body`` and the constant offset of its frame (a block rides its guide)."""
+    b = bodies[body]
+    if b.kind == "ground":
+        return -1, 0.0
+    if b.kind == "link":
+        return avar[body], 0.0
+    g = bodies[b.guide]
+    return (-1 if g.kind == "ground" else avar[g.name]), b.theta0 - g.theta0
+
+
+def _reference_nodes(mech: Mechanism, bodies: dict[str, Body], G: nx.Graph) -> dict[str, tuple[str, str]]:
+    ground = mech.ground
+    ref: dict[str, tuple[str, str]] = {}
+    G.add_node((ground, ORIGIN))
+    for bname in mech.body_names:
+        b = bodies[bname]
+        ref[bname] = (bname, ORIGIN) if b.kind == "ground" else (bname, next(iter(b.local)))
+        for m in b.local:
+            G.add_node((bname, m))
+    return ref
+
+
+def _add_body_stars(
+    mech: Mechanism,
+    bodies: dict[str, Body],
+    G: nx.Graph,
+    terms: Terms,
+    ref: dict[str, tuple[str, str]],
+    owner: dict[str, tuple[int, float]],
+) -> None:
+    origin = origin_name(mech)
+    for bname in mech.body_names:
+        ang, off = owner[bname]
+        for m, (lx, ly) in bodies[bname].local.items():
+            node = (bname, m)
+            if node == ref[bname]:
+                continue
+            start = origin if ref[bname][1] == ORIGIN else ref[bname][1]
+            tid = terms.add(ang, -1, math.hypot(lx, ly), math.atan2(ly, lx) + off, f"{start}→{m} ({bname})")
+            G.add_edge(ref[bname], node, terms=((tid, 1.0),), start=ref[bname], kind="link")
+
+
+def _add_slider_edges(
+    mech: Mechanism,
+    bodies: dict[str, Body],
+    G: nx.Graph,
+    terms: Terms,
+    ref: dict[str, tuple[str, str]],
+    owner: dict[str, tuple[int, float]],
+) -> list[float]:
+    """Guide → block edges: s along the axis plus the sliding line's constant offset. Returns each s at t = 0."""
+    coords_s = []
+    for i, sl in enumerate(mech.sliders.values()):
+        g = bodies[sl.guide]
+        ang, _ = owner[sl.guide]
+        px, py = mech.joints[sl.joint]
+        dx, dy = px - g.origin[0], py - g.origin[1]
+        cg, sg = math.cos(g.theta0), math.sin(g.theta0)
+        lx, ly = cg * dx + sg * dy, -sg * dx + cg * dy
+        alpha = math.atan2(sl.axis[1], sl.axis[0]) - g.theta0
+        s0 = lx * math.cos(alpha) + ly * math.sin(alpha)
+        e = -lx * math.sin(alpha) + ly * math.cos(alpha)
+        coords_s.append(s0)
+        edge = [(terms.add(ang, i, 0.0, alpha, f"s_{sl.name}"), 1.0)]
+        if abs(e) > 1e-15 * mech.scale:
+            edge.append((terms.add(ang, -1, e, alpha + math.pi / 2, f"offset of {sl.name}"), 1.0))
+        G.add_edge(ref[sl.guide], (sl.name, sl.joint), terms=tuple(edge), start=ref[sl.guide], kind="slider")
+    return coords_s
+
+
+def origin_name(mech: Mechanism) -> str:
+    """The world origin's display name: a ground joint placed there, else "O"."""
+    at_origin = [j for j in mech.links[mech.ground].joints if mech.joints[j] == (0.0, 0.0)]
+    return at_origin[0] if at_origin else "O"
+
+
+# ------------------------------------------------------------------ cycles
+
+
+def cycle_basis(G: nx.Graph) -> list[list]:
+    """Step 2: independent cycles (J − L + 1 of them), each as nodes in traversal order, in a canonical order.
+
+    Up to EXACT_BASIS_MAX_LOOPS loops: the exact minimum cycle basis (networkx, de Pina's algorithm),
+    whose cost grows like the cube of the size. Beyond: the shortest cycle through every edge (a
+    breadth-first search that stops at the first cycle, so near-linear for a linkage whose loops are
+    short), kept greedily by length while independent (GF(2) elimination on edge bitsets), completed
+    by fundamental cycles if needed. Both give short loops, which is what the block structure needs.
+    """
+    rank = G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
+    order = {n: i for i, n in enumerate(G.nodes)}
+    if rank <= EXACT_BASIS_MAX_LOOPS:
+        raw = [_walk_cycle(G, c) for c in nx.minimum_cycle_basis(G)]
+    else:
+        raw = _short_cycle_basis(G, rank)
+    cycles = [_canonical(c, order) for c in raw]
+    cycles.sort(key=lambda c: sorted(order[n] for n in c))
+    return cycles
+
+
+def _walk_cycle(G: nx.Graph, nodes: list) -> list:
+    """The cycle's nodes in traversal order (networkx returns them as a set-like list)."""
+    nodes = list(nodes)
+    if all(G.has_edge(u, v) for u, v in zip(nodes, nodes[1:] + nodes[:1], strict=True)):
+        return nodes
+    H = G.subgraph(nodes)
+    walk, prev = [nodes[0]], None
+    while len(walk) < len(nodes):
+        nxt = next(n for n in H.neighbors(walk[-1]) if n != prev and n not in walk)
+        prev = walk[-1]
+        walk.append(nxt)
+    return walk
+
+
+def _canonical(nodes: list, order: dict) -> list:
+    """Start from the cycle's lowest node and go the canonical way round."""
+    k = min(range(len(nodes)), key=lambda i: order[nodes[i]])
+    nodes = nodes[k:] + nodes[:k]
+    if len(nodes) > 2 and order[nodes[1]] > order[nodes[-1]]:
+        nodes = [nodes[0], *reversed(nodes[1:])]
+    return nodes
+
+
+def _short_cycle_basis(G: nx.Graph, rank: int) -> list[list]:
+    """The shortest cycle through each non-tree edge of a breadth-first forest, kept greedily by length while
+    independent; fundamental cycles complete the basis if some of them coincide."""
+    edge_id = {frozenset(e): i for i, e in enumerate(G.edges)}
+    adjacency = {n: list(G.adj[n]) for n in G.nodes}
+    fundamental = _fundamental_cycles(G)
+    candidates = []
+    for cyc in fundamental:  # each closes on one non-tree edge (its last and first nodes)
+        path = _shortest_path_avoiding(adjacency, cyc[-1], cyc[0])
+        candidates.append(path if path is not None else cyc)
+    candidates.sort(key=len)
+    basis: dict[int, int] = {}  # pivot bit → reduced bitset, for independence tests
+    chosen: list[list] = []
+    for cyc in candidates + fundamental:
+        if _insert(basis, _bits(cyc, edge_id)):
+            chosen.append(cyc)
+            if len(chosen) == rank:
+                break
+    return chosen
+
+
+def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
+    """The shortest path v → ... → u not using the edge (u, v) (with that edge: the shortest cycle through it)."""
+    prev = {v: None}
+    queue = deque([v])
+    while queue:
+        x = queue.popleft()
+        for y in adjacency[x]:
+            if y in prev or (x == v and y == u):
+                continue
+            prev[y] = x
+            if y == u:
+                path = [u]
+                while prev[path[-1]] is not None:
+                    path.append(prev[path[-1]])
+                return path
+            queue.append(y)
+    return None
+
+
+def _fundamental_cycles(G: nx.Graph) -> list[list]:
+    """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space)."""
+    out = []
+    for comp in nx.connected_components(G):
+        root = next(iter(comp))
+        parent = {root: None}
+        depth = {root: 0}
+        for a, b in nx.bfs_edges(G, root):
+            parent[b], depth[b] = a, depth[a] + 1
+        tree = {frozenset((b, a)) for b, a in parent.items() if a is not None}
+        for a, b in G.subgraph(comp).edges:
+            if frozenset((a, b)) in tree:
+                continue
+            left, right = [a], [b]
+            while left[-1] != right[-1]:
+                if depth[left[-1]] >= depth[right[-1]]:
+                    left.append(parent[left[-1]])
+                else:
+                    right.append(parent[right[-1]])
+            out.append(left + list(reversed(right[:-1])))
+    return out
+
+
+def _bits(cycle: list, edge_id: dict) -> int:
+    b = 0
+    for x, y in zip(cycle, cycle[1:] + cycle[:1], strict=True):
+        b ^= 1 << edge_id[frozenset((x, y))]
+    return b
+
+
+def _insert(basis: dict[int, int], bits: int) -> bool:
+    """Reduce ``bits`` by the basis (GF(2)); keep it if independent. Returns whether it was kept."""
+    while bits:
+        top = bits.bit_length() - 1
+        if top not in basis:
+            basis[top] = bits
+            return True
+        bits ^= basis[top]
+    return False
+
+
+# ------------------------------------------------------------------ paths
+
+
+def point_paths(G: nx.Graph, mech: Mechanism, n_terms: int) -> np.ndarray:
+    """Step 4: every joint/point's position as a sum of terms along a breadth-first tree from the origin.
+
+    Returns (n_terms, n_points) coefficients (±1, 0): position = z @ path.
+    """
+    points = mech.tracked_points
+    root = (mech.ground, ORIGIN)
+    coeff: dict[tuple[str, str], dict[int, float]] = {root: {}}
+    for u, v in nx.bfs_edges(G, root):
+        data = G.edges[u, v]
+        sign = 1.0 if data["start"] == u else -1.0
+        c = dict(coeff[u])
+        for tid, s in data["terms"]:
+            c[tid] = c.get(tid, 0.0) + sign * s
+        coeff[v] = c
+    path = np.zeros((n_terms, len(points)))
+    for k, p in enumerate(points):
+        for tid, s in coeff[(mech.body_of_point(p), p)].items():
+            path[tid, k] = s
+    return path
+
+
+# ------------------------------------------------------------------ loops
+
+
+@dataclass(frozen=True)
+class Loop:
+    """One vector loop: its traversal, terms with signs, and the variables it involves."""
+
+    index: int
+    label: str  # joints along the loop, e.g. "O–A–B"
+    nodes: tuple[tuple[str, str], ...]  # (body, joint) along the traversal
+    terms: tuple[int, ...]
+    signs: tuple[float, ...]
+    variables: tuple[int, ...]  # variable ids involved (angles and sliders)
+
+
+def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tuple[tuple[Loop, ...], np.ndarray]:
+    """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal)."""
+    ang, sl, r, _ = mg.terms.arrays()
+    na = len(mg.angle_links)
+    C = np.zeros((len(cycles), len(r)))
+    loops = []
+    for li, cyc in enumerate(cycles):
+        walk: list[int] = []  # terms in traversal order, as the paper writes a loop
+        for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
+            data = mg.G.edges[u, v]
+            sign = 1.0 if data["start"] == u else -1.0
+            for tid, s in data["terms"]:
+                C[li, tid] += sign * s
+                walk.append(tid)
+        C[li, (r == 0) & (sl < 0)] = 0.0  # zero-length vectors (coincident pins) add nothing
+        used = np.array([t for t in dict.fromkeys(walk) if C[li, t] != 0], int)
+        variables: set[int] = set()
+        for tid in used:
+            if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0):
+                variables.add(int(ang[tid]))
+            if sl[tid] >= 0:
+                variables.add(na + int(sl[tid]))
+        label = loop_label(cyc, mech)
+        loops.append(
+            Loop(li, label, tuple(cyc), tuple(int(t) for t in used), tuple(C[li, used]), tuple(sorted(variables)))
+        )
+    return tuple(loops), C
+
+
+def loop_label(cyc: list, mech: Mechanism) -> str:
+    """Joint names along the loop; the world origin takes the name of a ground joint placed there."""
+    origin = origin_name(mech)
+    names: list[str] = []
+    for _, j in cyc:
+        n = origin if j == ORIGIN else j
+        if not names or names[-1] != n:
+            names.append(n)
+    if len(names) > 1 and names[0] == names[-1]:
+        names.pop()
+    return "–".join(names)

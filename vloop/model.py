@@ -1,0 +1,316 @@
+"""What a mechanism is: plain, immutable data (read from a file by :mod:`vloop.fileformat`).
+
+Conventions (see README "Mechanism file"):
+
+* Lengths in the file's units (SI by default), angles in radians, CCW positive from +x.
+* Joint coordinates describe the assembly at t = 0.
+* A *body* is a rigid part: the ground, every link, and one block per slider.
+  A joint named by k bodies is a revolute pin of order k − 1.
+* A link's θ is the direction from its first to its second listed joint; a
+  one-joint link that guides a slider takes that slider's axis as its θ
+  direction; a slider block's θ is its axis direction.
+* A slider's s is the signed distance of its joint along the axis from the
+  guide's origin (world origin for ground, the guide's first joint otherwise).
+
+Everything here describes the input; nothing here solves the motion, so every
+engine (vloop and the validators) reads the same :class:`Mechanism`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Link:
+    """A rigid link. ``length`` is an optional stated length (binary links only)."""
+
+    name: str
+    joints: tuple[str, ...]
+    ground: bool = False
+    length: float | None = None
+
+
+@dataclass(frozen=True)
+class Slider:
+    """A block carrying pin ``joint`` that slides along ``axis`` (unit, world, t = 0) of ``guide``."""
+
+    name: str
+    joint: str
+    guide: str
+    axis: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Point:
+    """A tracer point fixed to ``link`` (a link or a slider block), at ``at`` when t = 0."""
+
+    name: str
+    link: str
+    at: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A tabulated input: times ``t`` and values ``x`` (θ [rad] or s), optional rates."""
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray | None = None
+    a: np.ndarray | None = None
+    source: str = "inline"
+
+
+@dataclass(frozen=True)
+class Driver:
+    """One input of the mechanism.
+
+    ``kind == "crank"``: ``target`` is a link turned about ``pivot`` (its first
+    joint); the input is the link's absolute θ.
+    ``kind == "slider"``: ``target`` is a slider; the input is its s.
+    Without a profile: x(t) = x0 + v0·t + a0·t²/2 (t from 0, the coordinates' instant).
+    """
+
+    kind: str
+    target: str
+    x0: float
+    v0: float = 0.0
+    a0: float = 0.0
+    pivot: str | None = None
+    profile: Profile | None = None
+    entry: str = "drivers"
+
+    @property
+    def symbol(self) -> str:
+        return f"θ_{self.target}" if self.kind == "crank" else f"s_{self.target}"
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body as every engine sees it.
+
+    ``origin`` is the world position of the body frame origin at t = 0 and
+    ``theta0`` the frame's angle at t = 0; ``local`` maps each joint/point on the
+    body to its coordinates in the body frame. For a link the frame origin is its
+    first joint and the x axis points to its second (θ convention above); for the
+    ground the frame is the world frame; for a block, origin at its joint and x
+    along the slider axis.
+    """
+
+    name: str
+    kind: str  # "ground" | "link" | "block"
+    joints: tuple[str, ...]
+    origin: tuple[float, float]
+    theta0: float
+    local: dict[str, tuple[float, float]]
+    guide: str | None = None  # blocks: the guide body
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """Mass [kg], inertia [kg·m²] about the centre of mass, and the centre of mass (x, y) in world
+    coordinates at t = 0 [the file's length units]."""
+
+    mass: float
+    inertia: float
+    com: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class LoadProfile:
+    """A tabulated load: times ``t`` [s] and ``values`` (rows; columns ``fx, fy`` [N] or ``torque`` [N·m]),
+    linearly interpolated between rows."""
+
+    t: np.ndarray
+    values: np.ndarray
+    columns: tuple[str, ...]
+    source: str = "inline"
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, LoadProfile)
+            and self.columns == other.columns
+            and np.array_equal(self.t, other.t)
+            and np.array_equal(self.values, other.values)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
+class Load:
+    """An external load on a moving body.
+
+    ``kind == "force"``: ``value`` = (fx, fy) [N, world frame] applied at joint/point ``point`` of
+    body ``body``; ``kind == "torque"``: ``value`` = τ [N·m, CCW positive] on ``body``. With a
+    ``profile`` the value follows the table over time (``value`` is then None).
+    """
+
+    kind: str
+    body: str
+    value: tuple[float, float] | float | None
+    point: str | None = None
+    profile: LoadProfile | None = None
+    entry: str = "loads"
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A planar linkage as described by its file. Immutable; engines read it."""
+
+    name: str
+    joints: dict[str, tuple[float, float]]
+    links: dict[str, Link]
+    sliders: dict[str, Slider]
+    points: dict[str, Point]
+    drivers: tuple[Driver, ...]
+    times: np.ndarray
+    title: str = ""
+    units: str = "m"
+    source: str = ""
+    options: dict[str, Any] = field(default_factory=dict)
+    # kinetostatics (README "Masses and loads"): bodies without an entry are massless
+    masses: dict[str, MassProperties] = field(default_factory=dict)
+    gravity: tuple[float, float] | None = None  # m/s², world frame
+    loads: tuple[Load, ...] = ()
+
+    # ----- derived views (pure functions of the description) -----
+    @property
+    def ground(self) -> str:
+        return next(n for n, lk in self.links.items() if lk.ground)
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        """Ground first, then links in file order, then slider blocks."""
+        return (self.ground, *(n for n, lk in self.links.items() if not lk.ground), *self.sliders)
+
+    @property
+    def moving_links(self) -> tuple[str, ...]:
+        """Every body with a θ in the output: moving links then slider blocks."""
+        return self.body_names[1:]
+
+    @property
+    def tracked_points(self) -> tuple[str, ...]:
+        """Every joint and tracer point (output order: joints, then points)."""
+        return (*self.joints, *self.points)
+
+    def bodies_at(self, joint: str) -> tuple[str, ...]:
+        """Bodies that name ``joint`` (a slider block names its own joint)."""
+        out = [n for n, lk in self.links.items() if joint in lk.joints]
+        out += [s.name for s in self.sliders.values() if s.joint == joint]
+        return tuple(out)
+
+    def body_of_point(self, name: str) -> str:
+        """The body that carries a joint/point for position purposes (first naming body)."""
+        if name in self.points:
+            return self.points[name].link
+        return self.bodies_at(name)[0]
+
+    def pin_order(self, joint: str) -> int:
+        return max(len(self.bodies_at(joint)) - 1, 0)
+
+    def gruebler(self) -> tuple[int, int, int]:
+        """(L, J, M): bodies incl. ground, full joints (pins of order k count k, sliders 1), mobility."""
+        n_bodies = len(self.body_names)
+        n_joints = sum(self.pin_order(j) for j in self.joints) + len(self.sliders)
+        return n_bodies, n_joints, 3 * (n_bodies - 1) - 2 * n_joints
+
+    def bodies(self) -> dict[str, Body]:
+        """Body frames and local joint coordinates (stated binary-link lengths applied)."""
+        return _bodies(self)
+
+    @cached_property
+    def scale(self) -> float:
+        """A length scale: the diagonal of the bounding box of all joints/points at t = 0."""
+        pts = np.array([*self.joints.values(), *(p.at for p in self.points.values())], float)
+        if len(pts) < 2:
+            return 1.0
+        span = np.ptp(pts, axis=0)
+        return float(max(math.hypot(*span), 1e-300))
+
+
+# ---------------------------------------------------------------- bodies
+
+
+def _angle(v: tuple[float, float]) -> float:
+    return math.atan2(v[1], v[0]) % (2 * math.pi)
+
+
+def _bodies(m: Mechanism) -> dict[str, Body]:
+    out: dict[str, Body] = {}
+    guided: dict[str, list[Slider]] = {}
+    for s in m.sliders.values():
+        guided.setdefault(s.guide, []).append(s)
+
+    def pos(name: str) -> tuple[float, float]:
+        return m.points[name].at if name in m.points else m.joints[name]
+
+    def on_body(body: str, joints: tuple[str, ...]) -> tuple[str, ...]:
+        return joints + tuple(p.name for p in m.points.values() if p.link == body)
+
+    for name, lk in m.links.items():
+        members = on_body(name, lk.joints)
+        if lk.ground:
+            out[name] = Body(name, "ground", lk.joints, (0.0, 0.0), 0.0, {j: pos(j) for j in members})
+            continue
+        o = pos(lk.joints[0])
+        if len(lk.joints) >= 2:
+            p1 = pos(lk.joints[1])
+            th = _angle((p1[0] - o[0], p1[1] - o[1]))
+        else:
+            th = _angle(guided[name][0].axis)
+        c, s = math.cos(th), math.sin(th)
+        local = {}
+        for j in members:
+            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            local[j] = (c * dx + s * dy, -s * dx + c * dy)
+        if len(lk.joints) >= 2:  # the x axis points at the second joint by definition
+            local[lk.joints[1]] = (lk.length if lk.length is not None else math.dist(o, pos(lk.joints[1])), 0.0)
+        out[name] = Body(name, "link", lk.joints, o, th, local)
+    for name, sl in m.sliders.items():
+        o = pos(sl.joint)
+        th = _angle(sl.axis)
+        c, s = math.cos(th), math.sin(th)
+        local = {}
+        for j in on_body(name, (sl.joint,)):
+            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            local[j] = (c * dx + s * dy, -s * dx + c * dy)
+        out[name] = Body(name, "block", (sl.joint,), o, th, local, guide=sl.guide)
+    return out
+
+
+# ---------------------------------------------------------------- units and mobility
+
+# Length units the force analysis knows (factor to metres): masses are in kg, forces in N, so the
+# file's lengths must be converted; a file with masses or loads in other units is refused.
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
+
+
+def length_factor(units: str) -> float:
+    """Metres per length unit of the file (KeyError for a unit vloop does not know)."""
+    return LENGTH_UNITS[units.strip().lower()]
+
+
+def mobility_message(mech: Mechanism, rank_note: str = "") -> str:
+    """The one-line explanation of a mobility mismatch: Gruebler's count against the drivers given."""
+    L, J, M = mech.gruebler()
+    n = len(mech.drivers)
+    if M <= 0:
+        meaning = (
+            "it is a rigid structure"
+            if M == 0
+            else f"it is over-constrained by {-M} (a statically indeterminate structure)"
+        )
+        hint = "it cannot move: check the joints and sliders"
+    else:
+        meaning = f"it has {M} independent degree{'s' if M > 1 else ''} of freedom"
+        hint = f"give exactly {M} driver{'s' if M > 1 else ''}" if n < M else "remove a driver"
+    return (
+        f"{mech.source}: [drivers] mobility mismatch: Gruebler M = 3(L-1) - 2J = 3({L}-1) - 2*{J} = {M}, "
+        f"so {meaning}, but {n} driver{'s are' if n != 1 else ' is'} given{rank_note}; {hint}"
+    )

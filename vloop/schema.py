@@ -1,0 +1,331 @@
+"""The mechanism file's schema, in one place: every section, key, type, default and unit.
+
+The readers (:mod:`vloop.fileformat`) accept exactly these keys, and the README's file-format
+table is generated from them (:func:`markdown`; a test keeps the two equal), so the
+documentation cannot drift from what is accepted. The value checks every reader shares live
+here too: finite numbers (10**400, nan, inf, strings and booleans refused), coordinate pairs,
+directions normalised without overflow, and names safe in CSV headers, file names and HTML.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from .errors import MechanismError
+
+NAME_MAX = 64
+_NAME = re.compile(r"[^\W_][\w-]*|_[\w-]*")  # letters, digits, '_' and '-' (Unicode letters and digits too)
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a section: its type, default, unit and meaning (``example``: a valid value, for tests)."""
+
+    name: str
+    type: str
+    default: str
+    unit: str
+    doc: str
+    example: Any = None
+
+
+@dataclass(frozen=True)
+class Section:
+    """A section of the file (``form`` shows how it is written) and the keys of each entry."""
+
+    name: str
+    form: str
+    doc: str
+    keys: tuple[Key, ...]
+
+    @property
+    def allowed(self) -> set[str]:
+        return {k.name for k in self.keys}
+
+
+MASS_KEYS = (
+    Key("mass", "number ≥ 0", "0 (massless)", "kg", "mass of the body", 1.5),
+    Key("inertia", "number ≥ 0", "0", "kg·m²", "moment of inertia about the centre of mass", 0.02),
+    Key("com", "[x, y]", "mean of the body's joints", "length", "centre of mass at t = 0, world frame", [1.0, 1.0]),
+)
+
+SECTIONS: tuple[Section, ...] = (
+    Section(
+        "file",
+        "top level",
+        "what the mechanism is called and its units",
+        (
+            Key(
+                "name",
+                "name-like string",
+                "the file's name",
+                "",
+                "the mechanism's name (messages, output folder)",
+                "m1",
+            ),
+            Key("title", "string", '""', "", "a title for reports and plots", "A four-bar"),
+            Key("units", "string", '"m"', "", "length unit (m, cm, mm, km, in, ft for forces)", "m"),
+            Key("gravity", "[gx, gy]", "none", "m/s²", "gravitational acceleration, world frame", [0.0, -9.81]),
+        ),
+    ),
+    Section(
+        "joints",
+        "[joints] NAME = [x, y]",
+        "every pin or slider point at t = 0",
+        (Key("NAME", "[x, y]", "required", "length", "position at t = 0", [0.0, 0.0]),),
+    ),
+    Section(
+        "links",
+        "[links] NAME = { ... }",
+        "rigid links; exactly one is the ground",
+        (
+            Key(
+                "joints",
+                "list of joint names",
+                "required",
+                "",
+                "the link's joints; θ runs from the first to the second",
+                None,
+            ),
+            Key("ground", "bool", "false", "", "this link is the frame", None),
+            Key("length", "number > 0", "from the coordinates", "length", "stated length (binary links only)", None),
+            *MASS_KEYS,
+        ),
+    ),
+    Section(
+        "sliders",
+        "[sliders] NAME = { ... }",
+        "a block carrying pin `joint`, sliding along `axis` of `guide`",
+        (
+            Key("joint", "joint name", "required", "", "the pin the block carries", None),
+            Key("guide", "link name", '"ground"', "", "the guide (a moving link: an inverse slider)", None),
+            Key("axis", "[ux, uy]", "required", "", "sliding direction at t = 0 (normalised)", None),
+            *MASS_KEYS,
+        ),
+    ),
+    Section(
+        "points",
+        "[points] NAME = { ... }",
+        "tracer points fixed to a link or slider block",
+        (
+            Key("link", "link or slider name", "required", "", "the body carrying the point", None),
+            Key("at", "[x, y]", "required", "length", "position at t = 0", None),
+        ),
+    ),
+    Section(
+        "crank",
+        "[[drivers]] with link = ...",
+        "a driven link: θ(t) = theta0 + omega·t + alpha·t²/2",
+        (
+            Key("link", "link name", "required", "", "the driven link", None),
+            Key("pivot", "joint name", "the link's first joint", "", "must be the link's first joint", None),
+            Key("theta0", "number", "the coordinates' angle", "rad", "θ at t = 0", 0.5),
+            Key("omega", "number", "0", "rad/s", "angular velocity at t = 0", 2.0),
+            Key("alpha", "number", "0", "rad/s²", "angular acceleration", 0.1),
+            Key("profile", "CSV path or table", "none", "", "columns t, theta[, omega, alpha] instead", None),
+        ),
+    ),
+    Section(
+        "actuator",
+        "[[drivers]] with slider = ...",
+        "a driven slider: s(t) = s0 + v·t + a·t²/2",
+        (
+            Key("slider", "slider name", "required", "", "the driven slider", None),
+            Key("s0", "number", "from the coordinates", "length", "s at t = 0", None),
+            Key("v", "number", "0", "length/s", "velocity", None),
+            Key("a", "number", "0", "length/s²", "acceleration", None),
+            Key("profile", "CSV path or table", "none", "", "columns t, s[, v, a] instead", None),
+        ),
+    ),
+    Section(
+        "time",
+        "[time]",
+        "the samples: start + k·step up to and including stop, or an explicit list",
+        (
+            Key("start", "number", "0", "s", "first sample", 0.0),
+            Key("stop", "number", "required", "s", "last sample (within half a step)", 1.0),
+            Key("step", "number > 0", "required", "s", "sample spacing", 0.1),
+            Key("times", "list of numbers", "none", "s", "explicit, strictly increasing samples instead", None),
+        ),
+    ),
+    Section(
+        "solver",
+        "[solver]",
+        "how the motion is solved",
+        (
+            Key(
+                "method",
+                '"auto" | "newton"',
+                '"auto"',
+                "",
+                "closed-form dyads where possible, or Newton only",
+                "newton",
+            ),
+            Key("tol", "0 < number < 1", "1e-12", "", "Newton step tolerance, relative", 1e-11),
+            Key("rtol", "0 < number < 1", "1e-9", "", "accuracy asked of every output (refuses samples beyond)", 1e-8),
+            Key("max_iter", "integer ≥ 1", "30", "", "Newton iterations per sample", 40),
+            Key("assembly_tolerance", "0 < number < 1", "1e-3", "", "t = 0 closure accepted, fraction of size", 2e-3),
+            Key(
+                "branches",
+                "{ N = choice }",
+                "none",
+                "",
+                'per loop N: "open", "crossed", "flip", "keep" at t = 0',
+                {"1": "keep"},
+            ),
+            Key(
+                "change_points",
+                "{ N = choice }",
+                '"smooth"',
+                "",
+                'per loop N: "smooth" or "other" (or a list)',
+                {"1": "smooth"},
+            ),
+            Key(
+                "memory_budget",
+                'bytes or "2G"',
+                "half the free memory",
+                "bytes",
+                "refuse a run estimated to need more (README: Big runs)",
+                "4G",
+            ),
+        ),
+    ),
+    Section(
+        "loads",
+        "[[loads]]",
+        "external loads (kinetostatics)",
+        (
+            Key("point", "joint or point name", "none", "", "where a force acts", None),
+            Key("link", "link or slider name", "the point's body", "", "the body a force or torque acts on", None),
+            Key("force", "[fx, fy]", "none", "N", "constant force, world frame", None),
+            Key("torque", "number", "none", "N·m", "constant torque, CCW positive", None),
+            Key("profile", "CSV path or table", "none", "", "columns t, fx, fy (force) or t, torque instead", None),
+        ),
+    ),
+)
+
+SECTION = {s.name: s for s in SECTIONS}
+TOP_LEVEL = SECTION["file"].allowed | {"joints", "links", "sliders", "points", "drivers", "time", "solver", "loads"}
+
+
+def markdown() -> str:
+    """The file format as Markdown tables, one per section (the README's copy must equal this)."""
+    out = []
+    for s in SECTIONS:
+        out.append(f"**{s.form}** — {s.doc}\n")
+        out.append("| key | type | default | unit | meaning |")
+        out.append("|---|---|---|---|---|")
+        for k in s.keys:
+            out.append(f"| `{k.name}` | {k.type} | {k.default} | {k.unit or '—'} | {k.doc} |")
+        out.append("")
+    return "\n".join(out).rstrip() + "\n"
+
+
+# ---------------------------------------------------------------- problems and values
+
+
+class Problems:
+    """Collects every problem found in one validation stage, raised as one message."""
+
+    def __init__(self, where: str) -> None:
+        self.where = where
+        self.items: list[tuple[str, str]] = []
+
+    def add(self, entry: str, msg: str) -> None:
+        self.items.append((entry, msg))
+
+    def raise_if_any(self) -> None:
+        if self.items:
+            entry = self.items[0][0]
+            text = "; ".join(f"[{e}] {m}" for e, m in self.items[:8])
+            more = f" (and {len(self.items) - 8} more)" if len(self.items) > 8 else ""
+            raise MechanismError(f"{self.where}: {text}{more}", entry=entry)
+
+
+def show(value: Any, limit: int = 60) -> str:
+    """A short, safe repr of a user value for a message (deep nesting, huge strings, control characters)."""
+    try:
+        text = repr(value)
+    except (RecursionError, ValueError):
+        text = f"<{type(value).__name__} nested too deeply>"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def check_keys(table: dict, section: str, entry: str, probs: Problems, extra: set[str] | None = None) -> None:
+    """Every key of ``table`` must be one of the section's (plus ``extra``)."""
+    allowed = SECTION[section].allowed | (extra or set())
+    for k in table:
+        if k not in allowed:
+            probs.add(entry, f"unknown key {show(k)} (allowed: {', '.join(sorted(allowed))})")
+
+
+def real(value: Any, what: str, entry: str, probs: Problems) -> float | None:
+    """A finite real number, or None after recording why not (bools, strings, 10**400, nan, inf)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        probs.add(entry, f"'{what}' must be a number, got {show(value)}")
+        return None
+    try:
+        x = float(value)
+    except OverflowError:
+        probs.add(entry, f"'{what}' is too large for a floating-point number ({len(str(abs(value)))} digits)")
+        return None
+    if not math.isfinite(x):
+        probs.add(entry, f"'{what}' is not finite ({show(value)}): non-finite values are refused")
+        return None
+    return x + 0.0  # -0.0 → 0.0
+
+
+def number(table: dict, key: str, entry: str, probs: Problems, default: float | None = None) -> float | None:
+    """``table[key]`` as a finite number, ``default`` if absent (or after recording a problem)."""
+    if key not in table:
+        return default
+    x = real(table[key], key, entry, probs)
+    return default if x is None else x
+
+
+def pair(value: Any, what: str, entry: str, probs: Problems) -> tuple[float, float] | None:
+    """A pair of finite numbers [x, y]."""
+    if not isinstance(value, list) or len(value) != 2:
+        probs.add(entry, f"expected a pair of numbers [x, y] for '{what}', got {show(value)}")
+        return None
+    xy = [real(v, what, entry, probs) for v in value]
+    return None if None in xy else (xy[0], xy[1])  # type: ignore[return-value]
+
+
+def direction(value: Any, what: str, entry: str, probs: Problems) -> tuple[float, float] | None:
+    """A unit direction from a pair: scaled by its largest component first, so huge or tiny ones neither
+    overflow nor underflow; a zero (or subnormal-only) pair is refused."""
+    xy = pair(value, what, entry, probs)
+    if xy is None:
+        return None
+    big = max(abs(xy[0]), abs(xy[1]))
+    if big < 1e-300:
+        probs.add(entry, f"{what} has zero length")
+        return None
+    x, y = xy[0] / big, xy[1] / big
+    n = math.hypot(x, y)
+    return x / n, y / n
+
+
+def name_problem(name: Any) -> str | None:
+    """Why a name is refused (None if it is fine): letters, digits, '_' and '-' only, at most 64 characters,
+    so every name is safe as a CSV header, a file name, an HTML id and in a message."""
+    if not isinstance(name, str) or not name:
+        return f"a name must be a non-empty string, got {show(name)}"
+    if len(name) > NAME_MAX:
+        return f"name {show(name, 30)} is longer than {NAME_MAX} characters"
+    if not _NAME.fullmatch(name):
+        return (
+            f"name {show(name)} may use only letters, digits, '_' and '-' (it becomes a column name "
+            f"such as {_clip(name)}.x in results.csv)"
+        )
+    return None
+
+
+def _clip(name: str) -> str:
+    safe = "".join(c if c.isprintable() else "?" for c in name)
+    return safe[:20]

@@ -1,0 +1,393 @@
+"""The interactive viewer: one self-contained, offline HTML page per run.
+
+The page is a pure function of (Mechanism, Result[, forces][, error message]). The geometry is
+serialized once — bodies in their local frames (plates, bars, slots), pins, ground pivots,
+slider blocks and guides, the vector loops as (link, slider, r, δ) terms with their equations —
+and per sample only the Result's own columns (body poses are read from them: a link's frame is
+its first joint and its θ), so the numbers panel shows every sample's exact values. The columns
+travel as little-endian float64, byte-shuffled, deflated and base64-encoded (the browser inflates
+them with its built-in ``DecompressionStream``): an eight-bar run of 5,000 samples is ~1.3 MB.
+
+The page's script and style live in ``vloop/viewer/`` and are inlined at render time; a
+Content-Security-Policy (``default-src 'none'``, the script allowed by its hash) forbids any
+network request from the page.
+
+``forces`` (optional, duck-typed): ``.t`` (the same samples), ``.columns`` (name → array; driver
+columns ``LINK.torque`` [N·m] / ``SLIDER.force`` [N], pin reactions ``JOINT:FROM>ON.fx|fy|mag`` [N],
+``SLIDER.normal``, ``SLIDER.moment``, ``shaking.fx|fy|moment``) and ``.arrows`` (list of
+``(point, fx_column, fy_column, label)``): reaction arrows at the joints and a driver plot.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import html
+import json
+import math
+import re
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import MotionError, VloopError
+from .geometry import equation_legend, loop_chains
+from .model import Mechanism
+from .result import Result
+
+ASSETS = Path(__file__).resolve().parent / "viewer"
+_PLACEHOLDER = re.compile(r"__CSP__|__TITLE__|__HEADING__|__NAME__|/\*__CSS__\*/|__DATA__|/\*__JS__\*/")
+FORMAT = 1
+MAX_SAMPLES = 200_000  # ~100 MB of page for a small mechanism: beyond this a browser struggles
+HEALTH = ("residual", "cond")
+BLOCK_SIZE = (0.08, 0.045)  # slider block length and height, fractions of the mechanism size
+
+
+class ViewError(VloopError):
+    """The page cannot be built from this data (the message names the quantity and sample)."""
+
+
+# ------------------------------------------------------------------ solving for a page
+
+
+def solve_for_view(mech: Mechanism) -> tuple[Result, str | None]:
+    """Solve the file's motion for a page: (Result, None), or (the samples before a stop, its message).
+
+    Where a motion stops before its first sample, the page shows the t = 0 assembly instead.
+    """
+    from .compiler import compile_system
+    from .solver import solve
+
+    _check_samples(mech.name, len(mech.times))  # before solving, not after
+    system = compile_system(mech)
+    try:
+        return solve(system), None
+    except MotionError as exc:
+        partial = exc.partial
+        if partial is None or not len(partial):
+            partial = solve(system, times=np.zeros(1))
+            return partial, f"{exc} (no requested sample could be solved: shown at the t = 0 assembly)"
+        return partial, str(exc)
+
+
+# ------------------------------------------------------------------ page data
+
+
+def build_payload(
+    mech: Mechanism, result: Result, *, forces: Any = None, error: str | None = None, system: Any = None
+) -> dict[str, Any]:
+    """Everything the page draws, as plain JSON-ready data (see the module docstring).
+
+    Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m.
+    """
+    from .compiler import compile_system
+
+    if not len(result):
+        raise ViewError(f"{mech.name}: the result has no sample to show")
+    _check_samples(mech.name, len(result))
+    system = system if system is not None else compile_system(mech)
+    names, matrix = _columns(mech, result, forces)
+    chains = loop_chains(system, result)
+    bodies = mech.bodies()
+    slots = _slots(mech, result, bodies)
+    return {
+        "format": FORMAT,
+        "name": mech.name,
+        "title": mech.title,
+        "units": mech.units,
+        "scale": mech.scale,
+        "error": error or None,
+        "samples": len(result),
+        "data": {"columns": names, "encoding": "f64le-shuffle-deflate-base64", "data": _pack(matrix)},
+        "bodies": [_body(mech, b, slots) for b in bodies.values()],
+        "joints": _joints(mech),
+        "labels": _label_directions(mech, result),
+        "sliders": [_slider(mech, name, slots[name]) for name in mech.sliders],
+        "block": [BLOCK_SIZE[0] * mech.scale, BLOCK_SIZE[1] * mech.scale],
+        "loops": [_loop(c) for c in chains],
+        "legend": equation_legend(system),
+        "links": [n for n, lk in mech.links.items() if not lk.ground],
+        "slider_names": list(mech.sliders),
+        "points": list(mech.tracked_points),
+        "tracers": list(mech.points),
+        "drivers": [{"kind": d.kind, "target": d.target, "symbol": d.symbol} for d in mech.drivers],
+        "forces": _forces_meta(mech, forces),
+    }
+
+
+def _check_samples(name: str, n: int) -> None:
+    if n > MAX_SAMPLES:
+        raise ViewError(
+            f"{name}: {n} samples; the viewer takes at most {MAX_SAMPLES} "
+            "(use a coarser [time] step; vloop run writes every sample to results.csv)"
+        )
+
+
+def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], np.ndarray]:
+    """Every column the page shows, checked finite: t, the Result's, health, forces (``force:NAME``)."""
+    names = ["t", *result.columns]
+    arrays = [result.t, *result.columns.values()]
+    for key in HEALTH:
+        if key in result.health:
+            names.append(f"health.{key}")
+            arrays.append(result.health[key])
+    if forces is not None:
+        _check_forces(mech, result, forces)
+        for key, col in forces.columns.items():
+            names.append(f"force:{key}")
+            arrays.append(col)
+    matrix = np.empty((len(names), len(result)))
+    for k, (name, arr) in enumerate(zip(names, arrays, strict=True)):
+        arr = _floats(mech, name, arr)
+        if arr.shape != (len(result),):
+            raise ViewError(f"{mech.name}: {name} has shape {arr.shape}, expected ({len(result)},)")
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if len(bad):
+            i = int(bad[0])
+            raise ViewError(f"{mech.name}: {name} is not finite at sample {i} (t = {result.t[i]:.6g} s): {arr[i]}")
+        matrix[k] = arr
+    return names, matrix
+
+
+def _pack(matrix: np.ndarray) -> str:
+    """float64 little-endian, column after column, byte-shuffled (byte k of every value together), deflated."""
+    raw = np.ascontiguousarray(matrix, dtype="<f8").view(np.uint8).reshape(-1, 8)
+    return base64.b64encode(zlib.compress(np.ascontiguousarray(raw.T).tobytes(), 9)).decode("ascii")
+
+
+def unpack(data: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The inverse of the page's data encoding (for tests and tools): column name → float64 array."""
+    raw = np.frombuffer(zlib.decompress(base64.b64decode(data["data"])), np.uint8)
+    values = raw.reshape(8, -1).T.copy().view("<f8").ravel()
+    n = len(values) // max(len(data["columns"]), 1)
+    return {name: values[k * n : (k + 1) * n] for k, name in enumerate(data["columns"])}
+
+
+def _body(mech: Mechanism, body: Any, slots: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """A body in its own frame: members (joints and points), the outline to draw, slots it carries."""
+    local = {k: [float(x), float(y)] for k, (x, y) in body.local.items()}
+    carried = [name for name, sl in mech.sliders.items() if sl.guide == body.name]
+    outline_pts = [tuple(p) for p in local.values()]
+    if body.kind == "link":  # a slotted link reaches over its slot
+        outline_pts += [tuple(p) for name in carried for p in slots[name]["ends"]]
+    return {
+        "name": body.name,
+        "kind": body.kind,
+        "origin": body.joints[0] if body.kind != "ground" else None,
+        "local": local,
+        "outline": _outline(outline_pts, mech.scale) if body.kind == "link" else [],
+        "slots": carried if body.kind == "link" else [],
+        "label": _label_point(local, mech.scale) if body.kind == "link" else None,
+    }
+
+
+def _outline(points: list[tuple[float, float]], scale: float) -> list[list[float]]:
+    """Convex hull (counter-clockwise) of a body's points; the two extreme points when they are collinear."""
+    pts = sorted(set(points))
+    if len(pts) <= 2:
+        return [list(p) for p in pts]
+
+    def cross(o: tuple, a: tuple, b: tuple) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower: list[tuple] = []
+    upper: list[tuple] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    hull = lower[:-1] + upper[:-1]
+    area = 0.5 * abs(sum(cross(hull[0], hull[i], hull[i + 1]) for i in range(1, len(hull) - 1)))
+    span = max(math.dist(a, b) for a in hull for b in hull)
+    if len(hull) < 3 or area < 0.02 * span * span:  # a thin sliver reads better as a bar
+        a, b = max(((a, b) for a in pts for b in pts), key=lambda ab: math.dist(*ab))
+        return [list(a), list(b)]
+    return [list(p) for p in hull]
+
+
+def _label_point(local: dict[str, list[float]], scale: float) -> list[float]:
+    """Where a link's name sits in its frame: beside its middle, off the bar, on its right-hand side
+    (the loop letters sit on the left of vectors that run along θ)."""
+    xs = [p[0] for p in local.values()]
+    ys = [p[1] for p in local.values()]
+    return [sum(xs) / len(xs), sum(ys) / len(ys) - 0.035 * scale]
+
+
+def _joints(mech: Mechanism) -> list[dict[str, Any]]:
+    """Every joint and tracer point: a pin (two or more bodies), a ground pivot, or a point of one body."""
+    ground = mech.links[mech.ground].joints
+    out = []
+    for name in mech.tracked_points:
+        bodies = list(mech.bodies_at(name)) if name in mech.joints else [mech.points[name].link]
+        kind = "pin" if len(bodies) >= 2 else "point"
+        out.append({"name": name, "kind": kind, "ground": name in ground and len(bodies) >= 2, "bodies": bodies})
+    return out
+
+
+def _label_directions(mech: Mechanism, result: Result) -> dict[str, list[float]]:
+    """A unit direction per point for its label: away from the mechanism's middle at the first sample."""
+    pos = {p: complex(result[f"{p}.x"][0], result[f"{p}.y"][0]) for p in mech.tracked_points}
+    centre = sum(pos.values()) / max(len(pos), 1)
+    out = {}
+    for p, z in pos.items():
+        d = z - centre
+        d = d / abs(d) if abs(d) > 1e-9 * mech.scale else 1j
+        out[p] = [d.real, d.imag]
+    return out
+
+
+def _slots(mech: Mechanism, result: Result, bodies: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Each slider's guide line in its guide's frame, over the travel of the run (plus the block and a margin)."""
+    from .geometry import body_poses
+
+    poses = body_poses(mech, result)
+    out = {}
+    for name, sl in mech.sliders.items():
+        g = bodies[sl.guide]
+        c0, s0 = math.cos(g.theta0), math.sin(g.theta0)
+        px, py = mech.joints[sl.joint][0] - g.origin[0], mech.joints[sl.joint][1] - g.origin[1]
+        through = (c0 * px + s0 * py, -s0 * px + c0 * py)  # the sliding line's point, guide frame
+        alpha = math.atan2(sl.axis[1], sl.axis[0]) - g.theta0
+        u = (math.cos(alpha), math.sin(alpha))
+        x, y, th = poses[sl.guide].T
+        dx, dy = result[f"{sl.joint}.x"] - x, result[f"{sl.joint}.y"] - y
+        lx, ly = np.cos(th) * dx + np.sin(th) * dy, -np.sin(th) * dx + np.cos(th) * dy
+        tau = (lx - through[0]) * u[0] + (ly - through[1]) * u[1]
+        reach = 0.5 * BLOCK_SIZE[0] * mech.scale + 0.04 * mech.scale
+        lo, hi = float(tau.min()) - reach, float(tau.max()) + reach
+        ends = [[through[0] + t * u[0], through[1] + t * u[1]] for t in (lo, hi)]
+        out[name] = {"guide": sl.guide, "ends": ends, "axis": list(u)}
+    return out
+
+
+def _slider(mech: Mechanism, name: str, slot: dict[str, Any]) -> dict[str, Any]:
+    sl = mech.sliders[name]
+    return {
+        "name": name,
+        "joint": sl.joint,
+        "guide": sl.guide,
+        "ground": mech.links[sl.guide].ground,
+        "ends": slot["ends"],
+        "axis": slot["axis"],
+    }
+
+
+def _loop(chain: Any) -> dict[str, Any]:
+    return {
+        "number": chain.number,
+        "label": chain.label,
+        "equation": chain.equation,
+        "start": chain.start,
+        "joints": [list(j) for j in chain.joints],
+        "vectors": [
+            {"letter": v.letter, "link": v.link, "slider": v.slider, "r": v.r, "delta": v.delta} for v in chain.vectors
+        ],
+    }
+
+
+# ------------------------------------------------------------------ forces
+
+
+def _check_forces(mech: Mechanism, result: Result, forces: Any) -> None:
+    """The forces belong to this run: the same samples, named columns, arrows at known points."""
+    t = _floats(mech, "forces.t", forces.t)
+    gap = np.max(np.abs(t - result.t), initial=0.0) if t.shape == result.t.shape else np.inf
+    if not gap <= 1e-9 * (1 + np.abs(result.t).max()):  # also refuses NaN
+        raise ViewError(f"{mech.name}: the forces are not given at the result's {len(result)} samples")
+    if not isinstance(forces.columns, dict) or not all(isinstance(k, str) for k in forces.columns):
+        raise ViewError(f"{mech.name}: forces.columns must map column names to arrays")
+    for k, arrow in enumerate(getattr(forces, "arrows", ())):
+        if not isinstance(arrow, (tuple, list)) or len(arrow) != 4 or not all(isinstance(a, str) for a in arrow):
+            raise ViewError(
+                f"{mech.name}: force arrow {k}: expected (point, fx column, fy column, label), got {arrow!r}"
+            )
+        point, fx, fy, _label = arrow
+        if point not in mech.tracked_points:
+            raise ViewError(f"{mech.name}: force arrow at {point!r}: no such joint or point")
+        for col in (fx, fy):
+            if col not in forces.columns:
+                raise ViewError(f"{mech.name}: force arrow at {point}: no column {col!r} in the forces")
+
+
+def _floats(mech: Mechanism, name: str, values: Any) -> np.ndarray:
+    try:
+        return np.asarray(values, float)
+    except (TypeError, ValueError, OverflowError):
+        raise ViewError(f"{mech.name}: {name} is not an array of numbers") from None
+
+
+def _force_unit(name: str) -> str:
+    return "N·m" if name.endswith((".torque", ".moment")) else "N"
+
+
+def _forces_meta(mech: Mechanism, forces: Any) -> dict[str, Any] | None:
+    if forces is None:
+        return None
+    cols = list(forces.columns)
+    drivers = []
+    for d in mech.drivers:
+        col = f"{d.target}.torque" if d.kind == "crank" else f"{d.target}.force"
+        if col in forces.columns:
+            what = "torque" if d.kind == "crank" else "force"
+            drivers.append({"column": col, "label": f"driver {what} on {d.target}", "unit": _force_unit(col)})
+    shaking = [c for c in ("shaking.fx", "shaking.fy") if c in forces.columns]
+    return {
+        "columns": cols,
+        "units": {c: _force_unit(c) for c in cols},
+        "arrows": [list(a) for a in getattr(forces, "arrows", ())],
+        "drivers": drivers,
+        "shaking": shaking,
+    }
+
+
+# ------------------------------------------------------------------ the page
+
+
+def _asset(name: str) -> str:
+    return (ASSETS / name).read_text(encoding="utf-8")
+
+
+def _json_for_script(data: dict[str, Any]) -> str:
+    """JSON that cannot close its <script> element nor start a comment (``<``, ``>``, ``&`` escaped)."""
+    text = json.dumps(data, allow_nan=False, ensure_ascii=False, separators=(",", ":"))
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
+def render(mech: Mechanism, result: Result, *, forces: Any = None, error: str | None = None, system: Any = None) -> str:
+    """The viewer page (one HTML string, no external resource)."""
+    payload = build_payload(mech, result, forces=forces, error=error, system=system)
+    script = _asset("viewer.js")
+    digest = base64.b64encode(hashlib.sha256(script.encode("utf-8")).digest()).decode("ascii")
+    csp = f"default-src 'none'; script-src 'sha256-{digest}'; style-src 'unsafe-inline'; img-src data:"
+    values = {
+        "__CSP__": html.escape(csp, quote=False).replace('"', "&quot;"),  # in a "…" attribute
+        "__TITLE__": html.escape(f"{mech.name} — vloop viewer"),
+        "__HEADING__": html.escape(mech.title or mech.name),
+        "__NAME__": html.escape(mech.name),
+        "/*__CSS__*/": _asset("viewer.css"),
+        "__DATA__": _json_for_script(payload),
+        "/*__JS__*/": script,
+    }
+    # one pass over the template: text put in is never searched again for placeholders
+    return _PLACEHOLDER.sub(lambda m: values[m.group(0)], _asset("page.html"))
+
+
+def write_view(
+    mech: Mechanism,
+    result: Result,
+    path: str | Path,
+    *,
+    forces: Any = None,
+    error: str | None = None,
+    system: Any = None,
+) -> Path:
+    """Write the viewer page to ``path`` atomically (through :mod:`vloop.output`) and return the path."""
+    from .output import write_text
+
+    return write_text(path, render(mech, result, forces=forces, error=error, system=system))
