@@ -112,7 +112,7 @@ def _system_of(mechanism: Mechanism, method: str | None) -> Any:
         return hit[1]
     system = compile_system(mechanism, method)
     try:
-        ref = weakref.ref(mechanism, lambda _, key=key: _SYSTEMS.pop(key, None))
+        ref = weakref.ref(mechanism, lambda _, key=key, systems=_SYSTEMS: systems.pop(key, None))
     except TypeError:  # not weak-referenceable: no cache
         return system
     _SYSTEMS[key] = (ref, system)

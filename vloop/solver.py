@@ -1084,18 +1084,15 @@ def join(parts: list[Result]) -> Result:
     )
 
 
-MARGIN_INPUT = 5 * STENCIL_INPUT  # a chunk's last rows within this input travel are solved again by the next chunk
-
-
 def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Result]:
     """Solve ``times`` in chunks of about ``chunk`` requested samples, yielding each chunk's Result.
 
     State carried across a chunk border: two internal rows (positions, unwrapped angles, so turn counts
     continue; change-point detection sees the border row with both neighbours), the change points found
-    so far and each Newton block's branch sign (in ``run``). A chunk's last rows, within MARGIN_INPUT of
-    input travel from its end, are not given out but solved again by the next chunk: a change point just
-    past the border (found by the next chunk) still reaches back to them, as in a run solved in one piece;
-    a failure among them is decided by a longer chunk. A failure raises MotionError whose ``partial``
+    so far and each Newton block's branch sign (in ``run``). A chunk's last rows that a change point just
+    past its end could still reach (ill-conditioned rows within its stencil: see _cut) are not given out
+    but solved again by the next chunk, as in a run solved in one piece; a failure there is decided by a
+    longer chunk. A failure raises MotionError whose ``partial``
     holds this chunk's rows before it (``sample`` counts from the start of the run)."""
     sys = run.sys
     lead, run.inputs, turns = _lead_in(sys, run, float(times[0]))
@@ -1116,8 +1113,9 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
             failure = None
         except MotionError as exc:
             res, failure = exc.partial, exc
-        cut = len(grid.out) - 1 if run.tail else _cut(run, grid)
-        if failure is not None and (run.tail or failure.sample is None or failure.sample - grid.offset <= cut):
+        reach = _border_reach(run, grid)
+        cut = len(grid.out) - 1 if run.tail else _cut(run, grid, res, reach)
+        if failure is not None and (run.tail or failure.time is None or failure.time <= reach):
             raise failure
         if not run.tail and (cut <= grid.skip or grid.out[cut] < 1):  # nothing safe from the chunk's end yet
             at_least = len(grid.out) - grid.skip + 1  # one more requested sample than this chunk had
@@ -1149,17 +1147,22 @@ def _chunk_grid(
     return dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
 
 
-def _cut(run: _Run, grid: _Grid) -> int:
-    """The last requested sample of a chunk (index into grid.out) at least MARGIN_INPUT of input travel
-    before the chunk's end."""
-    mech = run.sys.mechanism
-    if not mech.drivers:
-        return len(grid.out) - 1
-    X = run.inputs(grid.t[grid.out])[0]
-    units = np.array([1.0 if d.kind == "crank" else run.scale for d in mech.drivers])
-    left = np.max(np.abs(X - X[-1]) / units, axis=1)
-    far = np.nonzero(left >= MARGIN_INPUT)[0]
-    return int(far[-1]) if len(far) else -1
+def _border_reach(run: _Run, grid: _Grid) -> float:
+    """The earliest time a change point found after this chunk's end could still reach back to (its stencil,
+    4·η with η the time the inputs take to move STENCIL_INPUT)."""
+    t_end = float(grid.t[-1])
+    if not run.sys.mechanism.drivers:
+        return t_end
+    return t_end - 4.0 * _eta(run, t_end, math.inf, STENCIL_INPUT)
+
+
+def _cut(run: _Run, grid: _Grid, res: Result, reach: float) -> int:
+    """The last requested sample of a chunk (index into grid.out) that nothing after the chunk can change:
+    before the first sample that is ill-conditioned (next to a singular row: a change point found by
+    the next chunk would take its rates across) and within the reach of the chunk's end."""
+    weak = _error_bound(res.health["cond"]) > ILL_FRACTION * run.rtol
+    unsafe = np.nonzero(weak & (res.t > reach))[0]
+    return grid.skip + len(res) - 1 if not len(unsafe) else grid.skip + int(unsafe[0]) - 1
 
 
 def _rows(st: _State, k: slice) -> _State:
