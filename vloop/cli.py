@@ -1,4 +1,4 @@
-"""Command line: ``vloop run | view | loops | info | validate``. One function per command.
+"""Command line: ``vloop run | view | loops | info | validate | study``. One function per command.
 
 Exit codes: 0 success; 1 a validation that fails its tolerances; 2 bad input, an output that cannot be
 written, or a motion that cannot be completed (one line on stderr, no traceback; ``run`` still writes
@@ -451,6 +451,41 @@ def _table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+# ---------------------------------------------------------------- study
+
+
+def cmd_study(args: argparse.Namespace) -> int:
+    """Run a design study file: every variant solved (in this process, or on Dask), tables to Parquet in --out."""
+    from .output import default_folder
+    from .study import run
+    from .studyfile import load
+
+    spec = load(args.file)
+    out = Path(args.out) if args.out else default_folder(Path(args.file).stem)
+    res = run(spec, scheduler=args.scheduler, workers=args.workers)
+    files = res.write(out, plot=args.plot)
+    for line in _study_lines(res):
+        print(line)
+    print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _study_lines(res: Any) -> list[str]:
+    """The study in a few lines: counts, then per scalar output its nominal, linearized and Monte-Carlo spread."""
+    c = res.counts
+    lines = [
+        f"{res.spec.mechanism.name}: {c['variants']:,} variants ({c['completed']:,} completed, {c['stopped']:,} "
+        f"stopped, {c['not_assembled']:,} not assembled; {c['single_runs']:,} solved one by one) in {res.seconds:.2f} s"
+    ]
+    s = res.summary
+    for _, row in s[s["grid"] == 0].iterrows() if len(s) else ():
+        lines.append(
+            f"  {row['output']}: nominal {row['nominal']:.6g}, linearized σ {row['linearized_sigma']:.4g}, "
+            f"Monte-Carlo σ {row['mc_sigma']:.4g} ± {row['mc_sigma_error']:.2g}"
+        )
+    return lines
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
     p.add_argument("--version", action="version", version=f"vloop {__version__}")
@@ -518,6 +553,13 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="links, joints, pin orders, mobility, loops, Grashof class")
     _add_file(i)
     i.set_defaults(func=cmd_info)
+    st = sub.add_parser("study", help="a design study: grids and tolerances over many variants, with sensitivities")
+    st.add_argument("file", help="study file (TOML; README: Design studies)")
+    st.add_argument("--out", help="output folder (default: out/STUDY)")
+    st.add_argument("--plot", action="store_true", help="also write the pictures (bands, histograms, maps)")
+    st.add_argument("--scheduler", metavar="ADDRESS", help="run the chunks on this Dask scheduler (tcp://host:8786)")
+    st.add_argument("--workers", type=int, metavar="N", help="run the chunks on a local Dask cluster of N processes")
+    st.set_defaults(func=cmd_study)
     return p
 
 

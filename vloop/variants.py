@@ -80,7 +80,8 @@ def resolve(mech: Mechanism, name: object, entry: str) -> ParamRef:
             f"[{entry}] {_show(name)}: the section must be one of joints, points, links, sliders, drivers",
             entry=entry,
         )
-    return _RESOLVERS[section](mech, name, target, fld, entry)
+    ref = _RESOLVERS[section](mech, name, target, fld, entry)
+    return dataclasses.replace(ref, unit=ref.unit.replace("length", mech.units))
 
 
 def _resolve_joint(mech: Mechanism, name: str, target: str, fld: str, entry: str) -> ParamRef:
