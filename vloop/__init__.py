@@ -38,6 +38,7 @@ __all__ = [
     "solve",
     "solve_forces",
     "stroke",
+    "study",
     "time_ratio",
     "transmission_angles",
     "velocity_ratio",
@@ -55,6 +56,10 @@ def __getattr__(name: str) -> Any:
         from . import teaching
 
         return getattr(teaching, name)
+    if name == "study":  # design studies, imported on first use (by name: modules that import the package
+        import importlib  # for vloop.solve must not look as if they depended on the studies built on them)
+
+        return importlib.import_module(".studies", __name__).study
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")
 
 

@@ -35,13 +35,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .drivers import evaluate
-from .errors import MechanismError, MotionError, VloopError
+from .errors import MotionError, VloopError
 from .loops import Block, LoopSystem
 from .solver import DEFAULT_MAX_ITER, DEFAULT_RTOL, DEFAULT_TOL, EPS, ILL_FRACTION, MAX_INPUT_STEP, cross
 from .variants import Designs, VariantModel
 
 TWO_PI = 2.0 * math.pi
-ROWS = 1 << 16  # variants × internal samples solved together (the state stays in cache)
+# Variants × internal samples solved together. NumPy computes ``a * tmp`` in place as ``tmp * a`` when the
+# temporary is 256 KiB or more, and a complex product (fused multiply-add) is not bitwise symmetric: keeping
+# every complex (variants × samples) array below that size makes a variant's numbers independent of how many
+# variants it is solved with — the chunking never changes a number. (The state stays in cache, too.)
+ROWS = 16_000
 ASSEMBLY_STEPS = 16  # continuation steps from the nominal design to a variant (t = 0, Newton blocks)
 JUMP = 0.5  # a Newton correction beyond this fraction of the predicted move is not trusted
 CLOSURE = 1e-9  # a Newton row closes every equation to this fraction of the mechanism size
@@ -72,22 +76,7 @@ def make_grid(model: VariantModel, designs: Designs, times: np.ndarray) -> Grid:
     steps = np.ones(max(len(seq) - 1, 0), np.int64)
     mech = model.mechanism
     if mech.drivers and len(seq) > 1:
-        X, XD, _ = _inputs(model, designs, seq)
-        units = np.array([1.0 if d.kind == "crank" else mech.scale / TWO_PI for d in mech.drivers])
-        h = np.abs(np.diff(seq))[None, :, None]
-        travel = np.maximum(np.abs(np.diff(X, axis=1)), 0.5 * h * (np.abs(XD[:, 1:]) + np.abs(XD[:, :-1]))) / units
-        with np.errstate(invalid="ignore"):
-            need = np.ceil(np.nanmax(travel, axis=(0, 2)) / MAX_INPUT_STEP)
-        need = np.where(np.isfinite(need), need, 1.0)  # absurd inputs: those variants are refused later
-        allowed = MAX_GRID_FACTOR * len(times) + MAX_LEAD
-        if need.sum() > allowed:
-            raise MechanismError(
-                f"{mech.name}: the study's inputs move too far between samples (more than {math.degrees(MAX_INPUT_STEP):g}° "
-                f"per internal sample would need {int(need.sum()):,} samples for {len(times):,} requested): use more "
-                "samples or a [time] that starts nearer t = 0",
-                entry="time",
-            )
-        steps = np.maximum(need, 1).astype(np.int64)
+        steps = np.maximum(_steps_needed(model, designs, seq, lead), 1).astype(np.int64)
     starts = np.concatenate([[0], np.cumsum(steps)])
     k = np.arange(starts[-1])
     seg = np.repeat(np.arange(len(steps)), steps)
@@ -97,6 +86,27 @@ def make_grid(model: VariantModel, designs: Designs, times: np.ndarray) -> Grid:
     out = starts[1:] if lead else starts
     u = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(t)))])
     return Grid(t, out, u, times)
+
+
+def _steps_needed(model: VariantModel, designs: Designs, seq: np.ndarray, lead: bool) -> np.ndarray:
+    """Internal rows each interval of ``seq`` needs so that no variant's input moves more than MAX_INPUT_STEP per
+    row, capped at MAX_GRID_FACTOR (MAX_LEAD for a lead-in from t = 0): a variant whose inputs move farther is
+    left to the single-run solver (see _impose), which inserts its own rows. Evaluated in blocks of variants."""
+    mech = model.mechanism
+    units = np.array([1.0 if d.kind == "crank" else mech.scale / TWO_PI for d in mech.drivers])
+    h = np.abs(np.diff(seq))[None, :, None]
+    need = np.ones(len(seq) - 1)
+    per = max(1, ROWS // len(seq))
+    for lo in range(0, len(designs), per):
+        X, XD, _ = _inputs(model, designs.take(slice(lo, lo + per)), seq)
+        travel = np.maximum(np.abs(np.diff(X, axis=1)), 0.5 * h * (np.abs(XD[:, 1:]) + np.abs(XD[:, :-1]))) / units
+        with np.errstate(invalid="ignore"):
+            most = np.ceil(np.nanmax(travel, axis=(0, 2)) / MAX_INPUT_STEP)
+        need = np.maximum(need, np.where(np.isfinite(most), most, 1.0))  # absurd inputs: those variants go single
+    cap = np.full(len(need), float(MAX_GRID_FACTOR))
+    if lead:
+        cap[0] = MAX_LEAD
+    return np.minimum(need, cap)
 
 
 def _inputs(model: VariantModel, d: Designs, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -418,7 +428,9 @@ class _Newton:
         self.unit = np.where(self.is_angle, 1.0, TWO_PI / scale)
 
     def read(self, st: _State, vs: np.ndarray, k: int) -> np.ndarray:
-        return np.stack([st.TH[vs, k, v] if v < self.na else st.S[vs, k, v - self.na] for v in self.p.block.unknowns], 1)
+        return np.stack(
+            [st.TH[vs, k, v] if v < self.na else st.S[vs, k, v - self.na] for v in self.p.block.unknowns], 1
+        )
 
     def put(self, st: _State, vs: np.ndarray, k: int, x: np.ndarray) -> None:
         for u, v in enumerate(self.p.block.unknowns):
@@ -488,7 +500,9 @@ class _Newton:
         dv = d.take(vs)
         for what in ("v", "a"):
             sub = _Sub(st, vs, k)  # after the velocities are stored, for the accelerations' quadratic terms
-            R = np.stack([-sub.loop_sum(dv, self.p, self.p.C[li], everything, what) for li in range(self.p.C.shape[0])], 1)
+            R = np.stack(
+                [-sub.loop_sum(dv, self.p, self.p.C[li], everything, what) for li in range(self.p.C.shape[0])], 1
+            )
             rhs = np.concatenate([R.real, R.imag], axis=1)
             if self.square:
                 val = _solve_rows(J, rhs)
@@ -643,6 +657,12 @@ def _impose(run: _Run, st: _State, d: Designs, t: np.ndarray) -> np.ndarray:
     na = sys.n_angles
     X, XD, XDD = _inputs(run.model, d, t)
     bad = ~(np.isfinite(X) & np.isfinite(XD) & np.isfinite(XDD)).all(axis=(1, 2))
+    if len(t) > 1 and sys.drivers:  # an input moving more than MAX_INPUT_STEP per row: turns could be miscounted
+        units = np.array([1.0 if dr.kind == "crank" else run.scale / TWO_PI for dr in run.model.mechanism.drivers])
+        h = np.abs(np.diff(t))[None, :, None]
+        with np.errstate(invalid="ignore"):
+            travel = np.maximum(np.abs(np.diff(X, axis=1)), 0.5 * h * (np.abs(XD[:, 1:]) + np.abs(XD[:, :-1])))
+            bad |= ~np.all(travel / units <= MAX_INPUT_STEP * (1 + 1e-9), axis=(1, 2))
     for j, v in enumerate(sys.drivers):
         if v < na:
             st.TH[:, :, v] = X[:, :, j]
@@ -655,8 +675,16 @@ def _impose(run: _Run, st: _State, d: Designs, t: np.ndarray) -> np.ndarray:
     return bad
 
 
-def _solve_blocks(run: _Run, st: _State, d: Designs, t: np.ndarray, u: np.ndarray, out_rows: np.ndarray,
-                  start: np.ndarray, flags: _Flags) -> None:  # fmt: skip
+def _solve_blocks(
+    run: _Run,
+    st: _State,
+    d: Designs,
+    t: np.ndarray,
+    u: np.ndarray,
+    out_rows: np.ndarray,
+    start: np.ndarray,
+    flags: _Flags,
+) -> None:
     """Every block in order on every row of every variant. ``start`` (V, n_vars): the references the closed
     forms count turns from and the Newton blocks' t = 0 starting values; ``out_rows``: the requested rows
     (the worst condition number is taken over those, as the single run's health)."""
@@ -680,8 +708,18 @@ def _solve_blocks(run: _Run, st: _State, d: Designs, t: np.ndarray, u: np.ndarra
         _closed_form_rates(st, d, p, cols)
 
 
-def _newton_block(run: _Run, st: _State, d: Designs, t: np.ndarray, i: int, p: _Plan, start: np.ndarray,
-                  out_rows: np.ndarray, flags: _Flags, where: str) -> None:  # fmt: skip
+def _newton_block(
+    run: _Run,
+    st: _State,
+    d: Designs,
+    t: np.ndarray,
+    i: int,
+    p: _Plan,
+    start: np.ndarray,
+    out_rows: np.ndarray,
+    flags: _Flags,
+    where: str,
+) -> None:
     """A Newton block on every row: the t = 0 row from ``start`` (every assembled variant), then continuation
     along the rows (the variants the batch still takes)."""
     na = run.model.system.n_angles
@@ -705,8 +743,11 @@ def _newton_block(run: _Run, st: _State, d: Designs, t: np.ndarray, i: int, p: _
         if k == 0:
             mask = np.zeros(len(flags.regular), bool)
             mask[vs[bad]] = True
-            flags.refuse(mask, f"cannot assemble at t = 0 on the nominal branch: Newton on {where} does not converge "
-                         "there from the nominal design, or lands on another branch")  # fmt: skip
+            flags.refuse(
+                mask,
+                f"cannot assemble at t = 0 on the nominal branch: Newton on {where} does not converge "
+                "there from the nominal design, or lands on another branch",
+            )
         else:
             with np.errstate(invalid="ignore"):
                 c = np.max(np.abs(xs - pred) * nt.unit, axis=1)
@@ -740,7 +781,9 @@ def _assemble_newton(run: _Run, d: Designs, flags: _Flags) -> np.ndarray:
         st = _State(len(d), 1, sys.n_angles, len(sys.slider_names))
         _impose(run, st, dl, np.zeros(1))
         sub = _Flags(flags.assembled.copy(), flags.assembled.copy(), [""] * len(d), np.ones(len(d)))
-        _solve_blocks(run, st, dl, np.zeros(1), np.zeros(1), np.zeros(1, int), np.where(newton_vars, cur, d.q_start), sub)
+        _solve_blocks(
+            run, st, dl, np.zeros(1), np.zeros(1), np.zeros(1, int), np.where(newton_vars, cur, d.q_start), sub
+        )
         for v in np.nonzero(flags.assembled & ~sub.assembled)[0]:
             flags.refuse(np.arange(len(d)) == v, sub.why[v])
         cur = np.concatenate([st.TH[:, 0], st.S[:, 0, :-1]], axis=1)
@@ -838,10 +881,17 @@ def solve(model: VariantModel, values: np.ndarray, grid: Grid, names: list[str])
     N = len(grid.out)
     sys = model.system
     out = BatchOut(
-        {c: np.full((V, N), np.nan) for c in names}, np.zeros(V, bool), np.zeros(V, bool), np.full(V, np.nan),
-        np.full(V, -1, np.int64), [""] * V, np.full(V, np.nan), [""] * V,
-        np.full((V, len(sys.point_names)), np.nan + 0j), np.full((V, sys.n_vars), np.nan),
-    )  # fmt: skip
+        {c: np.full((V, N), np.nan) for c in names},
+        np.zeros(V, bool),
+        np.zeros(V, bool),
+        np.full(V, np.nan),
+        np.full(V, -1, np.int64),
+        [""] * V,
+        np.full(V, np.nan),
+        [""] * V,
+        np.full((V, len(sys.point_names)), np.nan + 0j),
+        np.full((V, sys.n_vars), np.nan),
+    )
     per = max(1, ROWS // max(len(grid.t), 1))
     for lo in range(0, V, per):
         hi = min(lo + per, V)
@@ -864,8 +914,11 @@ def _solve_chunk(run: _Run, values: np.ndarray, grid: Grid, names: list[str], ou
     for arr in cols.values():
         finite &= np.all(np.isfinite(arr), axis=1)
     flags.doubt(~finite)
-    pos = np.stack([_point_sum(st, d, sys, np.zeros(1, int), pi, "p")[:, 0] for pi in range(len(sys.point_names))], 1) \
-        if sys.point_names else np.zeros((V, 0), complex)  # fmt: skip
+    pos = (
+        np.stack([_point_sum(st, d, sys, np.zeros(1, int), pi, "p")[:, 0] for pi in range(len(sys.point_names))], 1)
+        if sys.point_names
+        else np.zeros((V, 0), complex)
+    )
     sl = slice(lo, lo + V)
     ok = flags.regular
     for c in names:
@@ -892,14 +945,29 @@ def variant_system(model: VariantModel, values: np.ndarray, d: Designs, q0: np.n
     mech = model.variant_mechanism(values, dict(zip(sys.point_names, positions.tolist(), strict=True)), q0)
     outputs = tuple((name, a, float(d.out_offset[0, j])) for j, (name, a, _) in enumerate(sys.link_outputs))
     system = dataclasses.replace(
-        sys, mechanism=mech, t_r=d.r[0].copy(), t_delta=d.delta[0].copy(), q0=np.asarray(q0, float),
-        coords_q=d.coords_q[0].copy(), link_outputs=outputs, cache={},
-    )  # fmt: skip
+        sys,
+        mechanism=mech,
+        t_r=d.r[0].copy(),
+        t_delta=d.delta[0].copy(),
+        q0=np.asarray(q0, float),
+        coords_q=d.coords_q[0].copy(),
+        link_outputs=outputs,
+        cache={},
+    )
     return mech, system
 
 
-def _single(run: _Run, values: np.ndarray, d: Designs, q0: np.ndarray, pos: np.ndarray, grid: Grid,
-            names: list[str], out: BatchOut, v: int) -> None:  # fmt: skip
+def _single(
+    run: _Run,
+    values: np.ndarray,
+    d: Designs,
+    q0: np.ndarray,
+    pos: np.ndarray,
+    grid: Grid,
+    names: list[str],
+    out: BatchOut,
+    v: int,
+) -> None:
     """Solve one variant with the single-run solver; record its columns or where and why it stopped."""
     from .solver import solve as solve_system
 

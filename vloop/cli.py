@@ -457,7 +457,7 @@ def _table(summary: dict) -> str:
 def cmd_study(args: argparse.Namespace) -> int:
     """Run a design study file: every variant solved (in this process, or on Dask), tables to Parquet in --out."""
     from .output import default_folder
-    from .study import run
+    from .studies import run
     from .studyfile import load
 
     spec = load(args.file)

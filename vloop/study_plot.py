@@ -42,12 +42,16 @@ def plot_study(res: Any, folder: str | Path) -> list[Path]:
         elif o.stat in ("path", "class"):
             continue
         elif tolerant or len(grid_params) != 2:
-            out.append(_hist(res, o, folder) if tolerant or len(grid_params) != 1 else _line(res, o, grid_params, folder))
+            out.append(
+                _hist(res, o, folder) if tolerant or len(grid_params) != 1 else _line(res, o, grid_params, folder)
+            )
     if len(grid_params) == 2 and not tolerant:
         for o in spec.outputs:
             if o.stat in ("series", "path"):
                 continue
-            out.append(_class_map(res, o, grid_params, folder) if o.stat == "class" else _map(res, o, grid_params, folder))
+            out.append(
+                _class_map(res, o, grid_params, folder) if o.stat == "class" else _map(res, o, grid_params, folder)
+            )
     return [p for p in out if p is not None]
 
 
@@ -57,10 +61,10 @@ def _safe(name: str) -> str:
 
 def _unit(res: Any, name: str) -> tuple[float, str]:
     """(factor, unit) to draw an output in: radians become degrees."""
-    from .study import _unit as unit_of
+    from .studyfile import output_unit
 
     o = next(o for o in res.spec.outputs if name.startswith(o.name))
-    u = unit_of(res._model, o)
+    u = output_unit(res.spec.mechanism, o)
     if u.startswith("rad"):
         return 180.0 / math.pi, "deg" + u[3:]
     return 1.0, u
@@ -95,9 +99,20 @@ def _band(res: Any, o: Any, folder: Path) -> Path | None:
             axes[1].fill_between(t, -s, s, color=f"C{i}", alpha=0.25, lw=0, label=f"linearized ±1.96σ{label}")
         if "mc_p2.5" in rows:
             for q, ls in (("mc_p2.5", "--"), ("mc_p97.5", "--"), ("mc_p50", ":")):
-                axes[1].plot(t, rows[q].to_numpy() * k - nom, ls, color=f"C{i}", lw=1.2,
-                             label=(f"Monte-Carlo 2.5–97.5 %{label}" if q == "mc_p2.5" else
-                                    f"Monte-Carlo median{label}" if q == "mc_p50" else None))  # fmt: skip
+                axes[1].plot(
+                    t,
+                    rows[q].to_numpy() * k - nom,
+                    ls,
+                    color=f"C{i}",
+                    lw=1.2,
+                    label=(
+                        f"Monte-Carlo 2.5–97.5 %{label}"
+                        if q == "mc_p2.5"
+                        else f"Monte-Carlo median{label}"
+                        if q == "mc_p50"
+                        else None
+                    ),
+                )
     axes[0].set_ylabel(f"{o.quantity} [{unit}]")
     axes[1].set_ylabel(f"deviation from nominal [{unit}]")
     axes[1].set_xlabel("t [s]")
@@ -147,11 +162,19 @@ def _hist(res: Any, o: Any, folder: Path) -> Path | None:
         mu, sd = row["nominal"] * k, row["linearized_sigma"] * k
         if np.isfinite(mu) and np.isfinite(sd) and sd > 0:
             x = np.linspace(mu - 4 * sd, mu + 4 * sd, 400)
-            ax.plot(x, np.exp(-0.5 * ((x - mu) / sd) ** 2) / (sd * math.sqrt(2 * math.pi)), "k-", lw=1.4,
-                    label=f"linearized N(nominal, σ = {sd:.3g})")  # fmt: skip
+            ax.plot(
+                x,
+                np.exp(-0.5 * ((x - mu) / sd) ** 2) / (sd * math.sqrt(2 * math.pi)),
+                "k-",
+                lw=1.4,
+                label=f"linearized N(nominal, σ = {sd:.3g})",
+            )
             ax.axvline(mu, color="k", ls=":", lw=1)
-        ax.set_title(f"{o.name}: Monte-Carlo σ = {row['mc_sigma'] * k:.3g} ± {row['mc_sigma_error'] * k:.2g} "
-                     f"({int(row['completed']):,} draws)", fontsize=10)  # fmt: skip
+        ax.set_title(
+            f"{o.name}: Monte-Carlo σ = {row['mc_sigma'] * k:.3g} ± {row['mc_sigma_error'] * k:.2g} "
+            f"({int(row['completed']):,} draws)",
+            fontsize=10,
+        )
     ax.set_xlabel(f"{o.name} [{unit}]")
     ax.set_ylabel("density")
     ax.grid(True, alpha=0.3)
@@ -198,8 +221,16 @@ def _map(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
     k, unit = _unit(res, o.name)
     z = z.astype(float) * k
     fig, ax = plt.subplots(figsize=(7.5, 5.5))
-    ax.pcolormesh(_edges(xs), _edges(ys), np.where(np.isfinite(z), np.nan, 1.0), cmap="Greys", vmin=0, vmax=4,
-                  hatch="//", shading="flat")  # fmt: skip
+    ax.pcolormesh(
+        _edges(xs),
+        _edges(ys),
+        np.where(np.isfinite(z), np.nan, 1.0),
+        cmap="Greys",
+        vmin=0,
+        vmax=4,
+        hatch="//",
+        shading="flat",
+    )
     m = ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_invalid(z), cmap="viridis", shading="flat")
     fig.colorbar(m, ax=ax, label=f"{o.name} [{unit}]")
     ax.set_xlabel(grid_params[0].name)
@@ -220,8 +251,15 @@ def _class_map(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
     colors = ["#4c72b0", "#55a868", "#c44e52", "#8172b2", "#ccb974", "#64b5cd", "#999999"]
     cmap = ListedColormap(colors[: max(len(classes), 1)])
     fig, ax = plt.subplots(figsize=(8, 5.8))
-    ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_less(zi, 0), cmap=cmap, vmin=-0.5,
-                  vmax=max(len(classes), 1) - 0.5, shading="flat")  # fmt: skip
+    ax.pcolormesh(
+        _edges(xs),
+        _edges(ys),
+        np.ma.masked_less(zi, 0),
+        cmap=cmap,
+        vmin=-0.5,
+        vmax=max(len(classes), 1) - 0.5,
+        shading="flat",
+    )
     handles = [Patch(color=colors[i % len(colors)], label=c) for i, c in enumerate(classes)]
     mu = next((m for m in res.spec.outputs if m.quantity.startswith("transmission_angle") and m.stat == "min"), None)
     if mu is not None and len(xs) > 1 and len(ys) > 1:

@@ -213,8 +213,9 @@ def load(path: str | Path) -> StudySpec:
     probs = Problems(str(path))
     mech_name = data.get("mechanism") if isinstance(data, dict) else None
     if not isinstance(mech_name, str) or not mech_name.strip() or "\x00" in mech_name:
-        raise MechanismError(f"{path}: [study] 'mechanism' must name the mechanism file, got {show(mech_name)}",
-                             entry="mechanism")  # fmt: skip
+        raise MechanismError(
+            f"{path}: [study] 'mechanism' must name the mechanism file, got {show(mech_name)}", entry="mechanism"
+        )
     mech = load_mechanism(path.parent / mech_name)
     spec = from_dict(data, mech, source=str(path), probs=probs)
     return spec
@@ -250,11 +251,15 @@ def check(spec: StudySpec) -> None:
     where = spec.source
     tolerant = [p.name for p in spec.parameters if p.tolerance is not None]
     if tolerant and spec.samples is None:
-        raise MechanismError(f"{where}: [study] 'samples' is needed: {', '.join(tolerant)} "
-                             "has a tolerance (how many Monte-Carlo draws?)", entry="samples")  # fmt: skip
+        raise MechanismError(
+            f"{where}: [study] 'samples' is needed: {', '.join(tolerant)} "
+            "has a tolerance (how many Monte-Carlo draws?)",
+            entry="samples",
+        )
     if spec.samples is not None and not tolerant:
-        raise MechanismError(f"{where}: [study] 'samples' draws Monte-Carlo variants, but no parameter has a "
-                             "tolerance", entry="samples")  # fmt: skip
+        raise MechanismError(
+            f"{where}: [study] 'samples' draws Monte-Carlo variants, but no parameter has a tolerance", entry="samples"
+        )
     n = math.prod(len(p.values) for p in spec.parameters if p.values is not None) * (spec.samples or 1)
     if n > MAX_DESIGNS:
         raise MechanismError(f"{where}: the study has {n:,} variants, more than {MAX_DESIGNS:,}", entry="study")
@@ -265,8 +270,9 @@ def read_parameters(raw: Any, mech: Mechanism, probs: Problems) -> tuple[Paramet
     from .variants import resolve
 
     if not isinstance(raw, list) or not raw:
-        probs.add("parameters", "missing or empty: give at least one [[parameters]] entry (name and values or "
-                                "tolerance)")  # fmt: skip
+        probs.add(
+            "parameters", "missing or empty: give at least one [[parameters]] entry (name and values or tolerance)"
+        )
         return ()
     out: list[ParameterSpec] = []
     for i, d in enumerate(raw):
@@ -316,7 +322,10 @@ def _grid(d: dict, entry: str, probs: Problems) -> tuple[float, ...] | None:
     if not ranged:
         return None
     if len(ranged) != 3:
-        probs.add(entry, f"start, stop and num go together (missing {', '.join(k for k in ('start', 'stop', 'num') if k not in d)})")
+        probs.add(
+            entry,
+            f"start, stop and num go together (missing {', '.join(k for k in ('start', 'stop', 'num') if k not in d)})",
+        )
         return None
     start, stop = real(d["start"], "start", entry, probs), real(d["stop"], "stop", entry, probs)
     num = _integer(d, "num", entry, 1, MAX_VALUES, probs)
@@ -357,15 +366,17 @@ def _tolerance(raw: Any, entry: str, probs: Problems) -> Tolerance | None:
 
 
 def read_outputs(raw: Any, mech: Mechanism, probs: Problems) -> tuple[OutputSpec, ...]:
-    """[[outputs]]: quantity, stat (default by quantity), name (default QUANTITY.STAT)."""
+    """[[outputs]]: quantity, stat (default by quantity), name (default QUANTITY.STAT); or strings
+    ``"QUANTITY[.STAT]"`` (``outputs = ["l4.theta.range", "transmission_angle"]``)."""
     if not isinstance(raw, list) or not raw:
         probs.add("outputs", "missing or empty: give at least one [[outputs]] entry (quantity and stat)")
         return ()
     out: list[OutputSpec] = []
     for i, d in enumerate(raw):
         entry = f"outputs[{i}]"
-        if isinstance(d, str):
-            d = {"quantity": d}
+        if isinstance(d, str):  # "QUANTITY" or "QUANTITY.STAT"
+            q, _, st = d.rpartition(".")
+            d = {"quantity": q, "stat": st} if q and st in STATS else {"quantity": d}
         if not isinstance(d, dict):
             probs.add(entry, f"must be a table {{ quantity = ..., stat = ... }}, got {show(d)}")
             continue
@@ -381,7 +392,7 @@ def read_outputs(raw: Any, mech: Mechanism, probs: Problems) -> tuple[OutputSpec
 
 
 def output_spec(d: dict, mech: Mechanism, entry: str, probs: Problems) -> OutputSpec | None:
-    """One output's quantity and stat checked against the mechanism (see :mod:`vloop.study` for the meaning)."""
+    """One output's quantity and stat checked against the mechanism (see :mod:`vloop.studies` for the meaning)."""
     q = d.get("quantity")
     if not isinstance(q, str) or not q:
         probs.add(entry, f"'quantity' must be a string such as l4.theta or transmission_angle, got {show(q)}")
@@ -439,6 +450,18 @@ def default_stat(q: str, kind: str | None) -> str:
         return "min"
     fld = q.rsplit(".", 1)[-1]
     return "range" if fld in ("theta", "s", "x", "y") else "peak"
+
+
+def output_unit(mech: Mechanism, o: OutputSpec) -> str:
+    """The unit of an output's values (rad for angles; the file's length unit for lengths)."""
+    q, u = o.quantity, mech.units
+    if q.startswith("transmission_angle"):
+        return "rad"
+    fld = q.rsplit(".", 1)[-1]
+    units = {"theta": "rad", "omega": "rad/s", "alpha": "rad/s²", "x": u, "y": u, "vx": f"{u}/s", "vy": f"{u}/s"}
+    units.update({"ax": f"{u}/s²", "ay": f"{u}/s²", "s": u, "v": f"{u}/s", "a": f"{u}/s²", "speed": f"{u}/s"})
+    units.update({"acceleration": f"{u}/s²", "path": u})
+    return units.get(fld, "")
 
 
 def _quantity_help(mech: Mechanism) -> str:

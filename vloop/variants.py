@@ -224,9 +224,12 @@ class Designs:
         x0 = (1.0 - lam) * self.x0 + lam * other.x0
         shape = other.r.shape
         return dataclasses.replace(
-            other, r=np.broadcast_to(r, shape).copy(), cd=np.broadcast_to(cd, shape).copy(), x0=x0,
+            other,
+            r=np.broadcast_to(r, shape).copy(),
+            cd=np.broadcast_to(cd, shape).copy(),
+            x0=x0,
             delta=np.angle(np.broadcast_to(cd, shape)) % TWO_PI,
-        )  # fmt: skip
+        )
 
 
 @dataclass
@@ -523,9 +526,16 @@ def _with_offset_terms(mech: Mechanism, sys: LoopSystem, params: tuple[ParamRef,
         path = np.concatenate([path, path[ts : ts + 1]], axis=0)
         extra[len(t_r) - 1] = i
     out = dataclasses.replace(
-        sys, t_ang=np.array(t_ang, int), t_sl=np.array(t_sl, int), t_r=np.array(t_r), t_delta=np.array(t_delta),
-        t_label=tuple(labels), C=C, path=path, cache={},
-    )  # fmt: skip
+        sys,
+        t_ang=np.array(t_ang, int),
+        t_sl=np.array(t_sl, int),
+        t_r=np.array(t_r),
+        t_delta=np.array(t_delta),
+        t_label=tuple(labels),
+        C=C,
+        path=path,
+        cache={},
+    )
     out.cache["study_offset_terms"] = extra
     return out
 

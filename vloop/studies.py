@@ -6,7 +6,7 @@
                       ["l4.theta.range", "l4.alpha.peak", "transmission_angle.min", "l4.theta.series"],
                       samples=10_000, seed=1)
     res.table                  # one row per variant: parameter values, outputs, assembled, stopped_at, reason
-    res.summary                # per output: nominal, linearized σ, Monte-Carlo mean/σ (± its sampling error), percentiles
+    res.summary                # per output: nominal, linearized σ, Monte-Carlo mean, σ ± its error, percentiles
     res.sensitivity            # d(output)/d(parameter) at the nominal design(s), central differences
     res.bands                  # series outputs over the motion: nominal, linearized σ, Monte-Carlo percentiles
 
@@ -55,7 +55,7 @@ from .errors import MechanismError, VloopError
 from .model import Mechanism
 from .result import Result
 from .schema import Problems
-from .studyfile import STATS, OutputSpec, StudySpec, from_dict, quantity_kind
+from .studyfile import OutputSpec, StudySpec, from_dict, output_unit, quantity_kind
 from .variants import ParamRef, VariantModel, resolve
 
 TASKS_PER_WORKER = 4  # chunks per Dask worker thread when the chunk size is automatic
@@ -106,21 +106,14 @@ def study(
 
 def _param_tables(params: Any) -> list:
     if isinstance(params, dict):
-        return [{"name": k, **(v if isinstance(v, dict) else {"values": list(np.atleast_1d(v))})} for k, v in params.items()]
+        return [
+            {"name": k, **(v if isinstance(v, dict) else {"values": list(np.atleast_1d(v))})} for k, v in params.items()
+        ]
     return [dict(p) if isinstance(p, dict) else p for p in params] if isinstance(params, list | tuple) else params
 
 
 def _output_tables(outputs: Any) -> list:
-    if isinstance(outputs, str):
-        outputs = [outputs]
-    out = []
-    for o in outputs if isinstance(outputs, list | tuple) else [outputs]:
-        if isinstance(o, str) and "." in o and o.rsplit(".", 1)[1] in STATS:
-            q, s = o.rsplit(".", 1)
-            out.append({"quantity": q, "stat": s})
-        else:
-            out.append({"quantity": o} if isinstance(o, str) else o)
-    return out
+    return [outputs] if isinstance(outputs, str) else list(outputs) if isinstance(outputs, list | tuple) else outputs
 
 
 def _check_times(times: Any) -> np.ndarray:
@@ -280,10 +273,19 @@ def run_chunk(task: _Task) -> dict[str, Any]:
     for i, why in task.invalid.items():
         out.reason[i] = why
     full: dict[str, np.ndarray] = {}
-    for name, arr in _reduce(model, task.outputs, res, task.grid.times).items():
-        full[name] = np.full((n, *arr.shape[1:]), np.nan)
-        full[name][ok] = arr
-    full.update(_static(model, task.outputs, task.values, ok))
+    rows = np.nonzero(ok)[0]
+    per = max(1, batch.ROWS // max(len(task.grid.times), 1))  # blocks as small as the batch's (see batch.ROWS)
+    for lo in range(0, len(rows), per):
+        part = {c: v[lo : lo + per] for c, v in res.columns.items()}
+        for name, arr in _reduce(model, task.outputs, part, task.grid.times).items():
+            if name not in full:
+                full[name] = np.full((n, *arr.shape[1:]), np.nan)
+            full[name][rows[lo : lo + per]] = arr
+    for lo in range(0, n, per):
+        for name, arr in _static(model, task.outputs, task.values[lo : lo + per], ok[lo : lo + per]).items():
+            if name not in full:
+                full[name] = np.empty(n, arr.dtype)
+            full[name][lo : lo + per] = arr
     return {"status": out, "values": full}
 
 
@@ -303,8 +305,17 @@ class _Outcomes:
 
     @classmethod
     def empty(cls, n: int, n_points: int, n_vars: int) -> _Outcomes:
-        return cls(np.zeros(n, bool), np.zeros(n, bool), np.full(n, np.nan), np.full(n, -1, np.int64), [""] * n,
-                   np.full(n, np.nan), [""] * n, np.full((n, n_points), np.nan + 0j), np.full((n, n_vars), np.nan))  # fmt: skip
+        return cls(
+            np.zeros(n, bool),
+            np.zeros(n, bool),
+            np.full(n, np.nan),
+            np.full(n, -1, np.int64),
+            [""] * n,
+            np.full(n, np.nan),
+            [""] * n,
+            np.full((n, n_points), np.nan + 0j),
+            np.full((n, n_vars), np.nan),
+        )
 
     def fill(self, rows: np.ndarray, res: batch.BatchOut) -> None:
         idx = np.nonzero(rows)[0]
@@ -315,11 +326,14 @@ class _Outcomes:
 
     @classmethod
     def join(cls, parts: list[_Outcomes]) -> _Outcomes:
-        return cls(*(
-            sum((getattr(p, f.name) for p in parts), []) if f.name in ("reason", "solver")
-            else np.concatenate([getattr(p, f.name) for p in parts])
-            for f in dataclasses.fields(cls)
-        ))  # fmt: skip
+        return cls(
+            *(
+                [x for p in parts for x in getattr(p, f.name)]
+                if f.name in ("reason", "solver")
+                else np.concatenate([getattr(p, f.name) for p in parts])
+                for f in dataclasses.fields(cls)
+            )
+        )
 
 
 # ---------------------------------------------------------------- outputs from the columns
@@ -366,17 +380,20 @@ def check_outputs(model: VariantModel, spec: StudySpec) -> None:
             from .teaching.transmission import dyads
 
             labels = ", ".join(d.label for d in dyads(model.system)[0]) or "none: its blocks are solved by Newton"
-            raise MechanismError(f"{spec.source}: [outputs[{i}]] {o.quantity}: no such dyad (dyads: {labels})",
-                                 entry=f"outputs[{i}]")  # fmt: skip
+            raise MechanismError(
+                f"{spec.source}: [outputs[{i}]] {o.quantity}: no such dyad (dyads: {labels})", entry=f"outputs[{i}]"
+            )
         if kind == "class" and _fourbar_loop(model, o.quantity) is None:
-            raise MechanismError(f"{spec.source}: [outputs[{i}]] {o.quantity}: no four-bar loop (ground and three "
-                                 "pinned links) there", entry=f"outputs[{i}]")  # fmt: skip
+            raise MechanismError(
+                f"{spec.source}: [outputs[{i}]] {o.quantity}: no four-bar loop (ground and three pinned links) there",
+                entry=f"outputs[{i}]",
+            )
 
 
-def _reduce(model: VariantModel, outputs: tuple[OutputSpec, ...], res: batch.BatchOut,
-            t: np.ndarray) -> dict[str, np.ndarray]:  # fmt: skip
+def _reduce(
+    model: VariantModel, outputs: tuple[OutputSpec, ...], cols: dict[str, np.ndarray], t: np.ndarray
+) -> dict[str, np.ndarray]:
     """Each output of each design (NaN where the motion did not complete): scalars (n,), series (n, N)."""
-    cols = res.columns
     out: dict[str, np.ndarray] = {}
     for o in outputs:
         kind = quantity_kind(model.mechanism, o.quantity)
@@ -402,7 +419,9 @@ def _history(model: VariantModel, o: OutputSpec, cols: dict[str, np.ndarray], t:
     from .teaching.transmission import raw_angle
 
     view = Result("", "study", t, cols)
-    folded = [np.minimum(r, np.pi - r) for r in (raw_angle(model.mechanism, view, d) for d in _dyads(model, o.quantity))]
+    folded = [
+        np.minimum(r, np.pi - r) for r in (raw_angle(model.mechanism, view, d) for d in _dyads(model, o.quantity))
+    ]
     return np.minimum.reduce(folded)
 
 
@@ -441,7 +460,8 @@ GRASHOF_CLASSES = ("Grashof double-crank", "Grashof crank-rocker", "Grashof doub
 
 
 def _fourbar_loop(model: VariantModel, quantity: str) -> tuple[int, list[int]] | None:
-    """(loop, its four owners in traversal order from the ground) of the four-bar loop a grashof quantity names."""
+    """(loop, its four owners: ground, input side, coupler, output side) of the four-bar loop a grashof quantity
+    names; the input side is the driven link where one is driven (else the loop's traversal decides)."""
     sys = model.system
     want = int(quantity.split(".", 1)[1]) - 1 if "." in quantity else None
     for lp in sys.loops:
@@ -453,7 +473,10 @@ def _fourbar_loop(model: VariantModel, quantity: str) -> tuple[int, list[int]] |
         order = list(dict.fromkeys(int(sys.t_ang[t]) for t in lp.terms))
         if len(order) == 4 and -1 in order:
             k = order.index(-1)
-            return lp.index, order[k:] + order[:k]
+            order = order[k:] + order[:k]
+            if order[3] in sys.drivers and order[1] not in sys.drivers:  # the driven link is the input side
+                order = [order[0], order[3], order[2], order[1]]
+            return lp.index, order
     return None
 
 
@@ -482,8 +505,9 @@ def grashof(model: VariantModel, d: Any, loop: tuple[int, list[int]]) -> tuple[n
 # ---------------------------------------------------------------- the run
 
 
-def run(spec: StudySpec, *, scheduler: str | None = None, workers: int | None = None,
-        progress: bool | None = None) -> StudyResult:  # fmt: skip
+def run(
+    spec: StudySpec, *, scheduler: str | None = None, workers: int | None = None, progress: bool | None = None
+) -> StudyResult:
     """Solve a study (in this process, or on Dask with ``scheduler`` / ``workers``) and gather its tables."""
     from .compiler import compile_system
     from .runner import run_tasks
@@ -496,16 +520,24 @@ def run(spec: StudySpec, *, scheduler: str | None = None, workers: int | None = 
     times = spec.times if spec.times is not None else np.asarray(mech.times, float)
     _check_memory(spec, p, model, len(times))
     valid = np.array([i not in p.invalid for i in range(len(p.values))], bool)
-    grid = batch.make_grid(model, model.designs(p.values[valid]), times) if valid.any() else batch.make_grid(
-        model, model.designs(model.nominal_values()[None, :]), times)  # fmt: skip
+    grid = (
+        batch.make_grid(model, model.designs(p.values[valid]), times)
+        if valid.any()
+        else batch.make_grid(model, model.designs(model.nominal_values()[None, :]), times)
+    )
     size = _chunk_size(spec, len(p.values), scheduler, workers)
     shipped = dataclasses.replace(model, system=dataclasses.replace(model.system, cache=dict(model.system.cache)))
     shipped.system.cache.pop("plans", None)  # the solver's plans are rebuilt where the chunk runs
     tasks = [
-        _Task(shipped, p.values[lo : lo + size], {i - lo: w for i, w in p.invalid.items() if lo <= i < lo + size},
-              grid, spec.outputs)
+        _Task(
+            shipped,
+            p.values[lo : lo + size],
+            {i - lo: w for i, w in p.invalid.items() if lo <= i < lo + size},
+            grid,
+            spec.outputs,
+        )
         for lo in range(0, len(p.values), size)
-    ]  # fmt: skip
+    ]
     outcomes = run_tasks(run_chunk, tasks, scheduler=scheduler, workers=workers, progress=progress, label="variants")
     failed = [o for o in outcomes if not o.ok]
     if failed:
@@ -528,8 +560,9 @@ def _check_memory(spec: StudySpec, p: _Plan, model: VariantModel, n_times: int) 
     from .budget import MemoryBudgetError, budget, fmt_size
 
     n = len(p.values)
-    series = sum(2 if quantity_kind(model.mechanism, o.quantity) == "path" else (o.stat == "series")
-                 for o in spec.outputs)  # fmt: skip
+    series = sum(
+        2 if quantity_kind(model.mechanism, o.quantity) == "path" else (o.stat == "series") for o in spec.outputs
+    )
     need = n * (len(p.refs) + len(spec.outputs) + 16 + model.system.n_vars + 2 * len(model.system.point_names)) * 8
     need = 3 * (need + n * series * n_times * 8) + batch.ROWS * 400
     limit, source = budget()
@@ -573,8 +606,10 @@ class StudyResult:
 
     def __repr__(self) -> str:
         c = self.counts
-        return (f"StudyResult({c['variants']:,} variants: {c['completed']:,} completed, {c['stopped']:,} stopped, "
-                f"{c['not_assembled']:,} not assembled; {self.seconds:.2f} s)")  # fmt: skip
+        return (
+            f"StudyResult({c['variants']:,} variants: {c['completed']:,} completed, {c['stopped']:,} stopped, "
+            f"{c['not_assembled']:,} not assembled; {self.seconds:.2f} s)"
+        )
 
     def _repr_html_(self) -> str:
         return f"<p>{self!r}</p>" + self.table._repr_html_()
@@ -598,8 +633,12 @@ class StudyResult:
         from .output import OutputSet
 
         with OutputSet(folder) as out:
-            for name, df in (("variants", self.table), ("summary", self.summary), ("sensitivity", self.sensitivity),
-                             ("bands", self.bands)):  # fmt: skip
+            for name, df in (
+                ("variants", self.table),
+                ("summary", self.summary),
+                ("sensitivity", self.sensitivity),
+                ("bands", self.bands),
+            ):
                 if len(df):
                     _write_parquet(df, out.path(f"{name}.parquet"))
             out.write_text("study.json", json.dumps(self.manifest(), indent=2) + "\n")
@@ -615,9 +654,14 @@ class StudyResult:
         return {
             "study": s.source,
             "mechanism": s.mechanism.name,
-            "parameters": [{"name": p.name, "grid": len(p.values) if p.values else 0,
-                            "tolerance": dataclasses.asdict(p.tolerance) if p.tolerance else None}
-                           for p in s.parameters],  # fmt: skip
+            "parameters": [
+                {
+                    "name": p.name,
+                    "grid": len(p.values) if p.values else 0,
+                    "tolerance": dataclasses.asdict(p.tolerance) if p.tolerance else None,
+                }
+                for p in s.parameters
+            ],
             "outputs": [dataclasses.asdict(o) for o in s.outputs],
             "samples": s.samples,
             "seed": s.seed,
@@ -636,8 +680,15 @@ def _write_parquet(df: Any, path: Path) -> None:
     pq.write_table(pa.Table.from_pandas(df, preserve_index=False), path)
 
 
-def _gather(spec: StudySpec, p: _Plan, model: VariantModel, st: _Outcomes, values: dict[str, np.ndarray],
-            t: np.ndarray, seconds: float) -> StudyResult:  # fmt: skip
+def _gather(
+    spec: StudySpec,
+    p: _Plan,
+    model: VariantModel,
+    st: _Outcomes,
+    values: dict[str, np.ndarray],
+    t: np.ndarray,
+    seconds: float,
+) -> StudyResult:
     """The study's tables from every design's outcome and outputs."""
     n = p.n_variants
     table = _variants_table(spec, p, st, values, n)
@@ -647,6 +698,8 @@ def _gather(spec: StudySpec, p: _Plan, model: VariantModel, st: _Outcomes, value
     summary = _summary(spec, p, values, sens, st)
     sensitivity = _sensitivity_table(spec, p, model, sens)
     bands = _bands(spec, p, values, sens, st, t)
+    for df in (table, summary, sensitivity, bands):
+        _null_non_finite(df)
     stopped = int(np.sum(st.assembled[:n] & ~st.completed[:n]))
     counts = {
         "variants": n,
@@ -657,6 +710,17 @@ def _gather(spec: StudySpec, p: _Plan, model: VariantModel, st: _Outcomes, value
         "single_runs": sum(s == "single" for s in st.solver),
     }
     return StudyResult(table, summary, sensitivity, bands, t, spec, seconds, counts, model, st, p.values)
+
+
+def _null_non_finite(df: Any) -> None:
+    """A number too large for a float (an absurd design's output or its spread) is null, never inf, in the tables."""
+    for col in df.columns:
+        if df[col].dtype.kind == "f":
+            v = df[col].to_numpy()
+            if not np.all(np.isfinite(v) | np.isnan(v)):
+                df[col] = np.where(np.isinf(v), np.nan, v)
+        elif df[col].dtype == object and len(df) and isinstance(df[col].iloc[0], list):
+            df[col] = [None if r is None or not np.all(np.isfinite(r)) else r for r in df[col]]
 
 
 def _scalar_outputs(spec: StudySpec) -> list[OutputSpec]:
@@ -729,12 +793,15 @@ def _add_each(table: Any, spec: StudySpec, p: _Plan, sens: dict[str, np.ndarray]
 
 def _lin_sigma(p: _Plan, d: np.ndarray) -> np.ndarray:
     """√Σ (∂y/∂p·σ_p)² over the toleranced parameters; ``d`` (P,) or (P, N) gives a number or (N,)."""
-    s = p.sigma.reshape((-1,) + (1,) * (d.ndim - 1))
-    return np.sqrt(np.sum((d * s) ** 2, axis=0))
+    x = np.abs(d * p.sigma.reshape((-1,) + (1,) * (d.ndim - 1)))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        big = np.max(x, axis=0)  # scaled so that the squares cannot overflow
+        return np.where(big > 0, big * np.sqrt(np.sum((x / np.where(big > 0, big, 1.0)) ** 2, axis=0)), 0.0)
 
 
-def _summary(spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray],
-             st: _Outcomes) -> Any:  # fmt: skip
+def _summary(
+    spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: _Outcomes
+) -> Any:
     """Per base design and scalar output of a tolerance study: the nominal, linearized and Monte-Carlo statistics."""
     import pandas as pd
 
@@ -750,9 +817,18 @@ def _summary(spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dic
             y = values[o.name][done]
             k = where.get(int(row))
             lin = float(_lin_sigma(p, sens[o.name][k])) if k is not None else np.nan
-            rows.append({"grid": b, **{r.name: p.values[row, i] for i, r in enumerate(p.refs)}, "output": o.name,
-                         "nominal": values[o.name][row] if st.completed[row] else np.nan, "linearized_sigma": lin,
-                         **_mc_stats(y), "completed": len(done), "draws": D})  # fmt: skip
+            rows.append(
+                {
+                    "grid": b,
+                    **{r.name: p.values[row, i] for i, r in enumerate(p.refs)},
+                    "output": o.name,
+                    "nominal": values[o.name][row] if st.completed[row] else np.nan,
+                    "linearized_sigma": lin,
+                    **_mc_stats(y),
+                    "completed": len(done),
+                    "draws": D,
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -760,15 +836,24 @@ def _mc_stats(y: np.ndarray) -> dict[str, float]:
     """Monte-Carlo mean, standard deviation and its sampling error √((κ − 1)/(4n))·σ, percentiles."""
     n = len(y)
     if n < 2:
-        return {"mc_mean": np.nan, "mc_sigma": np.nan, "mc_sigma_error": np.nan,
-                **{f"mc_p{q:g}": np.nan for q in PERCENTILES}}  # fmt: skip
+        return {
+            "mc_mean": np.nan,
+            "mc_sigma": np.nan,
+            "mc_sigma_error": np.nan,
+            **{f"mc_p{q:g}": np.nan for q in PERCENTILES},
+        }
     mean = float(np.mean(y))
     sd = float(np.std(y, ddof=1))
     m2 = float(np.mean((y - mean) ** 2))
     kurt = float(np.mean((y - mean) ** 4)) / (m2 * m2) if m2 > 0 else 3.0
     err = sd * math.sqrt(max(kurt - 1.0, 0.0) / (4 * n))
     pct = np.percentile(y, PERCENTILES)
-    return {"mc_mean": mean, "mc_sigma": sd, "mc_sigma_error": err, **{f"mc_p{q:g}": float(v) for q, v in zip(PERCENTILES, pct, strict=True)}}
+    return {
+        "mc_mean": mean,
+        "mc_sigma": sd,
+        "mc_sigma_error": err,
+        **{f"mc_p{q:g}": float(v) for q, v in zip(PERCENTILES, pct, strict=True)},
+    }
 
 
 def _sensitivity_table(spec: StudySpec, p: _Plan, model: VariantModel, sens: dict[str, np.ndarray]) -> Any:
@@ -778,7 +863,7 @@ def _sensitivity_table(spec: StudySpec, p: _Plan, model: VariantModel, sens: dic
     rows = []
     at = p.base_rows if p.draw_index is not None else p.sens_at[p.sens_at >= p.n_variants]
     where = {int(r): k for k, r in enumerate(p.sens_at)}
-    units = {o.name: _unit(model, o) for o in spec.outputs}
+    units = {o.name: output_unit(model.mechanism, o) for o in spec.outputs}
     for b, row in enumerate(at):
         k = where.get(int(row))
         if k is None:
@@ -786,23 +871,22 @@ def _sensitivity_table(spec: StudySpec, p: _Plan, model: VariantModel, sens: dic
         for o in _scalar_outputs(spec):
             for i, r in enumerate(p.refs):
                 d = float(sens[o.name][k, i])
-                rows.append({"base": b, "output": o.name, "parameter": r.name, "derivative": d,
-                             "unit": f"{units[o.name]}/{r.unit}", "sigma_contribution": abs(d) * p.sigma[i]})  # fmt: skip
+                rows.append(
+                    {
+                        "base": b,
+                        "output": o.name,
+                        "parameter": r.name,
+                        "derivative": d,
+                        "unit": f"{units[o.name]}/{r.unit}",
+                        "sigma_contribution": abs(d) * p.sigma[i],
+                    }
+                )
     return pd.DataFrame(rows)
 
 
-def _unit(model: VariantModel, o: OutputSpec) -> str:
-    q, u = o.quantity, model.mechanism.units
-    if q.startswith("transmission_angle"):
-        return "rad"
-    fld = q.rsplit(".", 1)[-1]
-    return {"theta": "rad", "omega": "rad/s", "alpha": "rad/s²", "x": u, "y": u, "vx": f"{u}/s", "vy": f"{u}/s",
-            "ax": f"{u}/s²", "ay": f"{u}/s²", "s": u, "v": f"{u}/s", "a": f"{u}/s²", "speed": f"{u}/s",
-            "acceleration": f"{u}/s²", "path": u}.get(fld, "")  # fmt: skip
-
-
-def _bands(spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: _Outcomes,
-           t: np.ndarray) -> Any:  # fmt: skip
+def _bands(
+    spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: _Outcomes, t: np.ndarray
+) -> Any:
     """Series outputs over the motion per base design: nominal, linearized σ, Monte-Carlo mean/σ/percentiles,
     and the derivative with respect to each parameter at every sample."""
     import pandas as pd
@@ -817,8 +901,13 @@ def _bands(spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[
     for b, row in enumerate(at):
         k = where.get(int(row))
         for name in names:
-            cols: dict[str, Any] = {"base": b, "output": name, "sample": np.arange(len(t)), "t": t,
-                                    "nominal": values[name][row] if st.completed[row] else np.full(len(t), np.nan)}  # fmt: skip
+            cols: dict[str, Any] = {
+                "base": b,
+                "output": name,
+                "sample": np.arange(len(t)),
+                "t": t,
+                "nominal": values[name][row] if st.completed[row] else np.full(len(t), np.nan),
+            }
             if k is not None:
                 d = sens[name][k]  # (P, N)
                 if p.draw_index is not None:
@@ -833,7 +922,7 @@ def _bands(spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[
                     for q, v in zip(PERCENTILES, np.percentile(y, PERCENTILES, axis=0), strict=True):
                         cols[f"mc_p{q:g}"] = v
             frames.append(pd.DataFrame(cols))
-    return pd.concat(frames, ignore_index=True)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def load_and_run(path: str | Path, **options: Any) -> StudyResult:
