@@ -99,7 +99,7 @@ def _steps_needed(model: VariantModel, designs: Designs, seq: np.ndarray, lead: 
     per = max(1, ROWS // len(seq))
     for lo in range(0, len(designs), per):
         X, XD, _ = _inputs(model, designs.take(slice(lo, lo + per)), seq)
-        travel = np.maximum(np.abs(np.diff(X, axis=1)), 0.5 * h * (np.abs(XD[:, 1:]) + np.abs(XD[:, :-1]))) / units
+        travel = _travel(X, XD, h) / units
         with np.errstate(invalid="ignore"):
             most = np.ceil(np.nanmax(travel, axis=(0, 2)) / MAX_INPUT_STEP)
         need = np.maximum(need, np.where(np.isfinite(most), most, 1.0))  # absurd inputs: those variants go single
@@ -107,6 +107,13 @@ def _steps_needed(model: VariantModel, designs: Designs, seq: np.ndarray, lead: 
     if lead:
         cap[0] = MAX_LEAD
     return np.minimum(need, cap)
+
+
+def _travel(X: np.ndarray, XD: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """How far each input moves over each interval, at most: |Δx|, or the interval times the larger rate at its
+    ends (the largest over it for a constant acceleration, so evenly inserted rows each move at most their share)."""
+    with np.errstate(invalid="ignore"):
+        return np.maximum(np.abs(np.diff(X, axis=1)), h * np.maximum(np.abs(XD[:, 1:]), np.abs(XD[:, :-1])))
 
 
 def _inputs(model: VariantModel, d: Designs, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -661,8 +668,7 @@ def _impose(run: _Run, st: _State, d: Designs, t: np.ndarray) -> np.ndarray:
         units = np.array([1.0 if dr.kind == "crank" else run.scale / TWO_PI for dr in run.model.mechanism.drivers])
         h = np.abs(np.diff(t))[None, :, None]
         with np.errstate(invalid="ignore"):
-            travel = np.maximum(np.abs(np.diff(X, axis=1)), 0.5 * h * (np.abs(XD[:, 1:]) + np.abs(XD[:, :-1])))
-            bad |= ~np.all(travel / units <= MAX_INPUT_STEP * (1 + 1e-9), axis=(1, 2))
+            bad |= ~np.all(_travel(X, XD, h) / units <= MAX_INPUT_STEP * (1 + 1e-9), axis=(1, 2))
     for j, v in enumerate(sys.drivers):
         if v < na:
             st.TH[:, :, v] = X[:, :, j]

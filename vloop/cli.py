@@ -478,11 +478,24 @@ def _study_lines(res: Any) -> list[str]:
         f"stopped, {c['not_assembled']:,} not assembled; {c['single_runs']:,} solved one by one) in {res.seconds:.2f} s"
     ]
     s = res.summary
-    for _, row in s[s["grid"] == 0].iterrows() if len(s) else ():
-        lines.append(
-            f"  {row['output']}: nominal {row['nominal']:.6g}, linearized σ {row['linearized_sigma']:.4g}, "
-            f"Monte-Carlo σ {row['mc_sigma']:.4g} ± {row['mc_sigma_error']:.2g}"
-        )
+    if len(s):
+        for _, row in s[s["grid"] == 0].iterrows():
+            lines.append(
+                f"  {row['output']}: nominal {row['nominal']:.6g}, linearized σ {row['linearized_sigma']:.4g}, "
+                f"Monte-Carlo σ {row['mc_sigma']:.4g} ± {row['mc_sigma_error']:.2g}"
+            )
+        return lines
+    t = res.table
+    for o in res.spec.outputs:
+        if o.stat == "class":
+            counts = t[o.name].value_counts()
+            lines.append(f"  {o.name}: " + ", ".join(f"{n:,} {c}" for c, n in counts.items()))
+        elif o.stat not in ("series", "path") and t[o.name].notna().any():
+            lines.append(f"  {o.name}: {t[o.name].min():.6g} to {t[o.name].max():.6g} over the completed variants")
+    sens = res.sensitivity
+    for _, row in sens.iterrows() if len(sens) else ():
+        d = f"d({row['output']})/d({row['parameter']})"
+        lines.append(f"  {d} = {row['derivative']:.4g} {row['unit']} at the nominal design")
     return lines
 
 
