@@ -723,6 +723,7 @@ def _zoom(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, hi: int) -> tu
     """
     a, b = float(tg[lo]), float(tg[hi])
     eta = _eta(run, 0.5 * (a + b), b - a)
+    first = True
     for _ in range(ZOOM_STEPS):
         ts = np.linspace(a, b, ZOOM_POINTS)
         h = _discriminant(run, st, tg, lo, i, np.concatenate([ts, ts - eta, ts + eta]))
@@ -732,6 +733,9 @@ def _zoom(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, hi: int) -> tu
         if np.any(mid < 0):
             j = int(np.argmin(mid))
             return float(ts[j]), float(mid[j])
+        if first and not (g[0] < 0 <= g[-1]):  # h least at an end of the bracket: no minimum inside it
+            return a, math.inf  # (e.g. a limit approached but not passed: h falls to the last sample)
+        first = False
         j = int(np.argmax(g >= 0)) if np.any(g >= 0) else len(ts) - 1
         a, b = float(ts[max(j - 1, 0)]), float(ts[j])
         if b - a <= 1e-9 * (tg[hi] - tg[lo]):
