@@ -1245,7 +1245,8 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
     mech = sys.mechanism
     rows = grid.out[grid.skip :][grid.out[grid.skip :] < n_ok]  # the requested samples solved
     points, loops = _system_sums(sys)
-    P, V, A = points.pos(st, rows), points.vel(st, rows), points.acc(st, rows)
+    k = _as_slice(rows)
+    P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
     cols: dict[str, np.ndarray] = {}
     for name, a, offset in sys.link_outputs:
         if a >= 0:
@@ -1280,11 +1281,20 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
     )
 
 
+def _as_slice(rows: np.ndarray) -> slice | np.ndarray:
+    """Consecutive rows as a slice (state arrays are then read as views, not copied)."""
+    if len(rows) and int(rows[-1]) - int(rows[0]) + 1 == len(rows):
+        return slice(int(rows[0]), int(rows[-1]) + 1)
+    return rows
+
+
 def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Solved, loops: _Sum) -> dict:
     """Per requested sample (``rows``): closure residual, worst block condition number, branch signature,
     flags. ``t``: the times of the rows, after the last sample of the chunk before if there is one."""
     sys = run.sys
-    residual = np.max(np.abs(loops.pos(st, rows)), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
+    residual = (
+        np.max(np.abs(loops.pos(st, _as_slice(rows))), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
+    )
     cond = np.max(np.stack([c[rows] for c in solved.conds]), axis=0) if solved.conds else np.ones(len(rows))
     branch = np.zeros(len(rows), np.int64)
     for bit, sgn in enumerate(solved.signs):
