@@ -71,23 +71,52 @@ def compile(mechanism: Mechanism, method: str | None = None) -> Any:
 def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options: Any) -> Result:
     """Positions, velocities and accelerations over ``times`` [s] (default: the file's [time]).
 
-    ``mechanism`` may be a Mechanism or an already compiled LoopSystem.
-    Options: ``method="auto"|"newton"`` (recompiles a LoopSystem compiled otherwise), ``tol``,
-    ``max_iter``, ``rtol``. Raises MotionError (with ``.partial``) if the motion cannot be completed.
+    ``mechanism`` may be a Mechanism (compiled on the first solve, then kept with it) or a LoopSystem.
+    Options: ``method="auto"|"newton"`` (a LoopSystem compiled otherwise keeps its variant), ``tol``,
+    ``max_iter``, ``rtol``, ``memory_budget`` (bytes or "2G": a run whose results would not fit is refused,
+    see vloop.budget). Raises MotionError (with ``.partial``) if the motion cannot be completed.
     """
     from .compiler import compile_system
     from .loops import LoopSystem
     from .solver import solve as solve_system
 
     method = options.pop("method", None)
-    unknown = set(options) - {"tol", "max_iter", "rtol"}
+    unknown = set(options) - {"tol", "max_iter", "rtol", "memory_budget"}
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}")
     if isinstance(mechanism, LoopSystem):
-        system = mechanism if method in (None, mechanism.method) else compile_system(mechanism.mechanism, method)
+        system = mechanism
+        if method not in (None, mechanism.method):  # the other method's variant, compiled once per system
+            key = f"method:{method}"
+            if key not in mechanism.cache:
+                mechanism.cache[key] = compile_system(mechanism.mechanism, method)
+            system = mechanism.cache[key]
     else:
-        system = compile_system(mechanism, method)
+        system = _system_of(mechanism, method)
     return solve_system(system, times, **options)
+
+
+_SYSTEMS: dict[tuple[int, str | None], tuple[Any, Any]] = {}
+
+
+def _system_of(mechanism: Mechanism, method: str | None) -> Any:
+    """The LoopSystem of a Mechanism for ``method``, compiled once per (Mechanism object, method) and kept
+    while that object lives (a Mechanism is immutable: solving it again needs no new compile)."""
+    import weakref
+
+    from .compiler import compile_system
+
+    key = (id(mechanism), method)
+    hit = _SYSTEMS.get(key)
+    if hit is not None and hit[0]() is mechanism:
+        return hit[1]
+    system = compile_system(mechanism, method)
+    try:
+        ref = weakref.ref(mechanism, lambda _, key=key, systems=_SYSTEMS: systems.pop(key, None))
+    except TypeError:  # not weak-referenceable: no cache
+        return system
+    _SYSTEMS[key] = (ref, system)
+    return system
 
 
 def solve_forces(mechanism: Mechanism | Any, result: Result) -> Any:

@@ -57,10 +57,9 @@ def _add_file(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """Solve the file's motion; write results.csv, health.csv and what the options ask, as one set."""
+    """Solve the file's motion in chunks, streaming results.FMT and health.FMT to disk; the extras the options
+    ask for (plots, extras.csv, forces, the viewer page) need the whole run in memory. One atomic set."""
     from .compiler import compile_system
-    from .output import OutputSet
-    from .solver import solve
 
     mech = _load(args)
     outputs = _teaching_outputs(args, mech)
@@ -68,20 +67,60 @@ def cmd_run(args: argparse.Namespace) -> int:
         mech = _rocking(mech)
     system = compile_system(mech, args.method)
     out = _out_folder(args, mech)
-    error: VloopError | None = None
-    try:
-        result = solve(system)
-    except MotionError as exc:
-        if exc.partial is None:
-            raise
-        result, error = exc.partial, exc
-    with OutputSet(out) as files:
-        _write_run(files.stage, args, mech, result, outputs, error)
+    summary, files, error = _run_streamed(args, mech, system, out, outputs)
     if error is not None:
-        return _fail(f"{error} (wrote {len(result)} rows to {out / 'results.csv'})")
-    _print_summary(system, result)
-    print("wrote " + ", ".join(str(f) for f in files.published))
+        return _fail(f"{error} (wrote {summary.rows} rows to {out / f'results.{args.format}'})")
+    _print_run_summary(system, summary)
+    print("wrote " + ", ".join(str(f) for f in files))
     return 0
+
+
+def _run_streamed(args: argparse.Namespace, mech: Any, system: Any, out: Path, outputs: Any) -> tuple:
+    """Stream the run's chunks into results.FMT / health.FMT (vloop.writers) inside one OutputSet, then the
+    extras from the whole run when asked. Returns (summary, published files, the MotionError that stopped it)."""
+    from . import budget, writers
+    from .forces import has_forces
+    from .output import OutputSet
+    from .progress import Progress
+    from .solver import CHUNK_ROWS, join, solve_iter
+
+    keep = bool(args.plot or args.html or args.extras or outputs is not None or has_forces(mech))
+    n = len(mech.times)
+    budget.check(system, n, not keep, CHUNK_ROWS, args.memory_budget)
+    with OutputSet(out) as files:
+        writers.check_disk(files.folder, n, budget.columns(system), args.format)
+        chunks = solve_iter(system, memory_budget=args.memory_budget)
+        with Progress(n, mech.name) as progress:
+            summary, kept, _, error = writers.stream(
+                files, args.format, chunks, _column_names(system), mech.units, mech.name, progress, keep
+            )
+        if keep and kept:
+            _write_extras(files.stage, args, mech, join(kept), outputs, error)
+    return summary, files.published, error
+
+
+def _column_names(system: Any) -> list[str]:
+    """The results' columns in output order (as vloop.solve names them)."""
+    cols = [f"{name}.{f}" for name, _, _ in system.link_outputs for f in ("theta", "omega", "alpha")]
+    cols += [f"{p}.{f}" for p in system.point_names for f in ("x", "y", "vx", "vy", "ax", "ay")]
+    cols += [f"{s}.{f}" for s in system.slider_names for f in ("s", "v", "a")]
+    return cols
+
+
+def _print_run_summary(system: Any, summary: Any) -> None:
+    mech = system.mechanism
+    asm = system.assembly
+    moved = ""
+    if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
+        moved = f", t = 0 assembly moved joints by up to {asm['moved']:.3g} {mech.units}"
+    print(
+        f"{mech.name}: {summary.rows} samples, t = {summary.t_first:g}..{summary.t_last:g} s, "
+        f"{len(system.loops)} loop{'s' if len(system.loops) != 1 else ''}, "
+        f"max closure {summary.closure:.2g}, max condition {summary.cond:.3g}{moved}"
+    )
+    notes = Result(mech.name, "vloop", np.zeros(0), {}, {"ill_conditioned": np.array([summary.ill])}, summary.meta)
+    for line in health_notes(notes):
+        print(line)
 
 
 def _rocking(mech: Any) -> Any:
@@ -94,10 +133,8 @@ def _rocking(mech: Any) -> Any:
     return mech
 
 
-def _write_run(stage: Path, args: argparse.Namespace, mech: Any, result: Result, outputs: Any, error: Any) -> None:
-    """Every file of one run, into the staging folder (published together by OutputSet)."""
-    result.to_csv(stage / "results.csv")
-    result.to_csv(stage / "health.csv", health=True)
+def _write_extras(stage: Path, args: argparse.Namespace, mech: Any, result: Result, outputs: Any, error: Any) -> None:
+    """The files of one run besides results and health, into the staging folder (published together)."""
     if args.plot and len(result):
         from .plots import plot_result
 
@@ -130,22 +167,6 @@ def _forces(mech: Any, result: Result, stage: Path, plot: bool) -> Any:
     if forces.message:
         print(f"vloop: {forces.message}: {', '.join(forces.indeterminate)} (no number in forces.csv)", file=sys.stderr)
     return forces
-
-
-def _print_summary(system: Any, result: Result) -> None:
-    mech = system.mechanism
-    asm = system.assembly
-    moved = ""
-    if asm.get("moved", 0) > 1e-12 * mech.scale:  # more than round-off
-        moved = f", t = 0 assembly moved joints by up to {asm['moved']:.3g} {mech.units}"
-    print(
-        f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s, "
-        f"{len(system.loops)} loop{'s' if len(system.loops) != 1 else ''}, "
-        f"max closure {np.max(result.health['residual'], initial=0):.2g}, "
-        f"max condition {np.max(result.health['cond'], initial=1):.3g}{moved}"
-    )
-    for line in health_notes(result):
-        print(line)
 
 
 def health_notes(result: Result, redundancy: bool = True) -> list[str]:
@@ -458,6 +479,18 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: every slider and every undriven link pivoted on the ground)",
     )
     r.add_argument("--html", action="store_true", help="also write the interactive viewer page NAME.html")
+    r.add_argument(
+        "--format",
+        choices=["csv", "parquet", "npz"],
+        default="csv",
+        help="results and health files: csv (default), parquet (needs pyarrow; units in the schema) or npz",
+    )
+    r.add_argument(
+        "--memory-budget",
+        default=None,
+        help="refuse a run estimated to need more memory than this (e.g. 2G, 500M; default: env "
+        "VLOOP_MEMORY_BUDGET, the file's [solver] memory_budget, else half the available memory)",
+    )
     r.set_defaults(func=cmd_run)
     vw = sub.add_parser("view", help="write one offline HTML page that animates the mechanism (loops, arrows, plots)")
     _add_file(vw)
@@ -503,7 +536,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except MemoryError:
-        return _fail("out of memory: use a larger step or a shorter run (or the streamed output of vloop run)")
+        from .budget import out_of_memory
+
+        return _fail(out_of_memory())
     except OSError as exc:  # an output or input the operating system refused, outside vloop's own checks
         from .output import describe_os_error
 

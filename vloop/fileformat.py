@@ -34,7 +34,23 @@ from .model import (
 )
 from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
 
-MAX_SAMPLES = 10_000_000  # beyond this a time grid is refused (memory, not maths)
+MAX_SAMPLES = 10**12  # a ceiling for absurd counts; the limit that applies is the memory budget (_time_limit)
+TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.budget)
+
+
+def _time_limit(n: float) -> str | None:
+    """Why a time grid of n samples is refused (it alone would exceed the memory budget), or None."""
+    from .budget import budget, fmt_size
+
+    limit, source = budget()
+    if n <= MAX_SAMPLES and n * TIME_BYTES <= limit:
+        return None
+    return (
+        f"{n:,.0f} samples: the time grid alone needs {fmt_size(n * TIME_BYTES)}, more than the memory budget of "
+        f"{fmt_size(limit)} ({source}); use a larger step or a shorter run, or raise VLOOP_MEMORY_BUDGET"
+    )
+
+
 MAX_FILE_BYTES = 64 * 2**20  # a mechanism file larger than this is refused before reading
 MAX_PROFILE_BYTES = 2**30  # a profile CSV larger than this is refused before reading
 MAX_PROFILE_ROWS = 10_000_000
@@ -580,12 +596,9 @@ def read_time(raw: Any, drivers: list[Driver], probs: Problems) -> np.ndarray:
         probs.add("time", f"stop ({stop:g}) is before start ({start:g})")
         return np.zeros(1)
     count = (stop - start) / step  # may overflow to inf for a subnormal step
-    if not math.isfinite(count) or count + 1 > MAX_SAMPLES:
-        many = f"{math.floor(count) + 1:,}" if math.isfinite(count) else "too many"
-        probs.add(
-            "time",
-            f"step {step:g} over [{start:g}, {stop:g}] gives {many} samples, more than the limit of {MAX_SAMPLES:,}",
-        )
+    if not math.isfinite(count) or _time_limit(count + 1):
+        why = _time_limit(count + 1) if math.isfinite(count) else "too many samples to count"
+        probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {why}")
         return np.zeros(1)
     n = math.floor(count + 1e-9) + 1  # up to and including stop, never past it
     t = start + step * np.arange(n)
@@ -595,8 +608,11 @@ def read_time(raw: Any, drivers: list[Driver], probs: Problems) -> np.ndarray:
 
 
 def _explicit_times(ts: Any, probs: Problems) -> np.ndarray:
-    if not isinstance(ts, list) or not ts or len(ts) > MAX_SAMPLES:
-        probs.add("time", f"'times' must be a non-empty list of at most {MAX_SAMPLES:,} numbers")
+    if not isinstance(ts, list) or not ts:
+        probs.add("time", "'times' must be a non-empty list of numbers")
+        return np.zeros(1)
+    if _time_limit(len(ts)):
+        probs.add("time", f"'times' has {_time_limit(len(ts))}")
         return np.zeros(1)
     vals = [real(x, "times", "time", probs) for x in ts]
     if None in vals:
@@ -608,7 +624,7 @@ def _explicit_times(ts: Any, probs: Problems) -> np.ndarray:
 
 
 def read_solver(raw: Any, probs: Problems) -> dict[str, Any]:
-    """[solver]: method, tol, rtol, max_iter, assembly_tolerance, branches, change_points."""
+    """[solver]: method, tol, rtol, max_iter, assembly_tolerance, branches, change_points, memory_budget."""
     if not isinstance(raw, dict):
         probs.add("solver", "must be a table")
         return {}
@@ -625,6 +641,13 @@ def read_solver(raw: Any, probs: Problems) -> dict[str, Any]:
             if not 0 < v < 1:
                 probs.add("solver", f"{k} must be between 0 and 1 (a fraction), got {v:g}")
             out[k] = v
+    if "memory_budget" in raw:  # bytes or a size such as "2G" (vloop.budget)
+        from .budget import parse_size
+
+        try:
+            out["memory_budget"] = parse_size(raw["memory_budget"], "memory_budget")
+        except ValueError as exc:
+            probs.add("solver", str(exc))
     if "max_iter" in raw:
         mi = raw["max_iter"]
         if isinstance(mi, bool) or not isinstance(mi, int) or not 1 <= mi <= 10_000:

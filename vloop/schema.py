@@ -184,6 +184,14 @@ SECTIONS: tuple[Section, ...] = (
                 'per loop N: "smooth" or "other" (or a list)',
                 {"1": "smooth"},
             ),
+            Key(
+                "memory_budget",
+                'bytes or "2G"',
+                "half the free memory",
+                "bytes",
+                "refuse a run estimated to need more (README: Big runs)",
+                "4G",
+            ),
         ),
     ),
     Section(

@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from . import budget, newton
 from .assembly import redundancy_text
 from .drivers import evaluate_all
 from .errors import MechanismError, MotionError
@@ -316,79 +318,6 @@ def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
     st.TH[k, a] = phi + TWO_PI * np.round((est - phi) / TWO_PI)
 
 
-def _newton_block(
-    p: _Plan, st: _State, n: int, tg: np.ndarray, na: int, scale: float, tol: float, max_iter: int
-) -> None:
-    """Per-sample Newton with analytic Jacobian and a Taylor predictor; raises _Failure."""
-    b = p.block
-    nu = len(b.unknowns)
-    is_ang = np.array([v < na for v in b.unknowns])
-    col = [v if v < na else v - na for v in b.unknowns]
-    x = np.array([st.TH[0, c] if a else st.S[0, c] for a, c in zip(is_ang, col, strict=True)])
-    xd = np.zeros(nu)
-    xdd = np.zeros(nu)
-    sign0 = None
-    m = p.C.shape[0]
-    colscale = np.where(is_ang, 1.0 / scale, 1.0)  # unit-free condition number, as in _block_health
-    cond_first = cond_last = 1.0
-
-    def put(k: int, x: np.ndarray) -> None:
-        for i in range(nu):
-            if is_ang[i]:
-                st.TH[k, col[i]] = x[i]
-                st.E[k, col[i]] = complex(math.cos(x[i]), math.sin(x[i]))
-            else:
-                st.S[k, col[i]] = x[i]
-
-    for k in range(n):
-        if k > 0:
-            h = tg[k] - tg[k - 1]
-            x = x + xd * h + 0.5 * xdd * h * h
-        row = slice(k, k + 1)
-        converged = False
-        for _ in range(max_iter):
-            put(k, x)
-            z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
-            F = p.C @ z[0]
-            J = _jacobian(p, z, e)[0]
-            try:
-                dx = _solve_block(J, -np.concatenate([F.real, F.imag]))
-            except np.linalg.LinAlgError:
-                raise _Failure(k, b.loops[0], "the loop Jacobian is singular (a toggle)") from None
-            x = x + dx
-            if np.max(np.abs(dx)) <= tol * (1.0 + np.max(np.abs(x))):
-                converged = True
-                break
-        put(k, x)
-        z, e = st.z(row, p.ang, p.sl, p.r, p.cd)
-        res = np.max(np.abs(p.C @ z[0])) / scale
-        if not converged or not np.isfinite(res) or res > 1e-9:
-            worst = b.loops[int(np.argmax(np.abs(p.C @ z[0])))] if np.isfinite(res) else b.loops[0]
-            why = f"Newton did not converge (closure {res:.2g} of the mechanism size)"
-            if k > 0 and cond_last > 10 * cond_first:
-                why += (
-                    f"; the Jacobian's condition number grew from {cond_first:.3g} to {cond_last:.3g}: "
-                    "a limit position or toggle is reached"
-                )
-            raise _Failure(k, worst, why)
-        J = _jacobian(p, z, e)
-        cond_last = float(np.linalg.cond(J[0] * colscale))
-        if k == 0:
-            cond_first = cond_last
-        sgn = _det_sign(J[0])
-        if sign0 is None:
-            sign0 = sgn
-        elif sgn != sign0:
-            raise _Failure(
-                k, b.loops[0], "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed"
-            )
-        if m and k + 1 < n:
-            xd = _rates(p, st, row, J, "v")[0]
-            _store(p, st, row, xd[None, :], "v", na)
-            xdd = _rates(p, st, row, J, "a")[0]
-            _store(p, st, row, np.zeros((1, nu)), "v", na)
-
-
 def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Real block Jacobians (rows, 2m, 2m) of [Re; Im] of the block's loops."""
     cols = []
@@ -538,6 +467,10 @@ class _Run:
     detect: bool = True  # look for change points (the main run only)
     check: bool = True  # refuse ill-conditioned samples and branch flips
     rates: bool = True
+    newton_sign: dict[int, float] = field(default_factory=dict)  # det sign of each Newton block's t = 0 branch
+    tail: bool = True  # the rows end the run (not a chunk followed by another)
+    t_start: float = 0.0  # the run's first requested time
+    memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
@@ -569,12 +502,24 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
     for i, p in enumerate(_plans(sys)):
         if upto is not None and i > upto:
             break
-        sig = _positions(run, st, tg, i, p, out)
+        fac = None
+        if p.block.kind == "newton":
+            failure, fac = newton.solve_block(run, st, tg, i, p, out.n_ok)
+            if failure is not None:
+                _fail(out, failure)
+            out.discs.append(None)
+            sig = run.sigma(i, tg[: out.n_ok])
+        else:
+            sig = _positions(run, st, tg, i, p, out)
         if out.n_ok == 0:
             break
         k = slice(0, out.n_ok)
-        cols = _columns(p, st, k) if len(p.block.unknowns) == 2 else None  # shared by health and rates
-        cond, sgn = _block_health(p, st, k, run.scale, cols)
+        cols = None
+        if fac is None:
+            cols = _columns(p, st, k)  # shared by health and rates
+            cond, sgn = _block_health(p, st, k, run.scale, cols)
+        else:
+            cond, sgn = fac.cond[k], fac.sign[k]
         near = _near_change_point(run, i, tg[k], cond)
         if run.check:
             signed = sgn * sig[: out.n_ok]
@@ -588,13 +533,23 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
         out.signs.append(sgn)
         if out.n_ok == 0 or not run.rates:
             continue
-        J = None if cols is not None else _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
-        _store(p, st, k, _rates(p, st, k, J, "v", cols), "v", na)
-        _store(p, st, k, _rates(p, st, k, J, "a", cols), "a", na)
+        if fac is None:
+            _store(p, st, k, _rates(p, st, k, None, "v", cols), "v", na)
+            _store(p, st, k, _rates(p, st, k, None, "a", cols), "a", na)
+        else:
+            _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "v"), "v", na)
+            _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "a"), "a", na)
         if near.any():
             _rates_across(run, st, tg, i, p, np.nonzero(near)[0], out)
     out.at_change = out.at_change[: out.n_ok]
     return out
+
+
+def _rates_by(p: _Plan, st: _State, k: slice, inv: np.ndarray, what: str) -> np.ndarray:
+    """Rates of a Newton block from its factored Jacobians (J⁻¹, or the least-squares (JᵀJ)⁻¹Jᵀ)."""
+    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))
+    rhs = np.concatenate([R.real, R.imag], axis=1)
+    return (inv @ rhs[..., None])[..., 0]
 
 
 def _fail(out: _Solved, failure: _Failure) -> None:
@@ -615,13 +570,6 @@ def _positions(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, out: _So
     """Solve block ``i``'s positions on rows 0..out.n_ok-1 (finding change points on the main run)."""
     na = run.sys.n_angles
     k = slice(0, out.n_ok)
-    if p.block.kind == "newton":
-        try:
-            _newton_block(p, st, out.n_ok, tg, na, run.scale, run.tol, run.max_iter)
-        except _Failure as f:
-            _fail(out, f)
-        out.discs.append(None)
-        return np.ones(out.n_ok)
     sig = run.sigma(i, tg[k])
     ok, h = _closed_form(p, st, k, na, sig)
     if run.detect and p.block.kind != "PP":
@@ -648,11 +596,13 @@ ZOOM_STEPS = 12  # each step narrows the bracket 16-fold
 ETA_INPUT = 1e-5  # the rates across a change point are compared this far from it (input units: rad, or size)
 
 
-def _candidate_minima(t: np.ndarray, h: np.ndarray) -> list[tuple[int, int]]:
+def _candidate_minima(t: np.ndarray, h: np.ndarray, tail: bool = True) -> list[tuple[int, int]]:
     """Brackets (row lo, row hi) around sampled minima of h deep enough to hide a zero between samples.
 
     Near a double zero h ≈ c·(t − t*)², so a parabola through three samples has its minimum
     near 0 whatever the phase of the sampling; a broad minimum keeps it near the samples.
+    ``tail``: also look between the last two samples (the end of the run, not of a chunk: the
+    next chunk sees that minimum with both its neighbours).
     """
     n = len(h)
     if n < 2:
@@ -660,15 +610,24 @@ def _candidate_minima(t: np.ndarray, h: np.ndarray) -> list[tuple[int, int]]:
     out = []
     m = np.nonzero((h[1:-1] <= h[:-2]) & (h[1:-1] <= h[2:]))[0] + 1
     for c in m:
-        u0, u2 = t[c - 1] - t[c], t[c + 1] - t[c]
-        g0, g2 = (h[c - 1] - h[c]) / u0, (h[c + 1] - h[c]) / u2
-        a = (g0 - g2) / (u0 - u2)  # h ≈ h[c] + b·u + a·u² through the three samples
-        low = h[c] - (g0 - a * u0) ** 2 / (4 * a) if a > 0 else h[c]
-        if low <= 0.25 * min(h[c - 1], h[c + 1]):
+        if _parabola_low(t, h, c, c - 1, c + 1) <= 0.25 * min(h[c - 1], h[c + 1]):
             out.append((c - 1, c + 1))
-    if h[-1] < h[-2]:  # still falling at the end: a zero may lie before the last sample
-        out.append((n - 2, n - 1))
+    if tail and h[-1] < h[-2]:  # still falling at the end: a zero may lie before the last sample
+        if n < 3 or _parabola_low(t, h, n - 2, n - 2, n - 1) <= 0.25 * h[-1]:
+            out.append((n - 2, n - 1))
     return out
+
+
+def _parabola_low(t: np.ndarray, h: np.ndarray, c: int, lo: int, hi: int) -> float:
+    """The least value over [t[lo], t[hi]] of the parabola through samples c − 1, c, c + 1 of h."""
+    u0, u2 = t[c - 1] - t[c], t[c + 1] - t[c]
+    g0, g2 = (h[c - 1] - h[c]) / u0, (h[c + 1] - h[c]) / u2
+    a = (g0 - g2) / (u0 - u2)  # h ≈ h[c] + b·u + a·u² through the three samples
+    b = g0 - a * u0
+    if not a > 0:
+        return float(min(h[lo], h[hi]))
+    u = min(max(-b / (2 * a), t[lo] - t[c]), t[hi] - t[c])
+    return float(h[c] + b * u + a * u * u)
 
 
 def _probe(run: _Run, st: _State, tg: np.ndarray, base: int, times: np.ndarray, upto: int, **mode: bool) -> tuple:
@@ -700,7 +659,9 @@ def _find_change_points(run: _Run, st: _State, tg: np.ndarray, i: int, h: np.nda
     found = []
     loop = run.sys.loops[_plans(run.sys)[i].block.loops[0]]
     choices = _change_point_choices(run.sys, loop.index + 1)
-    for lo, hi in _candidate_minima(tg[: len(h)], h):
+    for lo, hi in _candidate_minima(tg[: len(h)], h, run.tail):
+        if any(tg[lo] <= ev.time <= tg[hi] for ev in run.events.get(i, ())):
+            continue  # found already (by the chunk before, whose last rows this chunk starts from)
         t_star, h_min = _zoom(run, st, tg, i, lo, hi)
         if h_min < 0:
             raise _Failure(hi, loop.index, "the loop cannot close between samples: the input passes a limit position")
@@ -992,13 +953,43 @@ def solve(
     tol: float | None = None,
     max_iter: int | None = None,
     rtol: float | None = None,
+    memory_budget: Any = None,
 ) -> Result:
     """P/V/A of a compiled system at ``times`` [s] (default: the file's). Raises MotionError with ``partial``.
 
     ``tol``: Newton step tolerance (relative); ``max_iter``; ``rtol``: accuracy asked of every output
     (samples whose error bound cond²·ε exceeds it are refused). The file's [solver] values win for tol
-    and max_iter; an ``rtol`` given here wins over the file's.
+    and max_iter; an ``rtol`` given here wins over the file's. ``memory_budget`` (bytes or "2G"; see
+    vloop.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
     """
+    run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
+    budget.check(run.sys, len(times), False, CHUNK_ROWS, run.memory_budget)
+    with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
+        return _solve(run, times)
+
+
+def solve_iter(
+    system: LoopSystem,
+    times: np.ndarray | None = None,
+    *,
+    chunk: int | None = None,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    rtol: float | None = None,
+    memory_budget: Any = None,
+) -> Iterator[Result]:
+    """As :func:`solve`, but yield the run in chunks of about ``chunk`` samples: memory is bounded by a chunk
+    whatever the run's length. A failure raises MotionError whose ``partial`` holds the failing chunk's rows."""
+    run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
+    budget.check(run.sys, len(times), True, CHUNK_ROWS, run.memory_budget)
+    with np.errstate(all="ignore"):
+        yield from solve_chunks(run, times, chunk or CHUNK)
+
+
+def _prepare(
+    system: LoopSystem, times: np.ndarray | None, tol: Any, max_iter: Any, rtol: Any, memory_budget: Any
+) -> tuple[_Run, np.ndarray]:
+    """The run context and checked times of a solve."""
     mech = system.mechanism
     tol = float(mech.options.get("tol", DEFAULT_TOL if tol is None else tol))
     max_iter = int(mech.options.get("max_iter", DEFAULT_MAX_ITER if max_iter is None else max_iter))
@@ -1007,8 +998,8 @@ def solve(
     if times.ndim != 1 or len(times) == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise MotionError("times must be a non-empty, finite, strictly increasing 1-D array", entry="time")
     run = _Run(system, _Inputs(mech), mech.scale, tol, max_iter, rtol)
-    with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
-        return _solve(run, times)
+    run.memory_budget = memory_budget
+    return run, times
 
 
 @dataclass(frozen=True)
@@ -1019,6 +1010,9 @@ class _Grid:
 
     t: np.ndarray
     out: np.ndarray  # internal row of each requested sample (increasing)
+    skip: int = 0  # leading requested samples already given by the chunk before (its last one)
+    offset: int = 0  # index in the whole run of the requested sample at out[0]
+    total: int = 0  # requested samples in the whole run
 
     @property
     def first(self) -> int:
@@ -1062,19 +1056,138 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
     return _Grid(np.concatenate([lead, inner]), len(lead) + starts)
 
 
-def _solve(run: _Run, times: np.ndarray) -> Result:
+CHUNK = 16_384  # requested samples solved together: the state stays in cache, memory stays bounded
+CHUNK_ROWS = 2 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
+
+
+def _solve(run: _Run, times: np.ndarray, chunk: int | None = None) -> Result:
+    """The whole run as one Result: the chunks joined (on failure, the MotionError's partial joins them)."""
+    parts: list[Result] = []
+    try:
+        for part in solve_chunks(run, times, chunk or CHUNK):
+            parts.append(part)
+    except MotionError as exc:
+        if exc.partial is not None and parts:
+            exc.partial = join([*parts, exc.partial])
+        raise
+    return join(parts)
+
+
+def join(parts: list[Result]) -> Result:
+    """Results of consecutive chunks as one (meta from the last: it has every change point)."""
+    if len(parts) == 1:
+        return parts[0]
+    first, last = parts[0], parts[-1]
+    return Result(
+        first.mechanism,
+        first.engine,
+        np.concatenate([p.t for p in parts]),
+        {k: np.concatenate([p.columns[k] for p in parts]) for k in first.columns},
+        {k: np.concatenate([p.health[k] for p in parts]) for k in first.health},
+        dict(last.meta),
+    )
+
+
+def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Result]:
+    """Solve ``times`` in chunks of about ``chunk`` requested samples, yielding each chunk's Result.
+
+    State carried across a chunk border: two internal rows (positions, unwrapped angles, so turn counts
+    continue; change-point detection sees the border row with both neighbours), the change points found
+    so far and each Newton block's branch sign (in ``run``). A chunk's last rows that a change point just
+    past its end could still reach (ill-conditioned rows within its stencil: see _cut) are not given out
+    but solved again by the next chunk, as in a run solved in one piece; a failure there is decided by a
+    longer chunk. A failure raises MotionError whose ``partial``
+    holds this chunk's rows before it (``sample`` counts from the start of the run)."""
     sys = run.sys
     lead, run.inputs, turns = _lead_in(sys, run, float(times[0]))
-    grid = _grid(run, lead, times)
+    run.t_start = float(times[0])
+    carry: tuple[np.ndarray, _State] | None = None
+    i0, n_total, size, at_least = 0, len(times), chunk, 1
+    while i0 < n_total:
+        i1 = min(i0 + size, n_total)
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least)
+        run.tail = grid.offset + len(grid.out) == n_total
+        st = _initial_state(sys, len(grid.t))
+        if carry is not None:
+            for name in ("E", "TH", "S"):
+                getattr(st, name)[:2] = getattr(carry[1], name)
+        events = {i: list(evs) for i, evs in run.events.items()}
+        try:
+            res = _solve_grid(run, grid, st, turns if carry is None else None)
+            failure = None
+        except MotionError as exc:
+            res, failure = exc.partial, exc
+        reach = _border_reach(run, grid)
+        cut = len(grid.out) - 1 if run.tail else _cut(run, grid, res, reach)
+        if failure is not None and (run.tail or failure.time is None or failure.time <= reach):
+            raise failure
+        if not run.tail and (cut <= grid.skip or grid.out[cut] < 1):  # nothing safe from the chunk's end yet
+            at_least = len(grid.out) - grid.skip + 1  # one more requested sample than this chunk had
+            run.events, size = events, max(2 * size, at_least)
+            continue
+        t_cut = float(grid.t[grid.out[cut]])
+        run.events = {i: [ev for ev in evs if ev.time <= t_cut] for i, evs in run.events.items()}
+        yield res.head(cut + 1 - grid.skip)
+        if run.tail:
+            return
+        row = int(grid.out[cut])
+        carry = (grid.t[row - 1 : row + 1], _rows(st, slice(row - 1, row + 1)))
+        i0, size, at_least = grid.offset + cut + 1, chunk, 1
+
+
+def _chunk_grid(
+    run: _Run, lead: np.ndarray, carry: tuple | None, times: np.ndarray, i0: int, i1: int, n_total: int, at_least: int
+) -> _Grid:
+    """The internal grid of requested samples i0..i1-1 (after the carried rows), halved until it fits CHUNK_ROWS
+    or holds ``at_least`` requested samples."""
+    while True:
+        if carry is None:
+            grid = _grid(run, lead, times[i0:i1])
+        else:
+            grid = _grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
+        if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= at_least:
+            break
+        i1 = max(i0 + (i1 - i0) // 2, i0 + at_least)
+    return dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
+
+
+def _border_reach(run: _Run, grid: _Grid) -> float:
+    """The earliest time a change point found after this chunk's end could still reach back to (its stencil,
+    4·η with η the time the inputs take to move STENCIL_INPUT)."""
+    t_end = float(grid.t[-1])
+    if not run.sys.mechanism.drivers:
+        return t_end
+    return t_end - 4.0 * _eta(run, t_end, math.inf, STENCIL_INPUT)
+
+
+def _cut(run: _Run, grid: _Grid, res: Result, reach: float) -> int:
+    """The last requested sample of a chunk (index into grid.out) that nothing after the chunk can change:
+    before the first sample that is ill-conditioned (next to a singular row: a change point found by
+    the next chunk would take its rates across) and within the reach of the chunk's end."""
+    weak = _error_bound(res.health["cond"]) > ILL_FRACTION * run.rtol
+    unsafe = np.nonzero(weak & (res.t > reach))[0]
+    return grid.skip + len(res) - 1 if not len(unsafe) else grid.skip + int(unsafe[0]) - 1
+
+
+def _rows(st: _State, k: slice) -> _State:
+    """A copy of rows ``k`` of a state's positions (rates are recomputed where carried)."""
+    out = _State.__new__(_State)
+    for name in ("E", "TH", "S"):
+        setattr(out, name, getattr(st, name)[k].copy())
+    return out
+
+
+def _solve_grid(run: _Run, grid: _Grid, st: _State, turns: np.ndarray | None) -> Result:
+    """Solve one chunk's grid (row 0 assembled; rows 0–1 carried from the chunk before, if any)."""
+    sys = run.sys
     tg, n, first = grid.t, len(grid.t), grid.first
-    st = _initial_state(sys, n)
     X, XD, XDD = run.inputs(tg)
     _impose_drivers(sys, st, X, XD, XDD)
     early = _check_inputs(sys, X, XD, XDD, first, run.rtol)
     solved = _run_blocks(run, st, tg, early.sample if early else n)
     failure = solved.failure if early is None or (solved.failure and solved.failure.sample < early.sample) else early
     n_ok = min(solved.n_ok, failure.sample if failure else n)
-    free = [v for v in range(sys.n_angles) if v not in sys.drivers and turns[v]]
+    free = [v for v in range(sys.n_angles) if v not in sys.drivers and turns[v]] if turns is not None else []
     if free:  # whole turns skipped by the lead-in: θ = φ + 2π·n with n counted in whole turns, as from t = 0
         phi = np.angle(st.E[first:, free])
         st.TH[first:, free] = phi + TWO_PI * np.round((st.TH[first:, free] + turns[free] - phi) / TWO_PI)
@@ -1085,7 +1198,9 @@ def _solve(run: _Run, times: np.ndarray) -> Result:
     bad = _first_non_finite(result)
     if bad is not None:
         row, column = bad
-        failure = _Failure(int(grid.out[row]), None, f"{column} is not finite (an overflow: the inputs are too large)")
+        failure = _Failure(
+            int(grid.out[row + grid.skip]), None, f"{column} is not finite (an overflow: the inputs are too large)"
+        )
         result, limit = result.head(row), None
     if failure is not None:
         raise _motion_error(sys, failure, grid, X, result, limit)
@@ -1132,9 +1247,10 @@ def _first_non_finite(result: Result) -> tuple[int, str] | None:
 def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> Result:
     sys = run.sys
     mech = sys.mechanism
-    rows = grid.out[grid.out < n_ok]  # the requested samples solved
+    rows = grid.out[grid.skip :][grid.out[grid.skip :] < n_ok]  # the requested samples solved
     points, loops = _system_sums(sys)
-    P, V, A = points.pos(st, rows), points.vel(st, rows), points.acc(st, rows)
+    k = _as_slice(rows)
+    P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
     cols: dict[str, np.ndarray] = {}
     for name, a, offset in sys.link_outputs:
         if a >= 0:
@@ -1152,31 +1268,49 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
     for i, name in enumerate(sys.slider_names):
         cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[rows, i], st.SD[rows, i], st.SDD[rows, i]
     t = grid.t[rows]
+    seen = grid.t[grid.out[: grid.skip + len(rows)]]  # requested times solved in this chunk and the one before
+    span = np.array([run.t_start, seen[-1]]) if len(seen) else np.zeros(0)
     return Result(
         mech.name,
         "vloop",
         t,
         cols,
-        _health(run, st, t, rows, solved, loops),
-        {"blocks": [b.kind for b in sys.blocks], "assembly": sys.assembly, **_events_meta(run, t), **_redundancy(sys)},
+        _health(run, st, grid.t[grid.out[: grid.skip + len(rows)]], rows, solved, loops),
+        {
+            "blocks": [b.kind for b in sys.blocks],
+            "assembly": sys.assembly,
+            **_events_meta(run, span),
+            **_redundancy(sys),
+        },
     )
 
 
+def _as_slice(rows: np.ndarray) -> slice | np.ndarray:
+    """Consecutive rows as a slice (state arrays are then read as views, not copied)."""
+    if len(rows) and int(rows[-1]) - int(rows[0]) + 1 == len(rows):
+        return slice(int(rows[0]), int(rows[-1]) + 1)
+    return rows
+
+
 def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Solved, loops: _Sum) -> dict:
-    """Per requested sample: closure residual, worst block condition number, branch signature, flags."""
+    """Per requested sample (``rows``): closure residual, worst block condition number, branch signature,
+    flags. ``t``: the times of the rows, after the last sample of the chunk before if there is one."""
     sys = run.sys
-    residual = np.max(np.abs(loops.pos(st, rows)), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
+    residual = (
+        np.max(np.abs(loops.pos(st, _as_slice(rows))), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
+    )
     cond = np.max(np.stack([c[rows] for c in solved.conds]), axis=0) if solved.conds else np.ones(len(rows))
     branch = np.zeros(len(rows), np.int64)
     for bit, sgn in enumerate(solved.signs):
         branch |= (sgn[rows] > 0).astype(np.int64) << bit
     at_change = solved.at_change[rows] if len(solved.at_change) else np.zeros(len(rows), bool)
     change = at_change.copy()
+    skip = len(t) - len(rows)  # t starts with the chunk before's last sample, if any
     for evs in run.events.values():
         for ev in evs:
             j = int(np.searchsorted(t, ev.time))
-            if 0 < j < len(t):
-                change[j] = True
+            if 0 < j < len(t) and j >= skip:
+                change[j - skip] = True
     return {
         "residual": residual,
         "cond": cond,
@@ -1225,19 +1359,20 @@ def _motion_error(
     """The MotionError for failure ``f`` at internal row f.sample; ``sample`` is the first requested one lost."""
     mech = sys.mechanism
     t = float(grid.t[f.sample])
-    n_req = len(grid.out)
+    n_req = grid.total or len(grid.out)
     j = grid.requested_before(f.sample)
+    jg = j + grid.offset  # in the whole run
     drv = ", ".join(
         f"{d.symbol} = {X[f.sample, i]:.6g} {'rad' if d.kind == 'crank' else mech.units}"
         for i, d in enumerate(mech.drivers)
     )
     if f.sample < grid.first:
         where = "before the first requested time (on the way from the t = 0 assembly)"
-    elif j < n_req and grid.out[j] == f.sample:
-        where = f"at t = {t:.6g} s (sample {j} of {n_req})"
+    elif j < len(grid.out) and grid.out[j] == f.sample:
+        where = f"at t = {t:.6g} s (sample {jg} of {n_req})"
     else:
-        where = f"at t = {t:.6g} s (between samples {j - 1} and {j} of {n_req})"
-    kept = f"{len(partial)} earlier sample{'s' if len(partial) != 1 else ''} kept" if len(partial) else "no sample kept"
+        where = f"at t = {t:.6g} s (between samples {jg - 1} and {jg} of {n_req})"
+    kept = f"{jg} earlier sample{'s' if jg != 1 else ''} kept" if jg else "no sample kept"
     lim = ""
     if limit is not None:
         vals = ", ".join(
@@ -1250,7 +1385,7 @@ def _motion_error(
         f"{mech.name}: cannot assemble {where}, {drv}{at}: {f.why}{lim}; {kept}",
         entry=f"loop {f.loop + 1}" if f.loop is not None else "drivers",
         time=t if f.sample >= grid.first else None,
-        sample=j if f.sample >= grid.first else None,
+        sample=jg if f.sample >= grid.first else None,
         driver_value=X[f.sample].tolist() if len(X) else None,
         partial=partial,
     )

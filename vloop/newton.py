@@ -1,0 +1,544 @@
+"""Newton blocks, vectorized over samples.
+
+A block whose loops are not one of the closed-form dyads (an Assur group of class III, coupled
+loops, a whole system under ``method="newton"``) is solved for every sample of a run in passes:
+
+1. **Coarse continuation.** Rows about COARSE_STEP of input travel apart are solved one after the
+   other: Taylor predictor x + ẋ·h + ẍ·h²/2 from the previous coarse row (ẋ, ẍ exact linear
+   solves), Newton–Raphson with the analytic Jacobian. A coarse step is accepted only if it
+   converged, closes every equation, keeps the Jacobian's determinant sign (the assembly branch)
+   and lands within JUMP of the predicted increment; else the rows in between are continued one
+   by one (finer continuation, where the old sample-by-sample rules apply and decide).
+2. **Dense rows, all at once.** Every other row starts from the cubic Hermite interpolant of its
+   coarse neighbours (positions and rates) and takes batched Newton steps (``numpy.linalg.solve``
+   on stacks of small matrices). A row must converge, close, keep the branch's determinant sign
+   and stay near its prediction; an interval with a row that does not is continued one by one.
+3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
+   condition number, shared by the rates and the health columns.
+
+Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
+Gauss–Newton steps and least-squares rates; the residual of every equation is checked.
+
+A determinant that changes sign between two rows while Newton converges onto the Taylor-predicted
+(smooth) continuation is a change point (the branches cross): it is located by bisection on the
+determinant and reported like a closed-form dyad's; any other sign change is a branch flip, an error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import solver as _s
+
+if TYPE_CHECKING:
+    from .solver import _Plan, _Run, _State
+
+COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π per mechanism size)
+TWO_PI = 2.0 * math.pi
+WINDOW = 6  # coarse rows predicted from one anchor and solved together
+JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
+LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is then at round-off
+FRESH = 1e-14  # a last step above this (relative) refreshes the Jacobian the rates are taken from
+CLOSURE = 1e-9  # a solved row closes every equation to this fraction of the mechanism size
+LOCATE_STEPS = 40  # bisection steps locating a Newton block's change point
+
+
+@dataclass
+class Factor:
+    """The block Jacobian at every solved row and what rates and health take from it."""
+
+    J: np.ndarray  # (rows, 2m, nu)
+    inv: np.ndarray  # (rows, nu, 2m): J⁻¹, or (JᵀJ)⁻¹Jᵀ for a rectangular block (least squares)
+    cond: np.ndarray  # condition number, angle columns divided by the mechanism size (see _condition)
+    sign: np.ndarray  # sign of det J (+1 for a rectangular block: no branch sign)
+
+
+class _Block:
+    """Index data to evaluate one Newton block's residual and Jacobian on any set of rows."""
+
+    def __init__(self, run: _Run, p: _Plan) -> None:
+        sys = run.sys
+        na = sys.n_angles
+        unk = p.block.unknowns
+        self.p = p
+        self.nu = len(unk)
+        self.m2 = 2 * p.C.shape[0]
+        self.square = self.m2 == self.nu
+        self.ia = np.array([u for u, v in enumerate(unk) if v < na], int)
+        self.isl = np.array([u for u, v in enumerate(unk) if v >= na], int)
+        self.acol = np.array([v for v in unk if v < na], int)
+        self.scol = np.array([v - na for v in unk if v >= na], int)
+        nt = len(p.ang)
+        D = np.zeros((2 * nt, p.C.shape[0], self.nu), complex)
+        for u, (v, mask) in enumerate(zip(unk, p.masks, strict=True)):
+            # ∂z/∂θ = j·z for every term turning with θ; ∂z/∂s = e for the slider's own term
+            D[np.nonzero(mask)[0] + (0 if v < na else nt), :, u] = p.C.T[mask]
+        self.D = D.reshape(2 * nt, -1)
+        self.colscale = np.where([v < na for v in unk], 1.0 / run.scale, 1.0)
+        self.scale = run.scale
+
+    def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
+        x = np.empty((len(rows), self.nu))
+        x[:, self.ia] = st.TH[rows][:, self.acol]
+        x[:, self.isl] = st.S[rows][:, self.scol]
+        return x
+
+    def put(self, st: _State, rows: np.ndarray, x: np.ndarray) -> None:
+        r = rows[:, None]
+        if len(self.ia):
+            th = x[:, self.ia]
+            st.TH[r, self.acol] = th
+            st.E[r, self.acol] = np.cos(th) + 1j * np.sin(th)
+        if len(self.isl):
+            st.S[r, self.scol] = x[:, self.isl]
+
+    def residual_jacobian(self, st: _State, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """[Re; Im] of the block's loop sums (rows, 2m) and their Jacobian (rows, 2m, nu)."""
+        p = self.p
+        z, e = st.z(rows, p.ang, p.sl, p.r, p.cd)
+        F = z @ p.Ct
+        Jc = (np.concatenate([1j * z, e], axis=1) @ self.D).reshape(len(rows), -1, self.nu)
+        return np.concatenate([F.real, F.imag], axis=1), np.concatenate([Jc.real, Jc.imag], axis=1)
+
+    def step(self, J: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """Newton (square) or Gauss–Newton (rectangular) steps for every row; NaN where singular."""
+        if not self.square:
+            Jt = J.transpose(0, 2, 1)
+            J, F = Jt @ J, (Jt @ F[..., None])[..., 0]
+        return _solve_rows(J, -F)
+
+    def sign(self, J: np.ndarray) -> np.ndarray:
+        """det J's sign per row (the assembly branch); a rectangular (redundant) block has none: +1."""
+        if self.square:
+            return np.sign(np.linalg.det(J))
+        return np.ones(len(J))
+
+    def factor(self, st: _State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
+        """The Factor at the state's rows, the closure residual of each (fraction of the size) and whether
+        the Newton step from there is below tol·(1 + |x|); that last step is applied (J is kept: it moves
+        by the step, round-off for a converged row)."""
+        F, J = self.residual_jacobian(st, rows)
+        if self.square:
+            inv = _invert_rows(J)
+        else:  # the pseudo-inverse by SVD: normal equations would square the condition number
+            finite = np.all(np.isfinite(J), axis=(1, 2))
+            inv = np.full(J.transpose(0, 2, 1).shape, np.nan)
+            inv[finite] = np.linalg.pinv(J[finite])
+        cond = _condition(J * self.colscale, inv / self.colscale[:, None], rtol)
+        res = np.max(np.abs(F), axis=1, initial=0.0) / self.scale
+        dx = -(inv @ F[..., None])[..., 0]
+        x = self.read(st, rows) + dx
+        with np.errstate(invalid="ignore"):
+            step = np.max(np.abs(dx), axis=1, initial=0.0) / (1.0 + np.max(np.abs(x), axis=1, initial=0.0))
+        conv = step <= tol
+        fresh = step <= FRESH  # J at the rows that moved more is refreshed by the caller (rates use it)
+        finite = np.all(np.isfinite(x), axis=1)
+        self.put(st, rows[finite], x[finite])
+        return Factor(J, inv, cond, self.chain_sign(J, inv)), res, conv & fresh
+
+    def chain_sign(self, J: np.ndarray, inv: np.ndarray) -> np.ndarray:
+        """det J's sign on consecutive rows without a determinant per row: where ‖J_{k−1}⁻¹(J_k − J_{k−1})‖_F < 1
+        every eigenvalue of J_{k−1}⁻¹J_k = I + E lies within 1 of 1, so det J_k has det J_{k−1}'s sign; rows
+        where that bound fails (near a singular row) get their determinant computed."""
+        if not self.square or len(J) < 2:
+            return self.sign(J)
+        E = inv[:-1] @ (J[1:] - J[:-1])
+        with np.errstate(invalid="ignore"):
+            close = np.sum(E * E, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
+        exact = np.concatenate([[0], np.nonzero(~close)[0] + 1])
+        sign = np.full(len(J), np.nan)
+        sign[exact] = self.sign(J[exact])
+        last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
+        return sign[last]
+
+
+def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A⁻¹·B for stacks (B of shape (rows, n) or (rows, n, k)); rows whose A is singular give NaN."""
+    vec = B.ndim == 2
+    Bm = B[..., None] if vec else B
+    try:
+        X = np.linalg.solve(A, Bm)
+    except np.linalg.LinAlgError:
+        X = np.full((*Bm.shape[:1], A.shape[2], *Bm.shape[2:]), np.nan)
+        for k in range(len(A)):
+            try:
+                X[k] = np.linalg.solve(A[k], Bm[k])
+            except np.linalg.LinAlgError:
+                pass
+    return X[..., 0] if vec else X
+
+
+def _invert_rows(A: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        out = np.full(A.shape, np.nan)
+        for k in range(len(A)):
+            try:
+                out[k] = np.linalg.inv(A[k])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
+    """Condition number of the scaled Jacobians: the Frobenius-norm one ‖J‖_F·‖J⁺‖_F (an upper bound
+    of the 2-norm one, at most nu times it) on every row, replaced by the exact 2-norm one (singular
+    values) where the bound reaches the level at which a sample is flagged (cond²·ε > ILL_FRACTION·rtol),
+    so flags and refusals follow the 2-norm rule exactly while most rows skip the SVD."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum(Jinv_s * Jinv_s, axis=(1, 2)))
+    cond = np.where(np.isfinite(cond), cond, np.inf)
+    level = math.sqrt(_s.ILL_FRACTION * rtol / _s.EPS)
+    near = np.nonzero(cond > level)[0]
+    if len(near):
+        sv = np.linalg.svd(Js[near], compute_uv=False)
+        with np.errstate(divide="ignore"):
+            cond[near] = np.where(sv[:, -1] > 0, sv[:, 0] / np.where(sv[:, -1] > 0, sv[:, -1], 1.0), np.inf)
+    return cond
+
+
+def newton(
+    blk: _Block, st: _State, rows: np.ndarray, x: np.ndarray, tol: float, max_iter: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched Newton from ``x`` on ``rows``: (solution, converged mask); rows stop as their step falls
+    below tol·(1 + |x|)."""
+    x = x.copy()
+    conv = np.zeros(len(rows), bool)
+    act = np.arange(len(rows))
+    for _ in range(max_iter):
+        r = rows[act]
+        blk.put(st, r, x[act])
+        F, J = blk.residual_jacobian(st, r)
+        dx = blk.step(J, F)
+        xa = x[act] + dx
+        x[act] = xa
+        finite = np.all(np.isfinite(xa), axis=1)
+        done = finite & (np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(xa), axis=1)))
+        conv[act[done]] = True
+        act = act[finite & ~done]
+        if not len(act):
+            break
+    good = np.all(np.isfinite(x), axis=1)
+    blk.put(st, rows[good], x[good])
+    return x, conv
+
+
+# ------------------------------------------------------------------ the block over a run
+
+
+class _Ctx:
+    """One Newton block being solved on rows 0..n-1 of a state (row 0 assembled)."""
+
+    def __init__(self, run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int) -> None:
+        self.run, self.st, self.tg, self.i, self.p, self.n = run, st, tg, i, p, n
+        cache = run.sys.cache.setdefault("newton", {})
+        if i not in cache:
+            cache[i] = _Block(run, p)
+        self.blk: _Block = cache[i]
+        self.na = run.sys.n_angles
+        self.xd = np.zeros((n, self.blk.nu))  # rates at the rows continued one by one (predictors)
+        self.xdd = np.zeros((n, self.blk.nu))
+        self.weak = np.zeros(n, bool)  # rows whose rates are too ill-conditioned to predict from
+        self.prev = np.full(n, -1)  # the row each row was continued from
+
+    def expected_sign(self, rows: np.ndarray) -> np.ndarray:
+        """The determinant sign of the run's assembly branch at these rows (flipped after change points)."""
+        ref = self.run.newton_sign.get(self.i)
+        return ref * self.run.sigma(self.i, self.tg[rows])
+
+    def rates_rows(self, rows: np.ndarray, J: np.ndarray) -> None:
+        """ẋ and ẍ at several rows at once (as :meth:`rates_at`)."""
+        p, st, na = self.p, self.st, self.na
+        for what, out in (("v", self.xd), ("a", self.xdd)):
+            R = -(p.total.vel(st, rows) if what == "v" else p.total.acc(st, rows))
+            rhs = np.concatenate([R.real, R.imag], axis=1)
+            if self.blk.square:
+                val = _solve_rows(J, rhs)
+            else:
+                Jt = J.transpose(0, 2, 1)
+                val = _solve_rows(Jt @ J, (Jt @ rhs[..., None])[..., 0])
+            out[rows] = val
+            if what == "v":
+                _s._store(p, st, rows, val, "v", na)
+        _s._store(p, st, rows, np.zeros((len(rows), self.blk.nu)), "v", na)
+        Js = J * self.blk.colscale
+        ok = np.all(np.isfinite(Js), axis=(1, 2))
+        cond = np.full(len(rows), np.inf)
+        if ok.any():
+            sv = np.linalg.svd(Js[ok], compute_uv=False)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cond[ok] = sv[:, 0] / sv[:, -1]
+        self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~np.all(np.isfinite(self.xd[rows]), axis=1)
+
+    def rates_at(self, k: int, J: np.ndarray) -> None:
+        """ẋ and ẍ of the block at row k (exact linear solves), kept for the Taylor predictor."""
+        p, st, row = self.p, self.st, np.array([k])
+        fac = J[None] if self.blk.square else None
+        for what, out in (("v", self.xd), ("a", self.xdd)):
+            R = -(p.total.vel(st, row) if what == "v" else p.total.acc(st, row))
+            rhs = np.concatenate([R.real, R.imag], axis=1)
+            if fac is not None:
+                val = _solve_rows(fac, rhs)
+            else:
+                Jt = J.T[None]
+                val = _solve_rows(Jt @ J[None], (Jt @ rhs[..., None])[..., 0])
+            out[k] = val[0]
+            if what == "v":
+                _s._store(p, st, row, val, "v", self.na)
+        _s._store(p, st, row, np.zeros((1, self.blk.nu)), "v", self.na)  # the sums need them zero again
+        Js = J * self.blk.colscale
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sv = np.linalg.svd(Js, compute_uv=False) if np.all(np.isfinite(Js)) else np.array([1.0, 0.0])
+            cond = sv[0] / sv[-1] if sv[-1] > 0 else math.inf
+        # next to a singular row (a change point) the rates are not accurate enough to predict from
+        self.weak[k] = not (cond * cond * _s.EPS <= self.run.rtol) or not np.all(np.isfinite(out[k]))
+
+
+def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int) -> tuple[_s._Failure | None, Factor]:
+    """Solve Newton block ``i`` on rows 0..n-1; returns (the first failure or None, the Factor of the rows
+    before it). Rows from the failure on are left unsolved."""
+    ctx = _Ctx(run, st, tg, i, p, n)
+    blk = ctx.blk
+    if i not in run.newton_sign:
+        _, J0 = blk.residual_jacobian(st, np.array([0]))
+        run.newton_sign[i] = float(blk.sign(J0)[0] or 1.0) * float(run.sigma(i, tg[:1])[0])
+    _, J0 = blk.residual_jacobian(st, np.array([0]))
+    if n > 1:
+        ctx.rates_at(0, J0[0])
+    coarse, n_ok, failure = _coarse_pass(ctx)
+    coarse = coarse[coarse < n_ok]
+    rows, j, far = _dense_newton(ctx, coarse, n_ok)
+    fac, res, conv = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+    again = np.nonzero(~conv)[0]
+    if len(again):  # one more step where the last one was above tol: its Jacobian is refreshed too
+        fac2, res2, conv2 = blk.factor(st, again, run.rtol, run.tol)
+        for name in ("J", "inv", "cond", "sign"):
+            getattr(fac, name)[again] = getattr(fac2, name)
+        res[again], conv[again] = np.maximum(res[again], res2), conv2
+    if len(rows):  # every dense row must converge, close, stay near its prediction, on the branch
+        bad = ~conv[rows] | far | ~(res[rows] <= CLOSURE) | (fac.sign[rows] != ctx.expected_sign(rows))
+        for jj in np.unique(j[bad]):  # continue those intervals one row at a time
+            lo, hi = int(coarse[jj]), int(coarse[jj + 1])
+            for k in range(lo + 1, hi):
+                f = _step(ctx, k - 1, k, strict=False)
+                if f is not None:
+                    n_ok, failure = k, f
+                    break
+            if failure is not None and failure.sample <= hi:
+                break
+        if np.any(bad):
+            fac, _, _ = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+    return failure, fac
+
+
+def _input_travel(ctx: _Ctx) -> np.ndarray:
+    """Cumulative travel [rad; sliders: 2π per mechanism size] of the block's known variables over the rows."""
+    st, n, sys = ctx.st, ctx.n, ctx.run.sys
+    na = sys.n_angles
+    mine = set()
+    for li in ctx.p.block.loops:
+        mine.update(sys.loops[li].variables)
+    travel = np.zeros(max(n - 1, 0))
+    for v in sorted(mine - set(ctx.p.block.unknowns)):
+        d = np.diff(st.TH[:n, v]) if v < na else np.diff(st.S[:n, v - na]) * (TWO_PI / ctx.run.scale)
+        travel = np.maximum(travel, np.abs(d))
+    return np.concatenate([[0.0], np.cumsum(travel)])
+
+
+def _next_row(ctx: _Ctx, a: int, cum: np.ndarray) -> int:
+    """The furthest row after ``a`` that the block's unknowns (by their Taylor series at a) and its inputs
+    reach within COARSE_STEP of travel."""
+    unit = np.where(ctx.blk.colscale < 1.0, 1.0, TWO_PI / ctx.run.scale)  # angles: rad; sliders: 2π per size
+    v, acc = np.abs(ctx.xd[a]) * unit, np.abs(ctx.xdd[a]) * unit
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = np.where(acc > 0, (np.sqrt(v * v + 2 * acc * COARSE_STEP) - v) / np.where(acc > 0, acc, 1.0),
+                     COARSE_STEP / np.where(v > 0, v, np.nan))  # fmt: skip
+    h_max = float(np.nanmin(h, initial=math.inf))
+    b = int(np.searchsorted(ctx.tg[: ctx.n], ctx.tg[a] + h_max, side="right")) - 1
+    b = min(b, int(np.searchsorted(cum, cum[a] + COARSE_STEP, side="right")) - 1, ctx.n - 1)
+    return max(b, a + 1)
+
+
+def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, _s._Failure | None]:
+    """Adaptive continuation: from each solved row, the furthest row the predictor is trusted to reach;
+    an untrusted step is halved, down to single rows where the sample-by-sample rules decide.
+    Returns (the rows solved on the way, rows solved, failure)."""
+    cum = _input_travel(ctx)
+    coarse = [0]
+    a = 0
+    while a < ctx.n - 1:
+        b = _next_row(ctx, a, cum)
+        ahead = _window(ctx, a, b, cum)
+        if len(ahead):
+            coarse.extend(ahead.tolist())
+            a = int(ahead[-1])
+            continue
+        while True:
+            f = _step(ctx, a, b, strict=b - a > 1)
+            if f is None:
+                break
+            if b == a + 1:
+                return np.array(coarse), b, f
+            b = a + (b - a) // 2
+        coarse.append(b)
+        a = b
+    return np.array(coarse), ctx.n, None
+
+
+def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
+    """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart, predicted from a's Taylor series and
+    solved together; returns the leading rows that pass every check of a strict step (their rates computed)."""
+    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+    if ctx.weak[a] or b - a < 2:
+        return np.zeros(0, int)
+    rows = np.unique(np.minimum(a + (b - a) * np.arange(1, WINDOW + 1), ctx.n - 1))
+    rows = rows[cum[rows] - cum[a] <= COARSE_STEP * np.arange(1, len(rows) + 1)]
+    if len(rows) < 2:
+        return np.zeros(0, int)
+    h = (tg[rows] - tg[a])[:, None]
+    x_a = blk.read(st, np.array([a]))
+    incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
+    pred = x_a + incr
+    x, conv = newton(blk, st, rows, pred, run.tol, run.max_iter)
+    F, J = blk.residual_jacobian(st, rows)
+    with np.errstate(invalid="ignore"):
+        res = np.max(np.abs(F), axis=1) / run.scale
+    ok = conv & (res <= CLOSURE) & ~_far(blk, x - pred, incr, x_a) & (blk.sign(J) == ctx.expected_sign(rows))
+    m = int(np.argmin(ok)) if not ok.all() else len(rows)
+    if m == 0:
+        return np.zeros(0, int)
+    rows, J = rows[:m], J[:m]
+    ctx.rates_rows(rows, J)
+    ctx.prev[rows] = np.concatenate([[a], rows[:-1]])
+    return rows
+
+
+def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
+    """Continue from solved row ``a`` (its rates known) to row ``k``. Strict: any doubt returns a
+    failure (the caller refines); otherwise a branch sign change may be a change point."""
+    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+    h = tg[k] - tg[a]
+    x_a = blk.read(st, np.array([a]))[0]
+    if ctx.weak[a]:  # the secant through the row before instead of the (unreliable) Taylor series
+        b = ctx.prev[a]
+        incr = (x_a - blk.read(st, np.array([b]))[0]) * (h / (tg[a] - tg[b])) if b >= 0 else np.zeros(blk.nu)
+    else:
+        incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
+    pred = x_a + incr
+    rows = np.array([k])
+    x, conv = newton(blk, st, rows, pred[None], run.tol, run.max_iter)
+    F, J = blk.residual_jacobian(st, rows)
+    res = float(np.max(np.abs(F))) / run.scale if np.all(np.isfinite(F)) else math.inf
+    far = bool(_far(blk, x - pred, incr[None], x_a[None])[0])
+    sign = float(blk.sign(J)[0])
+    flipped = sign != float(ctx.expected_sign(rows)[0])
+    if strict:
+        if not conv[0] or res > CLOSURE or far or flipped:
+            return _s._Failure(k, ctx.p.block.loops[0], "untrusted coarse step")
+    else:
+        if not conv[0] or res > CLOSURE or not np.all(np.isfinite(J)):
+            worst = ctx.p.block.loops[
+                int(np.argmax(np.abs(F[0]) if np.all(np.isfinite(F)) else 0)) % len(ctx.p.block.loops)
+            ]
+            return _s._Failure(k, worst, f"Newton did not converge (closure {res:.2g} of the mechanism size)")
+        if flipped and sign != 0:
+            if not (run.detect and not far and _passes_change_point(ctx, a, k)):
+                return _s._Failure(
+                    k,
+                    ctx.p.block.loops[0],
+                    "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed",
+                )
+        elif sign == 0:
+            return _s._Failure(k, ctx.p.block.loops[0], "the loop Jacobian is singular (a toggle)")
+    ctx.rates_at(k, J[0])
+    ctx.prev[k] = a
+    return None
+
+
+def _passes_change_point(ctx: _Ctx, a: int, k: int) -> bool:
+    """Between rows a and k the determinant changed sign on the smooth continuation: locate where
+    (bisection on det J along the continuation from row a) and record the change point."""
+    run, i = ctx.run, ctx.i
+    choices = _s._change_point_choices(run.sys, run.sys.loops[ctx.p.block.loops[0]].index + 1)
+    if "other" in choices:
+        return False  # only a closed-form dyad can be sent onto the other branch
+    lo, hi = float(ctx.tg[a]), float(ctx.tg[k])
+    s_lo = float(ctx.expected_sign(np.array([a]))[0])
+    for _ in range(LOCATE_STEPS):
+        mid = 0.5 * (lo + hi)
+        d = _det_at(ctx, a, mid)
+        if d is None:
+            break
+        if np.sign(d) == s_lo:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * (ctx.tg[k] - ctx.tg[a]):
+            break
+    run.events.setdefault(i, []).append(_s._ChangePoint(i, 0.5 * (lo + hi), True, True))
+    return True
+
+
+def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
+    """det J of the block at time t, reached by Newton from row a's Taylor predictor (None: no convergence)."""
+    run = ctx.run
+    sub_run = _s.dataclasses.replace(run, detect=False, check=False, rates=False)
+    trial = _s._State(2, run.sys.n_angles, len(run.sys.slider_names))
+    for name in ("E", "TH", "S", "W", "AL", "SD", "SDD"):
+        getattr(trial, name)[0] = getattr(ctx.st, name)[a]
+    grid = np.array([ctx.tg[a], t])
+    _s._impose_drivers(run.sys, trial, *run.inputs(grid))
+    if ctx.i > 0:
+        solved = _s._run_blocks(sub_run, trial, grid, 2, upto=ctx.i - 1)
+        if solved.n_ok < 2:
+            return None
+    h = t - ctx.tg[a]
+    x_a = ctx.blk.read(ctx.st, np.array([a]))[0]
+    pred = x_a + ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
+    _, conv = newton(ctx.blk, trial, np.array([1]), pred[None], run.tol, run.max_iter)
+    if not conv[0]:
+        return None
+    _, J = ctx.blk.residual_jacobian(trial, np.array([1]))
+    return float(np.linalg.det(J[0])) if ctx.blk.square else 1.0
+
+
+def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Rows whose Newton correction exceeds JUMP of the predicted move (largest component, angles in rad,
+    sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch."""
+    unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)
+    with np.errstate(invalid="ignore"):
+        c = np.max(np.abs(correction) * unit, axis=1)
+        m = np.max(np.abs(move) * unit, axis=1) + 1e-9 * (1.0 + np.max(np.abs(x) * unit, axis=1))
+        return ~(c <= JUMP * m)
+
+
+def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Newton on every row between coarse rows at once, from the quintic Hermite interpolant of its
+    neighbours' positions, rates and accelerations (error ~ step⁶), until the steps fall below LOOSE:
+    the step the Factor then takes is the convergence test. Returns (rows, interval of each, far from
+    its prediction)."""
+    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
+    if not len(rows):
+        return rows, rows, np.zeros(0, bool)
+    j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
+    a, b = coarse[j], coarse[j + 1]
+    xa, xb = blk.read(st, a), blk.read(st, b)
+    H = (tg[b] - tg[a])[:, None]
+    u = ((tg[rows] - tg[a]) / (tg[b] - tg[a]))[:, None]
+    u2, u3 = u * u, u * u * u
+    u4, u5 = u3 * u, u3 * u2
+    pred = (
+        (1 - 10 * u3 + 15 * u4 - 6 * u5) * xa
+        + (10 * u3 - 15 * u4 + 6 * u5) * xb
+        + H * ((u - 6 * u3 + 8 * u4 - 3 * u5) * ctx.xd[a] + (-4 * u3 + 7 * u4 - 3 * u5) * ctx.xd[b])
+        + H * H * ((0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5) * ctx.xdd[a] + (0.5 * u3 - u4 + 0.5 * u5) * ctx.xdd[b])
+    )
+    x, _ = newton(blk, st, rows, pred, LOOSE, run.max_iter)
+    far = _far(blk, x - pred, xb - xa, xa)
+    return rows, j, far
