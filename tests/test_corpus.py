@@ -225,3 +225,15 @@ def test_cli_corpus_writes_the_files_and_refuses_bad_arguments(tmp_path, capsys)
     (tmp_path / "file").write_text("not a folder")
     assert main(["corpus", "--n", "1", "--out", str(tmp_path / "file")]) == 2
     assert "exists and is not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_limit_runs_stop_at_the_recorded_sample_in_exudyn_dynamic_too():
+    """Every engine, Exudyn's time integration included (~3 s a mechanism): the same recorded stop sample."""
+    pytest.importorskip("exudyn")
+    items, _ = corpus.generate(12, 78, limit_fraction=1.0)
+    for it in items:
+        v = harness.validate_mechanism(it.name, harness.ENGINES, mechanism=it.mechanism, corpus=it.sidecar)
+        assert v.expectation["passed"], (it.name, v.expectation["message"])
+        assert set(v.expectation["observed"].values()) == {it.sidecar["expect"]["stop_sample"]}
+        assert v.passed, (it.name, [c.message for c in v.checks if not c.passed])

@@ -383,6 +383,35 @@ def _badness(q: dict[str, Any]) -> float:
     return err / max(q["allowed"], 1e-300)
 
 
+def _comparison_entry(c: CheckedComparison) -> dict[str, Any]:
+    """One comparison of summary.json: its verdict and every quantity's errors (non-finite as "inf")."""
+    q = []
+    if c.comparison is not None:
+        for e in c.comparison.errors:
+            q.append(
+                {
+                    "quantity": e.column,
+                    "group": e.group,
+                    "max_abs": _num(e.max_abs),
+                    "max_rel": _num(e.rel),
+                    "rms": _num(e.rms),
+                    "t_at_max": e.t_at_max,
+                    "peak": e.scale,
+                    "allowed": e.tol,
+                    "passed": e.passed,
+                }
+            )
+    return {
+        "engine": c.engine,
+        "reference": c.reference,
+        "samples": c.samples,
+        "passed": c.passed,
+        "message": c.message,
+        "worst": max(q, key=_badness, default=None),
+        "quantities": q,
+    }
+
+
 def to_summary(v: Validation) -> dict[str, Any]:
     """The machine-readable summary (documented by validators/summary.schema.json)."""
     mechs = []
@@ -409,37 +438,7 @@ def to_summary(v: Validation) -> dict[str, Any]:
         }
         if it.corpus is not None:
             entry["corpus"] = _corpus_entry(it)
-        comps = []
-        for c in it.checks:
-            q = []
-            if c.comparison is not None:
-                for e in c.comparison.errors:
-                    q.append(
-                        {
-                            "quantity": e.column,
-                            "group": e.group,
-                            "max_abs": _num(e.max_abs),
-                            "max_rel": _num(e.rel),
-                            "rms": _num(e.rms),
-                            "t_at_max": e.t_at_max,
-                            "peak": e.scale,
-                            "allowed": e.tol,
-                            "passed": e.passed,
-                        }
-                    )
-            worst = max(q, key=_badness, default=None)
-            comps.append(
-                {
-                    "engine": c.engine,
-                    "reference": c.reference,
-                    "samples": c.samples,
-                    "passed": c.passed,
-                    "message": c.message,
-                    "worst": worst,
-                    "quantities": q,
-                }
-            )
-        entry["comparisons"] = comps
+        entry["comparisons"] = [_comparison_entry(c) for c in it.checks]
         mechs.append(entry)
     out = {
         "schema": SCHEMA,

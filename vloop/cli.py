@@ -296,12 +296,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     )
     summary = harness.to_summary(validation)
     if "corpus" in summary:
-        failures = nightly.corpus_failures(summary, engines, _corpus_options(args))
-        summary["corpus"].update(corpus_info or {}, failures=failures)
-        if failures and args.minimize_tries > 0:
-            summary["corpus"]["minimized"] = nightly.minimize_failures(
-                validation.items, engines, out, max_tries=args.minimize_tries
-            )
+        _corpus_failures(summary, validation, engines, args, corpus_info, out)
     flags: list[dict] = []
     if args.nightly:
         prev = Path(args.previous) if args.previous else nightly.previous_summary(root, out)
@@ -317,15 +312,33 @@ def cmd_validate(args: argparse.Namespace) -> int:
     print(_table(summary))
     for f in flags:
         print(f"FLAG {f['message']}")
+    _print_corpus_failures(summary)
+    print("wrote " + ", ".join(str(w) for w in written))
+    if validation.bad_input:
+        return 2
+    return 0 if validation.passed and not flags else 1
+
+
+def _corpus_failures(
+    summary: dict, validation: Any, engines: tuple[str, ...], args: argparse.Namespace, info: dict | None, out: Path
+) -> None:
+    """summary["corpus"]: how to regenerate it, each failure's reproduce command, the minimized failures."""
+    from validators import nightly
+
+    failures = nightly.corpus_failures(summary, engines, _corpus_options(args))
+    summary["corpus"].update(info or {}, failures=failures)
+    if failures and args.minimize_tries > 0:
+        summary["corpus"]["minimized"] = nightly.minimize_failures(
+            validation.items, engines, out, max_tries=args.minimize_tries
+        )
+
+
+def _print_corpus_failures(summary: dict) -> None:
     for f in summary.get("corpus", {}).get("failures", []):
         print(f"FAIL {f['mechanism']}: reproduce with: {f['reproduce']}")
     for m in summary.get("corpus", {}).get("minimized", []):
         if m.get("file"):
             print(f"minimized {m['mechanism']} in {m['tries']} tries: {m['file']} (still fails: {m['still_failing']})")
-    print("wrote " + ", ".join(str(w) for w in written))
-    if validation.bad_input:
-        return 2
-    return 0 if validation.passed and not flags else 1
 
 
 def _write_tables_and_pages(validation: Any, summary: dict, out: Path, args: argparse.Namespace) -> list[Path]:

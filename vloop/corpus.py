@@ -521,7 +521,7 @@ def watt2_draft(p: dict[str, float], variant: str) -> Draft:
     draft = Draft(variant, j, links, [("crank", "O2")], forward, points={"P": base.points["P"]})
     draft.notes = [*base.notes, f"Watt II: second four-bar C–D–O6, link5 = {l5:.6g}, output = {l6:.6g}"]
     if variant == "output":
-        return _driven_at(draft, p, "output", "O6", forward_index=("O6", "D"))
+        return _driven_at(draft, "output", "O6", forward_index=("O6", "D"))
     return draft
 
 
@@ -554,26 +554,17 @@ def stephenson3_draft(p: dict[str, float], variant: str) -> Draft:
     draft = Draft(variant, j, links, [("crank", "O2")], forward, points={"P": base.points["P"]})
     draft.notes = [*base.notes, f"Stephenson III: dyad C–D–O6 on the coupler, link5 = {l5:.6g}, output = {l6:.6g}"]
     if variant == "rocker":
-        return _driven_at(draft, p, "rocker", "O4", forward_index=("O4", "B"))
+        return _driven_at(draft, "rocker", "O4", forward_index=("O4", "B"))
     if variant == "output":
-        draft = _driven_at(draft, p, "output", "O6", forward_index=("O6", "D"))
+        draft = _driven_at(draft, "output", "O6", forward_index=("O6", "D"))
         draft.closed_form = False  # driven at the output the two loops are coupled: Newton, no closed form
         draft.notes.append("driven at the output: loops 1 and 2 are solved together (Newton); no closed form")
     return draft
 
 
-def _driven_at(draft: Draft, p: dict[str, float], link: str, pivot: str, forward_index: tuple[str, str]) -> Draft:
-    """Drive ``link`` instead of the crank; the motion is the crank-parametrized curve, re-read.
-
-    Along the crank angle θ2 the forward chain gives the driven link's angle ψ(θ2); driven at
-    that link, the mechanism follows the same curve as long as ψ is monotone in θ2 (where
-    dψ/dθ2 = 0 the new input reaches a limit). The feasible input range is the monotone segment
-    through the t = 0 configuration, computed on a grid of θ2 (2·10⁴ points a turn) and kept 3 %
-    of its width clear of both ends; inverting ψ(θ2) there by interpolation gives θ2 for any
-    input, and the margins of every dyad along it.
-    """
+def _monotone_segment(draft: Draft, j1: str, j2: str) -> tuple[np.ndarray, np.ndarray]:
+    """(θ2, ψ) along the crank angle θ2 where ψ = arg(j2 − j1) is monotone, through t = 0, ψ increasing."""
     th2_0 = draft.theta0(0)
-    j1, j2 = forward_index
     grid = th2_0 + np.linspace(-math.pi, math.pi, 20001)
     pos, m = draft.forward([grid])
     psi = np.unwrap(np.angle(pos[j2] - draft.joints[j1]))  # j1 is a ground pivot
@@ -583,19 +574,31 @@ def _driven_at(draft: Draft, p: dict[str, float], link: str, pivot: str, forward
     good = (m > 0) & (np.sign(dpsi) == np.sign(dpsi[k0])) & (np.abs(dpsi) > 1e-3)
     if not good[k0]:
         raise Infeasible("driven link at a limit at t = 0")
-    lo = k0
+    lo, hi = k0, k0
     while lo > 0 and good[lo - 1]:
         lo -= 1
-    hi = k0
     while hi < len(grid) - 1 and good[hi + 1]:
         hi += 1
-    seg = slice(lo, hi + 1)
-    g_seg, psi_seg = grid[seg], psi[seg]
+    g_seg, psi_seg = grid[lo : hi + 1], psi[lo : hi + 1]
     if psi_seg[-1] < psi_seg[0]:
         g_seg, psi_seg = g_seg[::-1], psi_seg[::-1]
-    width = psi_seg[-1] - psi_seg[0]
-    if width < 0.1:
+    if psi_seg[-1] - psi_seg[0] < 0.1:
         raise Infeasible("driven link barely moves")
+    return g_seg, psi_seg
+
+
+def _driven_at(draft: Draft, link: str, pivot: str, forward_index: tuple[str, str]) -> Draft:
+    """Drive ``link`` instead of the crank; the motion is the crank-parametrized curve, re-read.
+
+    Along the crank angle θ2 the forward chain gives the driven link's angle ψ(θ2); driven at
+    that link, the mechanism follows the same curve as long as ψ is monotone in θ2 (where
+    dψ/dθ2 = 0 the new input reaches a limit). The feasible input range is the monotone segment
+    through the t = 0 configuration, computed on a grid of θ2 (2·10⁴ points a turn) and kept 3 %
+    of its width clear of both ends; inverting ψ(θ2) there by interpolation gives θ2 for any
+    input, and the margins of every dyad along it.
+    """
+    g_seg, psi_seg = _monotone_segment(draft, *forward_index)
+    width = psi_seg[-1] - psi_seg[0]
     fwd_crank = draft.forward
 
     def forward(inputs: list[np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -605,16 +608,11 @@ def _driven_at(draft: Draft, p: dict[str, float], link: str, pivot: str, forward
         outside = (psi_t < psi_seg[0]) | (psi_t > psi_seg[-1])
         return pos, np.where(outside, -1.0, m)
 
-    links = dict(draft.links)
-    lk = dict(links[link])
-    if lk["joints"][0] != pivot:
+    if draft.links[link]["joints"][0] != pivot:
         raise Infeasible("driven link's pivot is not its first joint")
-    links[link] = lk
     clear = 0.03 * width
     return replace(
         draft,
-        variant=draft.variant,
-        links=links,
         drivers=[(link, pivot)],
         forward=forward,
         input_range=(float(psi_seg[0] + clear), float(psi_seg[-1] - clear)),
@@ -713,6 +711,31 @@ def eightbar_draft(p: dict[str, float], variant: str) -> Draft:
 ATTACH_KINDS = ("rrr-ground", "rrr-link", "rrp-ground")
 
 
+Step = Callable[[dict[str, np.ndarray]], tuple[dict[str, np.ndarray], np.ndarray]]
+
+
+@dataclass
+class _Chain:
+    """A mechanism under construction: its t = 0 joints, links, sliders, and each moving link's frame."""
+
+    joints: dict[str, complex]
+    links: dict[str, dict[str, Any]]
+    sliders: dict[str, dict[str, Any]]
+    frames: dict[str, tuple[str, str]]
+
+    def pin_on(self, host: str, name: str, rel: complex) -> complex:
+        """A new pin on ``host`` at ``rel`` in its frame (along, across its first member); its t = 0 position."""
+        j1, j2 = self.frames[host]
+        z1, z2 = self.joints[j1], self.joints[j2]
+        self.joints[name] = z1 + (z2 - z1) / abs(z2 - z1) * rel
+        self.links[host]["joints"] = [*self.links[host]["joints"], name]
+        return self.joints[name]
+
+    def add_link(self, name: str, j1: str, j2: str) -> None:
+        self.links[name] = {"joints": [j1, j2]}
+        self.frames[name] = (j1, j2)
+
+
 def attach_draft(p: dict[str, float], variant: str) -> Draft:
     """A base (crank-rocker four-bar or offset slider-crank) with one or two random dyads attached.
 
@@ -720,59 +743,13 @@ def attach_draft(p: dict[str, float], variant: str) -> Draft:
     ground pivot (RRR), a new pin on another moving link (RRR) or a block on a new ground line (RRP).
     """
     base = fourbar_draft(p, "crank-rocker") if variant.startswith("fourbar") else slider_crank_draft(p, "offset")
-    s = p["scale"]
-    joints = dict(base.joints)
-    links = {k: dict(v) for k, v in base.links.items()}
-    sliders = dict(base.sliders)
-    frames = {n: tuple(v["joints"][:2]) for n, v in links.items() if not v.get("ground")}
-    steps: list[Callable[[dict[str, np.ndarray]], tuple[dict[str, np.ndarray], np.ndarray]]] = []
-    notes = list(base.notes)
+    frames = {n: (v["joints"][0], v["joints"][1]) for n, v in base.links.items() if not v.get("ground")}
+    chain = _Chain(dict(base.joints), {k: dict(v) for k, v in base.links.items()}, dict(base.sliders), frames)
+    steps, notes = [], list(base.notes)
     for k in range(1, int(p["n_attach"]) + 1):
-        hosts = sorted(frames)
-        host = hosts[int(p[f"host{k}"] * len(hosts)) % len(hosts)]
-        j1, j2 = frames[host]
-        h0 = joints[j1] + (joints[j2] - joints[j1]) / abs(joints[j2] - joints[j1]) * s * complex(
-            p[f"hx{k}"], p[f"hy{k}"]
-        )
-        kind = ATTACH_KINDS[int(p[f"kind{k}"]) % 3]
-        hn, xn = f"H{k}", f"X{k}"
-        x0 = h0 + s * complex(p[f"mx{k}"], p[f"my{k}"])
-        joints[hn], joints[xn] = h0, x0
-        links[host]["joints"] = [*links[host]["joints"], hn]
-        rho_h = local(joints[j1], joints[j2], h0)
-        link_a = f"bar{k}a"
-        links[link_a] = {"joints": [hn, xn]}
-        frames[link_a] = (hn, xn)
-        if kind == "rrp-ground":
-            u = complex(cis(p[f"axis{k}"]))
-            sig = sign_of(float((np.conj(u) * (x0 - h0)).real))
-            sliders[f"block{k}"] = {"joint": xn, "guide": "ground", "axis": u}
-            steps.append(_rrp_step(j1, j2, rho_h, hn, xn, abs(x0 - h0), x0, u, sig))
-            notes.append(f"dyad {k}: rod {hn}–{xn} on {host}, block on a ground line at {p[f'axis{k}']:.6g} rad")
-            continue
-        link_b = f"bar{k}b"
-        if kind == "rrr-ground":
-            gn = f"G{k}"
-            g0 = x0 + s * complex(p[f"gx{k}"], p[f"gy{k}"])
-            joints[gn] = g0
-            links["ground"]["joints"] = [*links["ground"]["joints"], gn]
-            links[link_b] = {"joints": [gn, xn]}
-            frames[link_b] = (gn, xn)
-            steps.append(_rrr_step(j1, j2, rho_h, hn, xn, (gn, g0, None, None), x0, joints))
-            notes.append(f"dyad {k}: {hn}–{xn}–{gn}, {hn} on {host}, {gn} a new ground pivot")
-        else:
-            other = [n for n in hosts if n != host]
-            host2 = other[int(p[f"host2_{k}"] * len(other)) % len(other)]
-            k1, k2 = frames[host2]
-            gn = f"K{k}"
-            g0 = x0 + s * complex(p[f"gx{k}"], p[f"gy{k}"])
-            joints[gn] = g0
-            links[host2]["joints"] = [*links[host2]["joints"], gn]
-            links[link_b] = {"joints": [gn, xn]}
-            frames[link_b] = (gn, xn)
-            rho_g = local(joints[k1], joints[k2], g0)
-            steps.append(_rrr_step(j1, j2, rho_h, hn, xn, (gn, g0, (k1, k2), rho_g), x0, joints))
-            notes.append(f"dyad {k}: {hn}–{xn}–{gn}, {hn} on {host}, {gn} on {host2}")
+        step, note = _attach_one(chain, p, k)
+        steps.append(step)
+        notes.append(note)
     base_fwd = base.forward
 
     def forward(inputs: list[np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -784,12 +761,52 @@ def attach_draft(p: dict[str, float], variant: str) -> Draft:
             m = np.minimum(m, m2)
         return pos, m
 
-    draft = Draft(variant, joints, links, base.drivers, forward, points=dict(base.points), notes=notes)
-    draft.sliders = sliders
+    draft = Draft(variant, chain.joints, chain.links, base.drivers, forward, points=dict(base.points), notes=notes)
+    draft.sliders = chain.sliders
     return draft
 
 
-def _rrp_step(j1: str, j2: str, rho_h: complex, hn: str, xn: str, length: float, x0: complex, u: complex, sig: float):
+def _attach_one(chain: _Chain, p: dict[str, float], k: int) -> tuple[Step, str]:
+    """Dyad k: pin H on a host link, middle pin X, then a ground pivot G, a pin K on a second link, or a block."""
+    s = p["scale"]
+    hosts = sorted(chain.frames)
+    host = hosts[int(p[f"host{k}"] * len(hosts)) % len(hosts)]
+    j1, j2 = chain.frames[host]
+    hn, xn = f"H{k}", f"X{k}"
+    h0 = chain.pin_on(host, hn, s * complex(p[f"hx{k}"], p[f"hy{k}"]))
+    x0 = chain.joints[xn] = h0 + s * complex(p[f"mx{k}"], p[f"my{k}"])
+    rho_h = local(chain.joints[j1], chain.joints[j2], h0)
+    chain.add_link(f"bar{k}a", hn, xn)
+    kind = ATTACH_KINDS[int(p[f"kind{k}"]) % 3]
+    if kind == "rrp-ground":
+        u = complex(cis(p[f"axis{k}"]))
+        sig = sign_of(float((np.conj(u) * (x0 - h0)).real))
+        chain.sliders[f"block{k}"] = {"joint": xn, "guide": "ground", "axis": u}
+        note = f"dyad {k}: rod {hn}–{xn} on {host}, block on a ground line at {p[f'axis{k}']:.6g} rad"
+        return _rrp_step(j1, j2, rho_h, hn, xn, abs(x0 - h0), x0, u, sig), note
+    g0 = x0 + s * complex(p[f"gx{k}"], p[f"gy{k}"])
+    if kind == "rrr-ground":
+        gn = f"G{k}"
+        chain.joints[gn] = g0
+        chain.links["ground"]["joints"] = [*chain.links["ground"]["joints"], gn]
+        end: tuple[str, complex, tuple[str, str] | None, complex | None] = (gn, g0, None, None)
+        note = f"dyad {k}: {hn}–{xn}–{gn}, {hn} on {host}, {gn} a new ground pivot"
+    else:
+        other = [n for n in hosts if n != host]
+        host2 = other[int(p[f"host2_{k}"] * len(other)) % len(other)]
+        gn = f"K{k}"
+        k1, k2 = chain.frames[host2]
+        chain.joints[gn] = g0
+        chain.links[host2]["joints"] = [*chain.links[host2]["joints"], gn]
+        end = (gn, g0, (k1, k2), local(chain.joints[k1], chain.joints[k2], g0))
+        note = f"dyad {k}: {hn}–{xn}–{gn}, {hn} on {host}, {gn} on {host2}"
+    chain.add_link(f"bar{k}b", gn, xn)
+    return _rrr_step(j1, j2, rho_h, hn, xn, end, x0, chain.joints), note
+
+
+def _rrp_step(
+    j1: str, j2: str, rho_h: complex, hn: str, xn: str, length: float, x0: complex, u: complex, sig: float
+) -> Step:
     def step(pos: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray]:
         h = on_body(pos[j1], pos[j2], rho_h)
         x, m = rrp_position(h, length, x0, u, sig)
@@ -807,7 +824,7 @@ def _rrr_step(
     end: tuple[str, complex, tuple[str, str] | None, complex | None],
     x0: complex,
     joints: dict[str, complex],
-):
+) -> Step:
     gn, g0, frame, rho_g = end
     h0 = joints[hn]
     l1, l2 = abs(x0 - h0), abs(x0 - g0)
