@@ -43,7 +43,10 @@ def corpus200() -> list[corpus.Item]:
 @pytest.fixture(scope="module")
 def solved(corpus200):
     """vloop and the closed form on every mechanism of the 200 (in this process: ~3 s)."""
-    return {it.name: (harness.run_engine("vloop", it.mechanism), harness.run_engine("analytic", it.mechanism)) for it in corpus200}
+    return {
+        it.name: (harness.run_engine("vloop", it.mechanism), harness.run_engine("analytic", it.mechanism))
+        for it in corpus200
+    }
 
 
 def test_generation_is_deterministic_and_index_addressable():
@@ -104,7 +107,9 @@ def _disagreements(items, solved) -> list[str]:
             continue
         c = harness.check(a, v, it.name)
         if not c.passed or v.samples != want or a.samples != want:
-            bad.append(f"seed {SEED} index {it.spec.index} {it.name}: {c.message[:300]} ({v.samples}/{a.samples} of {want})")
+            bad.append(
+                f"seed {SEED} index {it.spec.index} {it.name}: {c.message[:300]} ({v.samples}/{a.samples} of {want})"
+            )
     return bad
 
 

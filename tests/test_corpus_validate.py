@@ -108,7 +108,9 @@ def test_parquet_table_has_one_row_per_compared_quantity(in_process, tmp_path):
     assert set(df["engine"]) == {"analytic", "pinocchio", "exudyn-kinematic"}
     assert set(df["family"]) <= set(corpus.FAMILIES) and (df["corpus_seed"] == SEED).all()
     per = df.groupby(["mechanism", "engine", "reference"])["comparison_passed"].first()
-    want = {(m["name"], c["engine"], c["reference"]): c["passed"] for m in summary["mechanisms"] for c in m["comparisons"]}
+    want = {
+        (m["name"], c["engine"], c["reference"]): c["passed"] for m in summary["mechanisms"] for c in m["comparisons"]
+    }
     assert per.to_dict() == want
 
 
@@ -122,7 +124,7 @@ def test_corpus_page_shows_families_worst_errors_histograms_and_limits(in_proces
         assert anchor in html
     families = {f"{m['corpus']['family']}/{m['corpus']['variant']}" for m in summary["mechanisms"]}
     assert all(f in html for f in families)
-    assert f"of 40 pass" in html and str(SEED) in html
+    assert "of 40 pass" in html and str(SEED) in html
     assert html.count("<tr>") >= len(families) + 1
 
 
@@ -187,7 +189,24 @@ def test_nightly_corpus_reproduces_and_minimizes_a_failure(tmp_path, broken_anal
     page = (day / "corpus.html").read_text()
     assert cmd in page and "Minimized failures" in page
     # the same command regenerates the same mechanism
-    assert main(["corpus", "--n", "1", "--start", str(k), "--seed", "8", "--families", "fourbar/crank-rocker", "--out", str(tmp_path / "r")]) == 0
+    assert (
+        main(
+            [
+                "corpus",
+                "--n",
+                "1",
+                "--start",
+                str(k),
+                "--seed",
+                "8",
+                "--families",
+                "fourbar/crank-rocker",
+                "--out",
+                str(tmp_path / "r"),
+            ]
+        )
+        == 0
+    )
     again = (tmp_path / "r" / f"{first['mechanism']}.toml").read_text()
     assert again == Path(first["file"]).read_text()
 
@@ -195,7 +214,9 @@ def test_nightly_corpus_reproduces_and_minimizes_a_failure(tmp_path, broken_anal
 def test_validate_a_folder_checks_the_sidecar_expectations(tmp_path, capsys):
     items, _ = corpus.generate(6, 5, limit_fraction=1.0)
     corpus.write(items, tmp_path / "c", seed=5)
-    code = main(["validate", str(tmp_path / "c"), "--engines", "vloop,analytic", "--out", str(tmp_path / "o"), "--no-report"])
+    code = main(
+        ["validate", str(tmp_path / "c"), "--engines", "vloop,analytic", "--out", str(tmp_path / "o"), "--no-report"]
+    )
     assert code == 0, capsys.readouterr()
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert len(summary["mechanisms"]) == 6
@@ -216,3 +237,48 @@ def test_validate_refuses_bad_runner_options(tmp_path, capsys):
         assert main(["validate", f, "--engines", "vloop", "--out", str(tmp_path), "--no-report", *extra]) == 2
         err = capsys.readouterr().err
         assert what in err and err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize(
+    "field, value, what",
+    [
+        ("family", "hexagon", "'family'/'variant'"),
+        ("seed", -1, "'seed' and 'index'"),
+        ("index", 2.5, "'seed' and 'index'"),
+        ("params", {"a": float("nan")}, "'params'"),
+        ("params", {"a": "1"}, "'params'"),
+        ("expect", {"samples": 10**400}, "'expect.samples'"),
+        ("expect", {"samples": 5, "stop_sample": 9}, "'expect.stop_sample'"),
+        ("closed_form", "yes", "'closed_form'"),
+        ("drive", [1], "'drive'"),
+    ],
+)
+def test_a_malformed_sidecar_is_bad_input_naming_the_field(tmp_path, field, value, what, capsys):
+    items, _ = corpus.generate(1, 3)
+    corpus.write(items, tmp_path, seed=3)
+    side = tmp_path / f"{items[0].name}.json"
+    data = json.loads(side.read_text())
+    data[field] = value
+    side.write_text(json.dumps(data))  # NaN is written as NaN, which Python reads back
+    code = main(["validate", str(tmp_path), "--engines", "vloop", "--out", str(tmp_path / "o"), "--no-report"])
+    assert code == 2
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    err = summary["mechanisms"][0]["error"]
+    assert str(side) in err and what in err
+    # a JSON next to a file that is not a corpus sidecar is simply not one
+    side.write_text(json.dumps({"hello": 1}))
+    assert corpus.read_sidecar(tmp_path / f"{items[0].name}.toml") is None
+
+
+def test_nightly_does_not_compare_generated_files_of_different_seeds():
+    from validators import nightly
+
+    def summary(seed, err):
+        q = {"quantity": "l3.theta", "max_abs": err, "allowed": 1e-9, "passed": err <= 1e-9}
+        comp = {"engine": "analytic", "reference": "vloop", "quantities": [q]}
+        m = {"name": "c00003-fourbar-kite", "corpus": {"seed": seed}, "comparisons": [comp], "runs": {}}
+        return {"mechanisms": [m]}
+
+    assert nightly.compare_summaries(summary(2, 1e-8), summary(1, 1e-16)) == []
+    (flag,) = nightly.compare_summaries(summary(1, 1e-8), summary(1, 1e-16))
+    assert flag["kind"] == "crossed tolerance" and flag["mechanism"] == "c00003-fourbar-kite@seed1"

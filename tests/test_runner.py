@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -49,7 +50,7 @@ def test_bad_options_are_one_clear_error(kw, what):
 def test_unreachable_scheduler_is_a_clear_error(monkeypatch):
     pytest.importorskip("distributed")
     monkeypatch.setattr("vloop.runner.CONNECT_TIMEOUT", 2.0)
-    with pytest.raises(RunnerError, match="cannot reach the Dask scheduler at tcp://127.0.0.1:9"):
+    with pytest.raises(RunnerError, match=re.escape("cannot reach the Dask scheduler at tcp://127.0.0.1:9")):
         run_tasks(runner_tasks.square, [1], scheduler="tcp://127.0.0.1:9")
 
 

@@ -304,10 +304,11 @@ def load_items(paths: Iterable[str | Path]) -> list[MechanismValidation]:
         path = Path(p)
         try:
             mech = vloop.load(path)
+            side = read_sidecar(path)
         except VloopError as exc:
             items.append(MechanismValidation(str(path), path.stem, None, error=str(exc)))
             continue
-        items.append(MechanismValidation(str(path), mech.name, mech, corpus=read_sidecar(path)))
+        items.append(MechanismValidation(str(path), mech.name, mech, corpus=side))
     return items
 
 

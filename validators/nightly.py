@@ -42,12 +42,18 @@ def previous_summary(root: Path, current: Path) -> Path | None:
     return max(cands, key=lambda p: p.parent.name, default=None)
 
 
+def _key(m: dict[str, Any]) -> str:
+    """A mechanism's identity across nights: its name, and for a generated one its seed (names repeat per seed)."""
+    c = m.get("corpus")
+    return f"{m['name']}@seed{c['seed']}" if c else m["name"]
+
+
 def _index(summary: dict[str, Any]) -> dict[tuple[str, str, str, str], dict[str, Any]]:
     out = {}
     for m in summary.get("mechanisms", []):
         for c in m.get("comparisons", []):
             for q in c.get("quantities", []):
-                out[(m["name"], c["engine"], c["reference"], q["quantity"])] = q
+                out[(_key(m), c["engine"], c["reference"], q["quantity"])] = q
     return out
 
 
@@ -89,10 +95,10 @@ def compare_summaries(current: dict[str, Any], previous: dict[str, Any]) -> list
                 ),
             }
         )
-    prev_runs = {(m["name"], e): r for m in previous.get("mechanisms", []) for e, r in m.get("runs", {}).items()}
+    prev_runs = {(_key(m), e): r for m in previous.get("mechanisms", []) for e, r in m.get("runs", {}).items()}
     for m in current.get("mechanisms", []):
         for e, r in m.get("runs", {}).items():
-            before = prev_runs.get((m["name"], e))
+            before = prev_runs.get((_key(m), e))
             if before is not None and before["status"] in ("ok", "stopped") and r["status"] == "error":
                 flags.append(
                     {

@@ -1424,7 +1424,13 @@ def _family_counts(items: Iterable[Item]) -> dict[str, int]:
 
 
 def read_sidecar(path: str | Path) -> dict[str, Any] | None:
-    """The sidecar JSON next to a corpus file (NAME.json for NAME.toml), or None if there is none."""
+    """The sidecar JSON next to a corpus file (NAME.json for NAME.toml), or None if there is none.
+
+    A JSON file that is not a corpus sidecar (no ``generator`` key of ours) is ignored; one that claims to
+    be but has a missing or malformed field raises MechanismError naming the file and the field.
+    """
+    from .errors import MechanismError
+
     side = Path(path).with_suffix(".json")
     if not side.is_file():
         return None
@@ -1432,4 +1438,39 @@ def read_sidecar(path: str | Path) -> dict[str, Any] | None:
         data = json.loads(side.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    return data if isinstance(data, dict) and data.get("generator") == GENERATOR else None
+    if not isinstance(data, dict) or data.get("generator") != GENERATOR:
+        return None
+    problem = _sidecar_problem(data)
+    if problem:
+        raise MechanismError(f"{side}: corpus sidecar {problem}", entry="sidecar")
+    return data
+
+
+def _is_int(x: Any, lo: int = 0) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and lo <= x < 2**63
+
+
+def _sidecar_problem(d: dict[str, Any]) -> str:
+    """What is wrong with a sidecar's fields ("" if nothing): the harness and the shrinker trust them."""
+    fam, variant = d.get("family"), d.get("variant")
+    if not isinstance(fam, str) or fam not in FAMILIES or variant not in FAMILIES[fam].variants:
+        return "field 'family'/'variant': not a known family and variant"
+    if not isinstance(d.get("drive"), str) or d["drive"] not in PLANS:
+        return f"field 'drive': must be one of {', '.join(PLANS)}"
+    if not _is_int(d.get("seed")) or not _is_int(d.get("index")):
+        return "fields 'seed' and 'index' must be non-negative integers"
+    params = d.get("params")
+    if not isinstance(params, dict) or not all(
+        isinstance(k, str) and isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for k, v in params.items()
+    ):
+        return "field 'params' must map names to finite numbers"
+    exp = d.get("expect")
+    if not isinstance(exp, dict) or not _is_int(exp.get("samples")):
+        return "field 'expect.samples' must be a non-negative integer"
+    stop = exp.get("stop_sample")
+    if stop is not None and not (_is_int(stop) and stop <= exp["samples"]):
+        return "field 'expect.stop_sample' must be null or an integer up to expect.samples"
+    if not isinstance(d.get("closed_form"), bool):
+        return "field 'closed_form' must be true or false"
+    return ""
