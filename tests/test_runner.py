@@ -75,3 +75,15 @@ def test_import_vloop_does_not_import_dask():
     code = "import sys, vloop, vloop.runner, vloop.corpus; print(any(m.split('.')[0] in ('dask', 'distributed') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_running_scheduler_by_its_address():
+    """scheduler=ADDRESS: the tasks run on that cluster's workers; the client does not shut it down."""
+    pytest.importorskip("distributed")
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        outs = run_tasks(runner_tasks.square, [3, "boom", 4], scheduler=cluster.scheduler_address)
+        assert [(o.value, o.error) for o in outs] == [(9, ""), (None, "RuntimeError: boom"), (16, "")]
+        assert {o.worker for o in outs} == {f"0:{next(iter(cluster.scheduler_info['workers']))}"}
+        assert run_tasks(runner_tasks.square, [5], scheduler=cluster.scheduler_address)[0].value == 25
