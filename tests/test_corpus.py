@@ -242,3 +242,24 @@ def test_limit_runs_stop_at_the_recorded_sample_in_exudyn_dynamic_too():
         assert v.expectation["passed"], (it.name, v.expectation["message"])
         assert set(v.expectation["observed"].values()) == {it.sidecar["expect"]["stop_sample"]}
         assert v.passed, (it.name, [c.message for c in v.checks if not c.passed])
+
+
+@pytest.mark.xfail(
+    strict=False,
+    reason="finding for vloop.solver (seed 2026, index 42): on the Newton path the branch check reports 'loop 1: "
+    "the Jacobian changed sign: a toggle was crossed' when crank and coupler pass collinear, which is no "
+    "singularity of the output-driven six-bar (Pinocchio and Exudyn agree to 1e-12 through it)",
+)
+def test_output_driven_stephenson_runs_through_crank_coupler_collinearity():
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    it = corpus.draw_item(2026, 42).item
+    assert it.spec.family == "stephenson3" and it.spec.variant == "output"
+    pin = harness.run_engine("pinocchio", it.mechanism)
+    exu = harness.run_engine("exudyn-kinematic", it.mechanism)
+    assert pin.status == exu.status == "ok" and pin.samples == exu.samples == len(it.mechanism.times) == 115
+    # two independent engines agree through the collinearity (Exudyn kinematic's tolerance, 1e-8 of peak)
+    assert_histories_close(exu.result, pin.result, rtol=1e-8)
+    v = harness.run_engine("vloop", it.mechanism)
+    assert v.status == "ok", v.message
+    assert harness.check(pin, v, it.name).passed

@@ -1157,6 +1157,8 @@ def plan_ramp(draft: Draft, p: dict[str, float]) -> Motion:
     """Constant speed from θ0 toward one end of the input's range, stopping short of it."""
     lo, hi = _range(draft)
     th0, n = draft.theta0(0), int(p["n"])
+    if not lo < th0 < hi:  # the range is already kept clear of the limits: t = 0 must be inside it too
+        raise Infeasible("t = 0 too close to a limit of the input")
     end = hi - 0.05 * (hi - lo) if p["dir"] > 0 else lo + 0.05 * (hi - lo)
     dist = (end - th0) * p["reach"]
     if dist * p["dir"] <= 1e-3 * (hi - lo):
