@@ -12,10 +12,12 @@ becomes that task's failure, and the run goes on with the others:
 * in this process, an exception is caught; a timeout interrupts the task with SIGALRM (POSIX, main
   thread; a task stuck inside compiled code is interrupted when it returns to Python); a crash of
   the process cannot be survived — use workers for code that may crash;
-* on Dask, each worker process runs one task at a time (LocalCluster: one thread per worker) and the
-  client keeps at most as many tasks in flight as there are worker threads, so a task's clock starts
-  when it is handed to a free worker. A task past its timeout is cancelled and its worker process
-  restarted by its nanny (the only way to stop a stuck thread); a task whose worker dies is not
+* on Dask, each worker process runs one task at a time (LocalCluster: one thread per worker); the client
+  keeps two tasks in flight per worker thread (one running, one ready) and starts a task's clock when the
+  scheduler shows it processing on a worker (on our LocalCluster a worker is given one task per thread, so
+  that is when it starts; a foreign scheduler may hand a worker more). A task past its timeout is
+  cancelled and its worker process restarted by its nanny (the only way to stop a stuck thread); a task
+  whose worker dies is not
   retried on our own cluster (``distributed.scheduler.allowed-failures`` = 0: a crash is a result,
   not bad luck) and is reported with the worker's death.
 
@@ -42,6 +44,7 @@ from typing import Any
 from .errors import VloopError
 
 POLL = 0.2  # s between checks of running tasks for a timeout
+IN_FLIGHT = 2  # tasks submitted per worker thread: one running, one ready, so no worker waits for the client
 MAX_LOCAL_WORKERS = 256  # a LocalCluster larger than this is a typo, not a plan
 CONNECT_TIMEOUT = 30.0  # s to reach a scheduler
 
@@ -209,7 +212,10 @@ def _client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         finally:
             client.close()
         return
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+    # allowed-failures 0: a task that kills its worker is not retried; worker-saturation 1.0: a worker is given
+    # one task per thread, the rest wait on the scheduler, so "processing" means running (the timeout's clock)
+    settings = {"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0}
+    with dask.config.set(settings):
         cluster = LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
@@ -268,35 +274,50 @@ def _run_dask(
 ) -> list[TaskOutcome]:
     outcomes: list[TaskOutcome | None] = [None] * len(items)
     pending = deque(enumerate(items))
-    running: dict[Any, tuple[int, float]] = {}
+    running: dict[Any, _Running] = {}
     tag = uuid.uuid4().hex[:8]
     wake = threading.Event()  # set from the client's event loop whenever a task finishes
     while pending or running:
-        slots = max(1, sum(client.nthreads().values()))
+        slots = IN_FLIGHT * max(1, sum(client.nthreads().values()))
         while pending and len(running) < slots:
             i, item = pending.popleft()
             fut = client.submit(_call, fn, item, key=f"vloop-task-{tag}-{i}", pure=False, retries=0)
             fut.add_done_callback(lambda _f: wake.set())
-            running[fut] = (i, time.monotonic())
+            running[fut] = _Running(i, time.monotonic())
         wake.wait(POLL)
         wake.clear()
         for fut in [f for f in running if f.done()]:
-            i, started = running.pop(fut)
-            _finish(_outcome_of(fut, i, started), outcomes, bar, on_done)
+            r = running.pop(fut)
+            _finish(_outcome_of(fut, r.index, r.submitted), outcomes, bar, on_done)
         if timeout:
             _expire(client, running, timeout, outcomes, bar, on_done)
     return outcomes  # type: ignore[return-value]
 
 
-def _expire(
-    client: Any, running: dict[Any, tuple[int, float]], timeout: float, outcomes: list, bar: Any, on_done: Any
-) -> None:
-    """Record every task running longer than ``timeout`` as timed out, and free its worker."""
+@dataclass
+class _Running:
+    """A submitted task: its item index, when it was submitted, and when a worker was seen running it."""
+
+    index: int
+    submitted: float
+    started: float | None = None
+
+
+def _expire(client: Any, running: dict[Any, _Running], timeout: float, outcomes: list, bar: Any, on_done: Any) -> None:
+    """Start each task's clock when the scheduler shows it on a worker; time out those past ``timeout``."""
     now = time.monotonic()
-    for fut, (i, started) in list(running.items()):
-        if now - started > timeout and not fut.done():
+    if any(r.started is None for r in running.values()):
+        try:
+            busy = {k for keys in client.processing().values() for k in keys}
+        except Exception:  # the scheduler did not answer: count from submission
+            busy = {f.key for f in running}
+        for fut, r in running.items():
+            if r.started is None and fut.key in busy:
+                r.started = now
+    for fut, r in list(running.items()):
+        if r.started is not None and now - r.started > timeout and not fut.done():
             running.pop(fut)
             addr = _stop_hung(client, fut)
             where = f" on worker {addr} (restarted)" if addr else ""
-            out = TaskOutcome(i, None, f"task timed out after {timeout:g} s{where}", now - started, addr)
+            out = TaskOutcome(r.index, None, f"task timed out after {timeout:g} s{where}", now - r.started, addr)
             _finish(out, outcomes, bar, on_done)
