@@ -7,8 +7,9 @@ Each mode runs in its own child process (so its peak memory is its own): the cor
 generated and written once, then ``validators.harness.run`` validates every mechanism with vloop, the
 closed forms, Pinocchio and Exudyn (kinematic) — one task per mechanism × engine through
 ``vloop.runner``. Printed per mode: wall time of the validation, tasks per second, the speed-up over the
-in-process run, the cluster's start-up time (separately), and peak resident memory of the main process
-and of the largest worker. The runs must give the same summary (numbers, not timings): checked here.
+in-process run, the cluster's start-up time (separately), the CPU time of the main process (client,
+scheduler and the comparisons, which all run there) and peak resident memory of the main process and
+of the largest worker. The runs must give the same summary (numbers, not timings): checked here.
 """
 
 from __future__ import annotations
@@ -36,6 +37,11 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
 
 
+def _cpu_seconds() -> float:
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime
+
+
 def _worker_peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
@@ -53,6 +59,7 @@ def child(folder: Path, workers: int, out: Path) -> None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         address = cluster.scheduler_address
         startup = time.perf_counter() - t0
+    cpu0 = _cpu_seconds()
     t0 = time.perf_counter()
     v = harness.run(files, ENGINES, scheduler=address, timeout=600)
     seconds = time.perf_counter() - t0
@@ -73,6 +80,7 @@ def child(folder: Path, workers: int, out: Path) -> None:
         "startup": startup,
         "tasks": len(files) * len(ENGINES),
         "main_mb": _peak_mb(),
+        "main_cpu": _cpu_seconds() - cpu0,
         "worker_mb": worker_mb,
         "passed": sum(m["passed"] for m in summary["mechanisms"]),
         "mechanisms": len(summary["mechanisms"]),
@@ -111,14 +119,14 @@ def main() -> None:
     base = results[0]
     print(
         f"{'mode':>22s} {'validation':>11s} {'tasks/s':>8s} {'speed-up':>9s} {'start-up':>9s} "
-        f"{'main MB':>8s} {'worker MB':>10s}  passed"
+        f"{'main CPU':>9s} {'main MB':>8s} {'worker MB':>10s}  passed"
     )
     for r in results:
         mode = "in-process" if not r["workers"] else f"LocalCluster {r['workers']} proc"
         same = "" if r["summary"] == base["summary"] else "  SUMMARY DIFFERS"
         print(
             f"{mode:>22s} {r['seconds']:10.1f}s {r['tasks'] / r['seconds']:8.1f} "
-            f"{base['seconds'] / r['seconds']:8.2f}x {r['startup']:8.1f}s {r['main_mb']:8.0f} "
+            f"{base['seconds'] / r['seconds']:8.2f}x {r['startup']:8.1f}s {r['main_cpu']:8.1f}s {r['main_mb']:8.0f} "
             f"{r['worker_mb']:10.0f}  {r['passed']}/{r['mechanisms']}{same}"
         )
 

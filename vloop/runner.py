@@ -29,6 +29,7 @@ Dask is imported only when a cluster is asked for (``pip install 'vloop[dask]'``
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import signal
 import socket
@@ -277,8 +278,13 @@ def _run_dask(
     running: dict[Any, _Running] = {}
     tag = uuid.uuid4().hex[:8]
     wake = threading.Event()  # set from the client's event loop whenever a task finishes
+    slots, checked = 0, -math.inf  # scheduler calls cost the client CPU: ask at most every POLL seconds
     while pending or running:
-        slots = IN_FLIGHT * max(1, sum(client.nthreads().values()))
+        now = time.monotonic()
+        if now - checked >= POLL:
+            slots, checked = IN_FLIGHT * max(1, sum(client.nthreads().values())), now
+            if timeout:
+                _expire(client, running, timeout, outcomes, bar, on_done)
         while pending and len(running) < slots:
             i, item = pending.popleft()
             fut = client.submit(_call, fn, item, key=f"vloop-task-{tag}-{i}", pure=False, retries=0)
@@ -289,8 +295,6 @@ def _run_dask(
         for fut in [f for f in running if f.done()]:
             r = running.pop(fut)
             _finish(_outcome_of(fut, r.index, r.submitted), outcomes, bar, on_done)
-        if timeout:
-            _expire(client, running, timeout, outcomes, bar, on_done)
     return outcomes  # type: ignore[return-value]
 
 
