@@ -13,9 +13,8 @@ becomes that task's failure, and the run goes on with the others:
   thread; a task stuck inside compiled code is interrupted when it returns to Python); a crash of
   the process cannot be survived — use workers for code that may crash;
 * on Dask, each worker process runs one task at a time (LocalCluster: one thread per worker); the client
-  keeps two tasks in flight per worker thread (one running, one ready) and starts a task's clock when the
-  scheduler shows it processing on a worker (on our LocalCluster a worker is given one task per thread, so
-  that is when it starts; a foreign scheduler may hand a worker more). A task past its timeout is
+  keeps one task in flight per worker thread, so no task waits behind another that may crash its worker,
+  and starts a task's clock when the scheduler shows it processing on a worker. A task past its timeout is
   cancelled and its worker process restarted by its nanny (the only way to stop a stuck thread); a task
   whose worker dies is not
   retried on our own cluster (``distributed.scheduler.allowed-failures`` = 0: a crash is a result,
@@ -45,7 +44,9 @@ from typing import Any
 from .errors import VloopError
 
 POLL = 0.2  # s between checks of running tasks for a timeout
-IN_FLIGHT = 2  # tasks submitted per worker thread: one running, one ready, so no worker waits for the client
+# Tasks in flight per worker thread. One: a task waiting behind another on the same worker would die with it if
+# that one crashes the process (two in flight gained within the noise of a loaded 2-core machine).
+IN_FLIGHT = 1
 MAX_LOCAL_WORKERS = 256  # a LocalCluster larger than this is a typo, not a plan
 CONNECT_TIMEOUT = 30.0  # s to reach a scheduler
 
