@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import MechanismError
 from .kernels import (
-    ILL_FRACTION,
+    EPS,
     _change_point_choices,
     _ChangePoint,
     _error_bound,
@@ -39,40 +39,27 @@ ZOOM_STEPS = 12  # each step narrows the bracket 16-fold
 
 
 ETA_INPUT = 1e-5  # the rates across a change point are compared this far from it (input units: rad, or size)
+DIP = 0.9  # a sampled minimum of h below this fraction of its larger neighbour is zoomed on
 
 
 def _candidate_minima(t: np.ndarray, h: np.ndarray, tail: bool = True) -> list[tuple[int, int]]:
-    """Brackets (row lo, row hi) around sampled minima of h deep enough to hide a zero between samples.
+    """Brackets (row lo, row hi) around sampled minima of h that dip: where a zero could hide between samples.
 
-    Near a double zero h ≈ c·(t − t*)², so a parabola through three samples has its minimum
-    near 0 whatever the phase of the sampling; a broad minimum keeps it near the samples.
-    ``tail``: also look between the last two samples (the end of the run, not of a chunk: the
-    next chunk sees that minimum with both its neighbours).
+    Near a double zero √h is V-shaped, so a sample next to it is well below its larger neighbour
+    (h below 1/4 of it for an even V) whatever the sampling's phase; a broad, shallow minimum keeps
+    the three samples alike and is left alone. A dip is only a candidate: the zoom decides.
+    ``tail``: also look between the last two samples (the end of the run, not of a chunk: the next
+    chunk sees that minimum with both its neighbours).
     """
     n = len(h)
     if n < 2:
         return []
-    out = []
     m = np.nonzero((h[1:-1] <= h[:-2]) & (h[1:-1] <= h[2:]))[0] + 1
-    for c in m:
-        if _parabola_low(t, h, c, c - 1, c + 1) <= 0.25 * min(h[c - 1], h[c + 1]):
-            out.append((c - 1, c + 1))
-    if tail and h[-1] < h[-2]:  # still falling at the end: a zero may lie before the last sample
-        if n < 3 or _parabola_low(t, h, n - 2, n - 2, n - 1) <= 0.25 * h[-1]:
-            out.append((n - 2, n - 1))
+    dips = m[h[m] < DIP * np.maximum(h[m - 1], h[m + 1])]
+    out = [(int(c) - 1, int(c) + 1) for c in dips]
+    if tail and h[-1] < DIP * h[-2]:  # still falling at the end: a zero may lie before the last sample
+        out.append((n - 2, n - 1))
     return out
-
-
-def _parabola_low(t: np.ndarray, h: np.ndarray, c: int, lo: int, hi: int) -> float:
-    """The least value over [t[lo], t[hi]] of the parabola through samples c − 1, c, c + 1 of h."""
-    u0, u2 = t[c - 1] - t[c], t[c + 1] - t[c]
-    g0, g2 = (h[c - 1] - h[c]) / u0, (h[c + 1] - h[c]) / u2
-    a = (g0 - g2) / (u0 - u2)  # h ≈ h[c] + b·u + a·u² through the three samples
-    b = g0 - a * u0
-    if not a > 0:
-        return float(min(h[lo], h[hi]))
-    u = min(max(-b / (2 * a), t[lo] - t[c]), t[hi] - t[c])
-    return float(h[c] + b * u + a * u * u)
 
 
 def _probe(run: _Run, st: _State, tg: np.ndarray, base: int, times: np.ndarray, upto: int, **mode: bool) -> tuple:
@@ -141,6 +128,10 @@ def _zoom(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, hi: int) -> tu
             return float(ts[j]), float(mid[j])
         if first and not (g[0] < 0 <= g[-1]):  # h least at an end of the bracket: no minimum inside it
             return a, math.inf  # (e.g. a limit approached but not passed: h falls to the last sample)
+        root = np.sqrt(mid)  # √h is Lipschitz: no lower between grid points than this bound allows
+        if first and root.min() - 0.5 * np.max(np.abs(np.diff(root))) > 0.5 * CHANGE_GAP * run.scale:
+            j = int(np.argmin(mid))
+            return float(ts[j]), float(mid[j])  # the branches stay apart: no change point here
         first = False
         j = int(np.argmax(g >= 0)) if np.any(g >= 0) else len(ts) - 1
         a, b = float(ts[max(j - 1, 0)]), float(ts[j])
@@ -199,38 +190,133 @@ def _smooth_continuation(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int,
 STENCIL = np.array([-4, -3, -2, -1, 1, 2, 3, 4], float)  # rates across a change point: interpolated from these
 
 
-STENCIL_INPUT = 0.05  # ... multiples of the time in which the inputs move this far (rad, or sizes)
+STENCIL_INPUT = 0.05  # ... multiples of at most the time in which the inputs move this far (rad, or sizes)
+STENCIL_COND = 100.0  # ... and of the time from the change point at which the condition number falls to this
 
 
 def _near_change_point(run: _Run, i: int, t: np.ndarray, cond: np.ndarray) -> np.ndarray:
-    """Rows too ill-conditioned for accurate rates that lie within a change point's stencil."""
+    """Rows next to a change point whose rates the direct solve cannot deliver to ``rtol`` (cond³·ε above it).
+
+    Rows merely ill-conditioned (within rtol, above its flag level) keep their direct rates, flagged in health.
+    """
     near = np.zeros(len(t), bool)
     events = run.events.get(i, ())
     if not events or not run.check:
         return near
-    weak = _error_bound(cond) > run.rtol * ILL_FRACTION
+    refused = _error_bound(cond) > run.rtol
     for ev in events:
         reach = 4.0 * _eta(run, ev.time, math.inf, STENCIL_INPUT)
-        near |= weak & (np.abs(t - ev.time) < reach)
+        near |= refused & (np.abs(t - ev.time) < reach)
     return near
 
 
-def _rates_across(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, rows: np.ndarray, out: _Solved) -> None:
-    """Rates of block ``i`` at rows next to a change point, where its Jacobian is (nearly) singular:
-    interpolated (degree 7) from the smooth branch at t* ± k·η, k = 1..4, where it is well conditioned."""
-    na = run.sys.n_angles
+def _rates_across(
+    run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, rows: np.ndarray, out: _Solved, cond: np.ndarray
+) -> None:
+    """Rates of block ``i`` at rows next to a change point, where its Jacobian is (nearly) singular.
+
+    Interpolated (degree 7) from the smooth branch at t* ± k·η, k = 1..4, η where the condition number
+    falls to STENCIL_COND (the stencil's own points then carry ~STENCIL_COND³·ε), and again at 2η: their
+    difference bounds the narrower one's truncation error (conservatively: where the branch bends fast the
+    error does not yet fall like η⁸). Each row keeps whichever is better: the interpolated rates (that
+    estimate) or its direct ones (their bound cond³·ε).
+    """
     for ev in run.events[i]:
-        eta = _eta(run, ev.time, math.inf, STENCIL_INPUT)
-        mine = rows[np.abs(tg[rows] - ev.time) < 4.0 * eta]
+        eta = _stencil_eta(run, st, tg, i, ev.time)
+        near = np.abs(tg[rows] - ev.time) < 8.0 * eta
+        mine = rows[near]
         if not len(mine):
             continue
-        base = max(int(np.searchsorted(tg, ev.time - 4.0 * eta)) - 1, 0)
-        solved, trial = _probe(run, st, tg, base, ev.time + eta * STENCIL, i, check=False)
-        if solved.n_ok < len(STENCIL) + 1:
-            continue  # the stencil leaves the feasible range: keep the direct rates (flagged)
-        u = (tg[mine] - ev.time) / eta
-        for what, ang, sl in (("v", trial.W, trial.SD), ("a", trial.AL, trial.SDD)):
-            vals = np.stack([ang[1:, v] if v < na else sl[1:, v - na] for v in p.block.unknowns], 1)
-            fit = np.polynomial.polynomial.polyfit(STENCIL, vals, len(STENCIL) - 1)
-            _store(p, st, mine, np.polynomial.polynomial.polyval(u, fit).T, what, na)
-        out.at_change[mine] = True
+        narrow = _stencil_rates(run, st, tg, i, p, ev.time, eta, tg[mine])
+        wide = _stencil_rates(run, st, tg, i, p, ev.time, 2.0 * eta, tg[mine])
+        if narrow is None or wide is None:
+            continue  # a stencil leaves the feasible range: keep the direct rates (flagged)
+        use = np.zeros(len(mine), bool)
+        for what in ("v", "a"):
+            scale = _rate_scale(run, p, narrow["scale_" + what], narrow["scale_v"], what)
+            err_stencil = np.abs(narrow[what] - wide[what]) + STENCIL_COND**3 * EPS * scale
+            err_direct = (cond[mine] ** 3 * EPS)[:, None] * scale
+            use |= np.all(err_stencil < err_direct, axis=1)
+        if use.any():
+            for what in ("v", "a"):
+                _store(p, st, mine[use], narrow[what][use], what, run.sys.n_angles)
+            out.at_change[mine[use]] = True
+
+
+def _stencil_rates(
+    run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, t_star: float, eta: float, at: np.ndarray
+) -> dict[str, np.ndarray] | None:
+    """Block ``i``'s rates interpolated at times ``at`` from the stencil t* ± k·η, and their magnitudes."""
+    na = run.sys.n_angles
+    base = max(int(np.searchsorted(tg, t_star - 4.0 * eta)) - 1, 0)
+    solved, trial = _probe(run, st, tg, base, t_star + eta * STENCIL, i, check=False)
+    if solved.n_ok < len(STENCIL) + 1:
+        return None
+    u = (at - t_star) / eta
+    out = {}
+    for what, ang, sl in (("v", trial.W, trial.SD), ("a", trial.AL, trial.SDD)):
+        vals = np.stack([ang[1:, v] if v < na else sl[1:, v - na] for v in p.block.unknowns], 1)
+        fit = np.polynomial.polynomial.polyfit(STENCIL, vals, len(STENCIL) - 1)
+        out[what] = np.polynomial.polynomial.polyval(u, fit).T
+        out["scale_" + what] = np.max(np.abs(vals), axis=0)
+    return out
+
+
+def _rate_scale(run: _Run, p: _Plan, scale: np.ndarray, scale_v: np.ndarray, what: str) -> np.ndarray:
+    """Per unknown, the magnitude its rate's error is relative to: the largest of its kind (angles together,
+    sliders together), and for accelerations at least ω_max times the rates of that kind — an acceleration is
+    a difference of such terms even where it is itself small (a parallelogram's coupler: α ≡ 0)."""
+    angle = np.array([v < run.sys.n_angles for v in p.block.unknowns])
+    omega = float(np.max(scale_v[angle], initial=0.0))
+    base = scale if what == "v" else np.maximum(scale, omega * scale_v)
+    out = np.empty(len(angle))
+    for kind in (True, False):
+        if np.any(angle == kind):
+            out[angle == kind] = np.max(base[angle == kind])
+    return out
+
+
+def _stencil_eta(run: _Run, st: _State, tg: np.ndarray, i: int, t_star: float) -> float | None:
+    """The stencil's step [s]: where block ``i``'s condition number falls to STENCIL_COND (it grows like
+    1/|t − t*| next to a change point), at most the time the inputs take to move STENCIL_INPUT."""
+    widest = _eta(run, t_star, math.inf, STENCIL_INPUT)
+    d = 0.02 * widest
+    base = max(int(np.searchsorted(tg, t_star - d)) - 1, 0)
+    solved, _ = _probe(run, st, tg, base, np.array([t_star - d, t_star + d]), i, check=False, rates=False)
+    if solved.n_ok < 3 or len(solved.conds) <= i:
+        return widest
+    k = float(np.min(solved.conds[i][1:])) * d  # cond·|t − t*|, about constant near the change point
+    return float(np.clip(k / STENCIL_COND, 0.02 * widest, widest))
+
+
+def find_singular_points(run: _Run, st: _State, tg: np.ndarray, i: int, cond: np.ndarray) -> None:
+    """A redundant (least-squares) Newton block has a single branch: where its Jacobian loses rank between
+    well-conditioned samples (a double parallelogram folding), the continuation went on smoothly, and the
+    rates next to that point are interpolated across it as at a change point (event kind "singular")."""
+    rows = np.nonzero(_error_bound(cond) > run.rtol)[0]
+    if not len(rows) or not run.detect:
+        return
+    for seg in np.split(rows, np.nonzero(np.diff(rows) > 1)[0] + 1):
+        lo, hi = int(seg[0]) - 1, int(seg[-1]) + 1
+        if lo < 0 or hi >= len(cond):
+            continue  # not passed (yet): the motion stops there, or the next chunk decides
+        if any(tg[lo] <= ev.time <= tg[hi] for ev in run.events.get(i, ())):
+            continue
+        t_star = _cond_peak(run, st, tg, i, lo, hi)
+        if t_star is not None:
+            run.events.setdefault(i, []).append(_ChangePoint(i, t_star, False, True, "singular"))
+
+
+def _cond_peak(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, hi: int) -> float | None:
+    """Where block ``i``'s condition number peaks between samples lo and hi (zooming probes)."""
+    a, b = float(tg[lo]), float(tg[hi])
+    for step in range(ZOOM_STEPS):
+        ts = np.linspace(a, b, ZOOM_POINTS)
+        solved, _ = _probe(run, st, tg, lo, ts, i, check=False, rates=False)
+        if solved.n_ok < len(ts) + 1 or len(solved.conds) <= i:  # Newton gave up right at the singular point
+            return None if step == 0 else 0.5 * (a + b)
+        j = int(np.argmax(solved.conds[i][1:]))
+        a, b = float(ts[max(j - 1, 0)]), float(ts[min(j + 1, len(ts) - 1)])
+        if b - a <= 1e-9 * (tg[hi] - tg[lo]):
+            break
+    return 0.5 * (a + b)

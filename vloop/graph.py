@@ -244,8 +244,9 @@ def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
 def _fundamental_cycles(G: nx.Graph) -> list[list]:
     """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space)."""
     out = []
+    order = {n: i for i, n in enumerate(G.nodes)}
     for comp in nx.connected_components(G):
-        root = next(iter(comp))
+        root = min(comp, key=order.__getitem__)  # not next(iter(comp)): set order follows the hash seed
         parent = {root: None}
         depth = {root: 0}
         for a, b in nx.bfs_edges(G, root):

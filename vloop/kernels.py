@@ -21,9 +21,7 @@ from .model import Mechanism
 EPS = float(np.finfo(float).eps)
 
 
-DEFAULT_RTOL = (
-    1e-9  # accuracy asked of every output, relative: a sample whose error bound cond²·ε exceeds it is refused
-)
+DEFAULT_RTOL = 1e-9  # accuracy asked of every output, relative (refusals and flags follow it: see _velocity_bound)
 
 
 ILL_FRACTION = 1e-3  # a kept sample whose error bound exceeds this fraction of rtol is flagged ill-conditioned
@@ -133,6 +131,12 @@ class _Plan:
     w_sl: dict[int, list[tuple[int, complex]]]
     # per unknown slider i: its vector's direction U = coef·E[:, ang]
     u_dir: dict[int, tuple[int, complex]]
+    known: np.ndarray = None  # type: ignore[assignment]  # the block terms independent of the unknowns
+
+    def known_magnitude(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
+        """Σ |r + s| over the known vectors per row: what the known part X is summed from (its round-off
+        grows with it, not with |X|: a mechanism far from the origin sums large vectors to a small X)."""
+        return np.abs(self.r[self.known] + st.S[k][:, self.sl[self.known]]).sum(axis=1)
 
 
 def _plans(sys: LoopSystem) -> list[_Plan]:
@@ -162,7 +166,7 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
             u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
         plan = _Plan(
             b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
-            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], Cb.T[known]), w_const, w_sl, u_dir,
+            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], Cb.T[known]), w_const, w_sl, u_dir, known,
         )  # fmt: skip
         plans.append(plan)
     sys.cache["plans"] = plans
@@ -233,7 +237,8 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
         D2 = X.real**2 + X.imag**2
         k1 = 0.5 * (A2 + D2 - B2)
-        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2)
+        xerr = p.known_magnitude(st, k) * np.sqrt(D2)  # ~ |X|·Σ|known| / ε: round-off carried by X
+        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2 + k1 * k1 + (A2 + np.abs(k1)) * xerr)
         ok = (h2 >= 0) & (D2 > 0)
         Dd = np.where(D2 > 0, D2, 1.0)
         P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / Dd
@@ -247,7 +252,7 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         W1 = _w(p, st, k, p.unk_ang[0])
         XU, WU = X * Uc, W1 * Uc
         y = XU.imag
-        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2)
+        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2 + np.abs(y) * p.known_magnitude(st, k))
         ok = h >= 0
         c = sig * np.sqrt(np.where(ok, h, 0.0))
         _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
@@ -260,7 +265,8 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         W = _w(p, st, k, a, skip=i)
         bb = (W * np.conj(cdir)).real
         D2 = X.real**2 + X.imag**2
-        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, bb * bb + np.abs(W) ** 2 + D2)
+        size = bb * bb + np.abs(W) ** 2 + D2 + np.sqrt(D2) * p.known_magnitude(st, k)
+        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, size)
         s = -bb + sig * np.sqrt(np.where(disc >= 0, disc, 0.0))
         den = W + s * cdir
         ok = (disc >= 0) & (np.abs(den) > 0)
@@ -421,12 +427,14 @@ class _Inputs:
 
 @dataclass(frozen=True)
 class _ChangePoint:
-    """Where the two assembly branches of closed-form block ``block`` meet, at internal time ``time``."""
+    """Where block ``block``'s assembly branches meet (a change point), or where a redundant block's
+    Jacobian loses rank on its one smooth branch (kind "singular"), at internal time ``time``."""
 
     block: int
     time: float
     flip: bool  # whether σ changes there (True on the smooth continuation of a crossing)
     smooth: bool  # whether this continuation is the one whose velocities stay continuous
+    kind: str = "change point"
 
 
 @dataclass
@@ -482,7 +490,14 @@ def _fail(out: _Solved, failure: _Failure) -> None:
 
 
 def _error_bound(cond: np.ndarray) -> np.ndarray:
-    """Relative error bound of a sample's rates: accelerations lose cond²·ε (velocities cond·ε, feeding them)."""
+    """Relative error bound of a sample's accelerations: cond³·ε. Next to a fold the positions themselves are
+    only known to cond·ε (the inputs' round-off, amplified), the velocities to cond²·ε, the accelerations to
+    cond³·ε (measured on a parallelogram at its folding: the bound holds, with a margin of ~10)."""
+    return cond * cond * cond * EPS
+
+
+def _velocity_bound(cond: np.ndarray) -> np.ndarray:
+    """Relative error bound of a sample's velocities: cond²·ε (a sample beyond rtol here is refused)."""
     return cond * cond * EPS
 
 

@@ -189,12 +189,12 @@ def _invert_rows(A: np.ndarray) -> np.ndarray:
 def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
     """Condition number of the scaled Jacobians: the Frobenius-norm one ‖J‖_F·‖J⁺‖_F (an upper bound
     of the 2-norm one, at most nu times it) on every row, replaced by the exact 2-norm one (singular
-    values) where the bound reaches the level at which a sample is flagged (cond²·ε > ILL_FRACTION·rtol),
+    values) where the bound reaches the level at which a sample is flagged (cond³·ε > ILL_FRACTION·rtol),
     so flags and refusals follow the 2-norm rule exactly while most rows skip the SVD."""
     with np.errstate(invalid="ignore", over="ignore"):
         cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum(Jinv_s * Jinv_s, axis=(1, 2)))
     cond = np.where(np.isfinite(cond), cond, np.inf)
-    level = math.sqrt(_s.ILL_FRACTION * rtol / _s.EPS)
+    level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
     near = np.nonzero(cond > level)[0]
     if len(near):
         sv = np.linalg.svd(Js[near], compute_uv=False)

@@ -30,7 +30,15 @@ import numpy as np
 
 from . import budget, newton
 from .assembly import redundancy_text
-from .changepoints import STENCIL_INPUT, _eta, _find_change_points, _near_change_point, _probe, _rates_across
+from .changepoints import (
+    STENCIL_INPUT,
+    _eta,
+    _find_change_points,
+    _near_change_point,
+    _probe,
+    _rates_across,
+    find_singular_points,
+)
 from .errors import MechanismError, MotionError
 from .kernels import (
     DEFAULT_RTOL,
@@ -55,6 +63,7 @@ from .kernels import (
     _store,
     _Sum,
     _system_sums,
+    _velocity_bound,
 )
 from .loops import LoopSystem
 from .result import Result
@@ -91,10 +100,12 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
             cond, sgn = _block_health(p, st, k, run.scale, cols)
         else:
             cond, sgn = fac.cond[k], fac.sign[k]
+            if p.C.shape[0] * 2 > len(p.block.unknowns):  # redundant: one branch, singular points passed
+                find_singular_points(run, st, tg, i, cond)
         near = _near_change_point(run, i, tg[k], cond)
         if run.check:
             signed = sgn * sig[: out.n_ok]
-            bad = np.nonzero(((_error_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
+            bad = np.nonzero(((_velocity_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
             if len(bad):
                 _fail(out, _Failure(int(bad[0]), p.block.loops[0], _toggle_reason(cond[bad[0]], run.rtol)))
                 k = slice(0, out.n_ok)
@@ -111,15 +122,15 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
             _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "v"), "v", na)
             _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "a"), "a", na)
         if near.any():
-            _rates_across(run, st, tg, i, p, np.nonzero(near)[0], out)
+            _rates_across(run, st, tg, i, p, np.nonzero(near)[0], out, cond)
     out.at_change = out.at_change[: out.n_ok]
     return out
 
 
 def _toggle_reason(cond: float, rtol: float) -> str:
     return (
-        f"the mechanism reaches a toggle (singular Jacobian: condition number {cond:.3g}, so the accelerations "
-        f"could be wrong by cond²·ε = {min(float(_error_bound(cond)), 1.0):.2g} of their size, "
+        f"the mechanism reaches a toggle (singular Jacobian: condition number {cond:.3g}, so the velocities "
+        f"could be wrong by cond²·ε = {min(float(_velocity_bound(cond)), 1.0):.2g} of their size, "
         f"more than rtol = {rtol:g})"
     )
 
@@ -281,7 +292,7 @@ def solve(
     """P/V/A of a compiled system at ``times`` [s] (default: the file's). Raises MotionError with ``partial``.
 
     ``tol``: Newton step tolerance (relative); ``max_iter``; ``rtol``: accuracy asked of every output
-    (samples whose error bound cond²·ε exceeds it are refused). The file's [solver] values win for tol
+    (samples whose velocities' error bound cond²·ε exceeds it are refused). The file's [solver] values win for tol
     and max_iter; an ``rtol`` given here wins over the file's. ``memory_budget`` (bytes or "2G"; see
     vloop.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
     """
@@ -671,6 +682,7 @@ def _events_meta(run: _Run, t: np.ndarray) -> dict[str, Any]:
                     "time": ev.time,
                     "inputs": {d.symbol: float(v) for d, v in zip(sys.mechanism.drivers, x, strict=True)},
                     "continued": "smooth" if ev.smooth else "other",
+                    "kind": ev.kind,
                 }
             )
     return {"change_points": sorted(out, key=lambda e: e["time"]), "rtol": run.rtol}
