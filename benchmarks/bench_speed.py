@@ -80,6 +80,8 @@ def pylinkage_model(name: str, mech: vloop.Mechanism, dt: float):
     """The mechanism as a pylinkage Linkage turning its crank ω·dt per step, or None if not one of the three."""
     import pylinkage as pl
 
+    if name not in ("eightbar", "fourbar_textbook_example", "slider_crank_offset"):
+        return None
     d = mech.drivers[0]
     j = mech.joints
     O2 = pl.Ground(*j["O2"], name="O2")

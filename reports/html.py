@@ -869,6 +869,7 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
         sections=sections,
         tolerances=tolerances,
         groups=GROUPS,
+        corpus=summary.get("corpus"),  # a generated corpus has its own page, corpus.html (reports/corpus.py)
     )
 
 

@@ -537,6 +537,8 @@ def test_hostile_values_are_refused_with_one_line_naming_the_entry(textbook, whe
         ({"outputs": [{"quantity": "B.speed"}, {"quantity": "B.speed"}]}, "used twice"),
         ({"outputs": [{"quantity": "l4.theta", "name": "a b"}]}, "'name' may use only"),
         ({"outputs": [{"quantity": "grashof.7"}]}, None),
+        ({"outputs": [{"quantity": "l4.theta", "name": "reason"}]}, "a column of the table already"),
+        ({"outputs": [{"quantity": "l4.theta", "name": "links.l3.length"}]}, "a column of the table already"),
         (
             {"parameters": [{"name": "joints.O4.x", "tolerance": {"dist": "normal", "sigma": 1e308}}], "samples": 50},
             "overflow",

@@ -19,6 +19,8 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from . import (
+    analytic_chain,
+    analytic_changepoint,
     analytic_eightbar,
     analytic_fivebar,
     analytic_fourbar,
@@ -43,12 +45,18 @@ CLOSED_FORMS: tuple[ModuleType, ...] = (
     analytic_jansen,
 )
 
-__all__ = ["CLOSED_FORMS", "LimitPositionError", "available", "closed_form_for", "solve"]
+# Tried before CLOSED_FORMS: change-point four-bars (where analytic_fourbar's fixed branch sign would jump
+# branches) continue on the velocity-continuous branch. Tried after: any other chain of dyads on cranks
+# (the corpus's random attachments), solved dyad by dyad from its structure.
+BEFORE: tuple[ModuleType, ...] = (analytic_changepoint,)
+FALLBACK: tuple[ModuleType, ...] = (analytic_chain,)
+
+__all__ = ["BEFORE", "CLOSED_FORMS", "FALLBACK", "LimitPositionError", "available", "closed_form_for", "solve"]
 
 
 def closed_form_for(mech: Mechanism) -> ModuleType | None:
     """The closed-form module whose structure matches ``mech``, or None."""
-    return next((m for m in CLOSED_FORMS if m.applies(mech)), None)
+    return next((m for m in (*BEFORE, *CLOSED_FORMS, *FALLBACK) if m.applies(mech)), None)
 
 
 def available(mech: Mechanism) -> bool:

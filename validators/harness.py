@@ -74,10 +74,19 @@ class EngineRun:
     result: Result | None = None
     message: str = ""
     seconds: float = 0.0
+    worker: str = ""  # who ran the task (vloop.runner: "local:HOST:PID" or the Dask worker)
+    task_seconds: float = 0.0  # the task's wall time where it ran (engine + its imports), s
+    n_samples: int | None = None  # kept when the Result is dropped to save memory
 
     @property
     def samples(self) -> int:
-        return len(self.result) if self.result is not None else 0
+        if self.result is not None:
+            return len(self.result)
+        return self.n_samples or 0
+
+    def drop_result(self) -> None:
+        """Forget the Result (a passing corpus run needs only its numbers in the summary)."""
+        self.n_samples, self.result = self.samples, None
 
 
 @dataclass
@@ -101,6 +110,8 @@ class MechanismValidation:
     runs: dict[str, EngineRun] = field(default_factory=dict)
     checks: list[CheckedComparison] = field(default_factory=list)
     error: str = ""  # the file itself is bad
+    corpus: dict[str, Any] | None = None  # the generated file's sidecar (vloop.corpus): family, seed, expectations
+    expectation: dict[str, Any] | None = None  # what the sidecar expected of every engine, and what happened
 
     @property
     def passed(self) -> bool:
@@ -108,6 +119,7 @@ class MechanismValidation:
             not self.error
             and all(c.passed for c in self.checks)
             and all(r.status in ("ok", "stopped", "skipped") for r in self.runs.values())
+            and (self.expectation is None or self.expectation["passed"])
         )
 
 
@@ -118,6 +130,7 @@ class Validation:
     started: str
     seconds: float
     versions: dict[str, str]
+    runner: dict[str, Any] = field(default_factory=dict)  # how the tasks ran (vloop.runner settings)
 
     @property
     def passed(self) -> bool:
@@ -191,37 +204,113 @@ def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | Non
     return CheckedComparison(a.engine, b.engine, cmp, n, passed, msg or "within tolerance", tol.rtol)
 
 
-def validate_mechanism(
-    path: str | Path,
-    engines: Iterable[str],
-    *,
-    progress: Callable[[str], None] | None = None,
-    mechanism: Mechanism | None = None,
-) -> MechanismValidation:
-    """Every engine on one mechanism file, each compared with vloop and with the closed form."""
-    path = Path(path)
-    try:
-        mech = mechanism or vloop.load(path)
-    except VloopError as exc:
-        return MechanismValidation(str(path), path.stem, None, error=str(exc))
-    item = MechanismValidation(str(path), mech.name, mech)
-    engines = tuple(engines)
-    for name in engines:
-        run = run_engine(name, mech)
-        item.runs[name] = run
-        if progress:
-            extra = f" ({run.message.splitlines()[0][:120]})" if run.status in ("error", "stopped") else ""
-            progress(f"{mech.name}: {name} {run.status} in {run.seconds:.2f} s{extra}")
+def _checks(item: MechanismValidation, engines: tuple[str, ...]) -> None:
+    """Compare every engine with every reference run (vloop, then the closed form)."""
     for ref in REFERENCES:
         if ref not in item.runs:
             continue
         for name in engines:
             if name == ref or name not in item.runs:
                 continue
-            c = check(item.runs[name], item.runs[ref], mech.name)
+            c = check(item.runs[name], item.runs[ref], item.name)
             if c is not None:
                 item.checks.append(c)
+
+
+def expectation(item: MechanismValidation) -> dict[str, Any] | None:
+    """What a generated file's sidecar promises, checked against every engine's run.
+
+    Every engine that ran must return exactly the expected number of samples: all of them for a run
+    clear of limits, the recorded stop sample K for a run into a limit (computed by the generator from
+    the closed-form limit angle, not by running an engine), with the status to match; and where the
+    generator says a closed form exists, the analytic engine must not be skipped.
+    """
+    side = item.corpus
+    if not side or "expect" not in side:
+        return None
+    want = int(side["expect"]["samples"])
+    stop = side["expect"].get("stop_sample")
+    problems, observed = [], {}
+    for name, r in item.runs.items():
+        observed[name] = r.samples if r.status in ("ok", "stopped") else None
+        if r.status == "skipped":
+            if name == "analytic" and side.get("closed_form"):
+                problems.append("analytic skipped, but the family has a closed form")
+            continue
+        if r.status == "error":
+            continue  # reported as the engine's failure already
+        if r.samples != want or (r.status == "stopped") != (stop is not None):
+            what = f"stop at sample {stop}" if stop is not None else f"run all {want} samples"
+            problems.append(f"{name} {_extent(r)} samples, expected to {what}")
+    return {
+        "samples": want,
+        "stop_sample": stop,
+        "observed": observed,
+        "passed": not problems,
+        "message": "; ".join(problems) or "as expected",
+    }
+
+
+def _finalize(item: MechanismValidation, engines: tuple[str, ...], keep_results: bool) -> None:
+    item.runs = {e: item.runs[e] for e in engines if e in item.runs}
+    _checks(item, engines)
+    item.expectation = expectation(item)
+    if not keep_results and item.corpus is not None and item.passed:
+        for r in item.runs.values():
+            r.drop_result()
+
+
+def validate_mechanism(
+    path: str | Path,
+    engines: Iterable[str],
+    *,
+    progress: Callable[[str], None] | None = None,
+    mechanism: Mechanism | None = None,
+    corpus: dict[str, Any] | None = None,
+) -> MechanismValidation:
+    """Every engine on one mechanism file (in this process), each compared with vloop and with the closed form."""
+    path = Path(path)
+    try:
+        mech = mechanism or vloop.load(path)
+    except VloopError as exc:
+        return MechanismValidation(str(path), path.stem, None, error=str(exc))
+    item = MechanismValidation(str(path), mech.name, mech, corpus=corpus)
+    engines = tuple(engines)
+    for name in engines:
+        run = run_engine(name, mech)
+        item.runs[name] = run
+        if progress:
+            progress(_run_line(item.name, run))
+    _finalize(item, engines, keep_results=True)
     return item
+
+
+def _run_line(name: str, run: EngineRun) -> str:
+    extra = f" ({run.message.splitlines()[0][:120]})" if run.status in ("error", "stopped") and run.message else ""
+    return f"{name}: {run.engine} {run.status} in {run.seconds:.2f} s{extra}"
+
+
+def engine_task(task: tuple[str, Mechanism]) -> EngineRun:
+    """One task of a validation run (what a Dask worker executes): one engine on one mechanism."""
+    name, mech = task
+    return run_engine(name, mech)
+
+
+def load_items(paths: Iterable[str | Path]) -> list[MechanismValidation]:
+    """Load every file (a bad one becomes an item with its error) and its corpus sidecar, if any."""
+    from vloop.corpus import read_sidecar
+
+    items = []
+    for p in paths:
+        path = Path(p)
+        try:
+            mech = vloop.load(path)
+            side = read_sidecar(path)
+        except VloopError as exc:
+            items.append(MechanismValidation(str(path), path.stem, None, error=str(exc)))
+            continue
+        items.append(MechanismValidation(str(path), mech.name, mech, corpus=side))
+    return items
 
 
 def run(
@@ -229,21 +318,58 @@ def run(
     engines: Iterable[str] = ENGINES,
     *,
     progress: Callable[[str], None] | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    timeout: float | None = None,
+    bar: bool | None = None,
+    keep_results: bool = False,
 ) -> Validation:
-    """Validate every mechanism file with every engine."""
+    """Validate every mechanism file with every engine, each (mechanism, engine) one task of vloop.runner.
+
+    In this process by default; ``workers=N`` on a local Dask cluster of N processes, ``scheduler=ADDRESS``
+    on a running one. A task that fails, crashes its worker or passes ``timeout`` [s] is that engine's
+    error. ``progress`` gets one line per finished task; ``bar`` as :func:`vloop.runner.run_tasks`'s
+    ``progress``. Results of generated files that pass are dropped once compared (``keep_results=False``)
+    so that a corpus of thousands fits in memory; the summary keeps their numbers.
+    """
+    from vloop.runner import run_tasks
+
     engines = tuple(engines)
     for e in engines:
         if e not in ENGINES:
             raise MechanismError(f"unknown engine '{e}' (known: {', '.join(ENGINES)})", entry="engines")
     started = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     t0 = time.perf_counter()
-    items = []
-    paths = list(paths)
-    for i, p in enumerate(paths, 1):
+    items = load_items(paths)
+    tasks = [(k, e) for k, it in enumerate(items) if it.mechanism is not None for e in engines]
+    waiting = {k: len(engines) for k, _ in tasks}
+
+    def on_done(out: Any) -> None:
+        k, name = tasks[out.index]
+        item = items[k]
+        run_ = out.value if out.ok else EngineRun(name, "error", None, out.error, out.seconds)
+        run_.worker, run_.task_seconds = out.worker, out.seconds
+        item.runs[name] = run_
+        out.value = None
         if progress:
-            progress(f"[{i}/{len(paths)}] {Path(p).name}")
-        items.append(validate_mechanism(p, engines, progress=progress))
-    return Validation(items, engines, started, time.perf_counter() - t0, versions())
+            progress(_run_line(item.name, run_))
+        waiting[k] -= 1
+        if waiting[k] == 0:
+            _finalize(item, engines, keep_results)
+
+    run_tasks(
+        engine_task,
+        [(e, items[k].mechanism) for k, e in tasks],
+        scheduler=scheduler,
+        workers=workers,
+        timeout=timeout,
+        progress=bar,
+        on_done=on_done,
+        label="validate",
+    )
+    mode = "scheduler" if scheduler else "local-cluster" if workers else "in-process"
+    runner = {"mode": mode, "workers": workers, "scheduler": scheduler, "timeout": timeout, "tasks": len(tasks)}
+    return Validation(items, engines, started, time.perf_counter() - t0, versions(), runner)
 
 
 # ------------------------------------------------------------------ summary.json
@@ -257,6 +383,35 @@ def _badness(q: dict[str, Any]) -> float:
     """A quantity's error as a fraction of what is allowed."""
     err = q["max_abs"] if isinstance(q["max_abs"], float) else np.inf
     return err / max(q["allowed"], 1e-300)
+
+
+def _comparison_entry(c: CheckedComparison) -> dict[str, Any]:
+    """One comparison of summary.json: its verdict and every quantity's errors (non-finite as "inf")."""
+    q = []
+    if c.comparison is not None:
+        for e in c.comparison.errors:
+            q.append(
+                {
+                    "quantity": e.column,
+                    "group": e.group,
+                    "max_abs": _num(e.max_abs),
+                    "max_rel": _num(e.rel),
+                    "rms": _num(e.rms),
+                    "t_at_max": e.t_at_max,
+                    "peak": e.scale,
+                    "allowed": e.tol,
+                    "passed": e.passed,
+                }
+            )
+    return {
+        "engine": c.engine,
+        "reference": c.reference,
+        "samples": c.samples,
+        "passed": c.passed,
+        "message": c.message,
+        "worst": max(q, key=_badness, default=None),
+        "quantities": q,
+    }
 
 
 def to_summary(v: Validation) -> dict[str, Any]:
@@ -273,42 +428,21 @@ def to_summary(v: Validation) -> dict[str, Any]:
         L, J, M = m.gruebler()
         entry.update(samples=len(m.times), loops=J - L + 1, mobility=M)
         entry["runs"] = {
-            name: {"status": r.status, "samples": r.samples, "seconds": r.seconds, "message": r.message}
+            name: {
+                "status": r.status,
+                "samples": r.samples,
+                "seconds": r.seconds,
+                "message": r.message,
+                "worker": r.worker,
+                "task_seconds": r.task_seconds,
+            }
             for name, r in it.runs.items()
         }
-        comps = []
-        for c in it.checks:
-            q = []
-            if c.comparison is not None:
-                for e in c.comparison.errors:
-                    q.append(
-                        {
-                            "quantity": e.column,
-                            "group": e.group,
-                            "max_abs": _num(e.max_abs),
-                            "max_rel": _num(e.rel),
-                            "rms": _num(e.rms),
-                            "t_at_max": e.t_at_max,
-                            "peak": e.scale,
-                            "allowed": e.tol,
-                            "passed": e.passed,
-                        }
-                    )
-            worst = max(q, key=_badness, default=None)
-            comps.append(
-                {
-                    "engine": c.engine,
-                    "reference": c.reference,
-                    "samples": c.samples,
-                    "passed": c.passed,
-                    "message": c.message,
-                    "worst": worst,
-                    "quantities": q,
-                }
-            )
-        entry["comparisons"] = comps
+        if it.corpus is not None:
+            entry["corpus"] = _corpus_entry(it)
+        entry["comparisons"] = [_comparison_entry(c) for c in it.checks]
         mechs.append(entry)
-    return {
+    out = {
         "schema": SCHEMA,
         "created": v.started,
         "seconds": v.seconds,
@@ -318,3 +452,125 @@ def to_summary(v: Validation) -> dict[str, Any]:
         "tolerances": {f"{a} vs {b}": t.as_dict() for (a, b), t in TOLERANCES.items()},
         "mechanisms": mechs,
     }
+    if v.runner:
+        out["runner"] = v.runner
+    corpus = [it.corpus for it in v.items if it.corpus is not None]
+    if corpus:
+        out["corpus"] = {
+            "seeds": sorted({int(c["seed"]) for c in corpus}),
+            "mechanisms": len(corpus),
+            "families": _count(f"{c['family']}/{c['variant']}" for c in corpus),
+            "limit_runs": sum(1 for c in corpus if c["expect"].get("stop_sample") is not None),
+        }
+    return out
+
+
+def _count(keys: Iterable[str]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for k in keys:
+        out[k] = out.get(k, 0) + 1
+    return dict(sorted(out.items()))
+
+
+def _corpus_entry(it: MechanismValidation) -> dict[str, Any]:
+    """A generated file's identity (family, seed, index: enough to rebuild it) and its expectation check."""
+    c = it.corpus or {}
+    keys = ("family", "variant", "drive", "seed", "index", "closed_form", "change_point")
+    entry: dict[str, Any] = {k: c[k] for k in keys if k in c}
+    entry["expect"] = it.expectation or {}
+    return entry
+
+
+# ------------------------------------------------------------------ the comparison table (Parquet)
+
+TABLE_COLUMNS = (
+    "mechanism", "file", "family", "variant", "drive", "corpus_seed", "corpus_index", "mechanism_passed",
+    "engine", "reference", "comparison_passed", "samples", "engine_status", "engine_seconds", "engine_worker",
+    "quantity", "group", "max_abs", "max_rel", "rms", "t_at_max", "peak", "allowed", "ratio", "passed",
+)  # fmt: skip
+
+
+def _float(x: Any) -> float:
+    return float("inf") if isinstance(x, str) else float(x)
+
+
+def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per mechanism × engine × reference × quantity (a comparison without a result: one row, no quantity).
+
+    Errors as in summary.json (file units, rad, s); ``ratio`` = max_abs / allowed (> 1 fails); "inf" is +inf.
+    """
+    rows = []
+    for m in summary.get("mechanisms", []):
+        c = m.get("corpus") or {}
+        base = {
+            "mechanism": m["name"],
+            "file": m["file"],
+            "family": c.get("family", "catalog"),
+            "variant": c.get("variant", ""),
+            "drive": c.get("drive", ""),
+            "corpus_seed": c.get("seed"),
+            "corpus_index": c.get("index"),
+            "mechanism_passed": m["passed"],
+        }
+        for comp in m.get("comparisons", []):
+            run = m.get("runs", {}).get(comp["engine"], {})
+            head = {
+                **base,
+                "engine": comp["engine"],
+                "reference": comp["reference"],
+                "comparison_passed": comp["passed"],
+                "samples": comp["samples"],
+                "engine_status": run.get("status", ""),
+                "engine_seconds": run.get("seconds"),
+                "engine_worker": run.get("worker", ""),
+            }
+            empty = dict.fromkeys(("quantity", "group", "max_abs", "max_rel", "rms", "t_at_max", "peak", "allowed"))
+            if not comp["quantities"]:
+                rows.append({**head, **empty, "ratio": None, "passed": comp["passed"]})
+            for q in comp["quantities"]:
+                err, allowed = _float(q["max_abs"]), float(q["allowed"])
+                rows.append(
+                    {
+                        **head,
+                        "quantity": q["quantity"],
+                        "group": q["group"],
+                        "max_abs": err,
+                        "max_rel": _float(q["max_rel"]),
+                        "rms": _float(q["rms"]),
+                        "t_at_max": q["t_at_max"],
+                        "peak": q["peak"],
+                        "allowed": allowed,
+                        "ratio": err / allowed if allowed > 0 else (0.0 if err == 0 else float("inf")),
+                        "passed": q["passed"],
+                    }
+                )
+    return rows
+
+
+def comparison_table(summary: dict[str, Any]) -> Any:
+    """The rows of :func:`comparison_rows` as a pandas DataFrame with fixed columns and dtypes."""
+    import pandas as pd
+
+    df = pd.DataFrame(comparison_rows(summary), columns=list(TABLE_COLUMNS))
+    for col in ("corpus_seed", "corpus_index", "samples"):
+        df[col] = df[col].astype("Int64")
+    for col in ("engine_seconds", "max_abs", "max_rel", "rms", "t_at_max", "peak", "allowed", "ratio"):
+        df[col] = df[col].astype("float64")
+    for col in ("mechanism_passed", "comparison_passed", "passed"):
+        df[col] = df[col].astype("boolean")
+    return df
+
+
+def write_parquet(summary: dict[str, Any], path: str | Path) -> Path:
+    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``) through vloop.output."""
+    import io
+
+    from vloop.output import write_bytes
+
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError as exc:
+        raise VloopError(f"writing {path} needs pyarrow: pip install 'vloop[parquet]' ({exc})", entry="out") from None
+    buf = io.BytesIO()
+    comparison_table(summary).to_parquet(buf, index=False, engine="pyarrow")
+    return write_bytes(path, buf.getvalue())

@@ -1,8 +1,8 @@
 """Every tolerance of the cross-validation, in one place, with where each number comes from.
 
 A comparison passes when, for every shared quantity, max |a − b| ≤ atol + rtol·peak, where
-peak is the quantity's peak magnitude over the run and atol = 1e-12 × the peak of its group
-(see :mod:`vloop.compare`). ``rtol`` is a number or a dict by quantity group.
+peak is the quantity's peak magnitude over the run and atol = floor × the peak of its group
+(see :mod:`vloop.compare`; ``floor`` below). ``rtol`` is a number or a dict by quantity group.
 """
 
 from __future__ import annotations
@@ -54,24 +54,34 @@ _DYNAMIC = Tolerance(
     floor=_DYNAMIC_RTOL,
 )
 
+# For a quantity that is zero in theory (a fixed point's acceleration, a translating coupler's ω) the
+# allowance is a fraction of its group's peak. Away from singular configurations both sides agree to
+# round-off (~1e-13 of the group's peak); next to a change point or toggle the rates carry up to cond³·ε
+# (vloop's documented error bound, flagged in health): measured ≤ 3e-10 of the group's peak on the
+# generated change-point four-bars (seed 2026). The floor is 1e-9 of the group's peak, the claim itself.
+_FLOOR = 1e-9
+
 # (engine, reference) -> tolerance
 TOLERANCES: dict[tuple[str, str], Tolerance] = {
     ("analytic", "vloop"): Tolerance(
         1e-9,
         "Closed forms derived by hand; both sides are exact to round-off and agree to ~1e-13 of peak "
         "(measured: ≤ 1e-13 on the catalog). 1e-9 is the claim of the core issue.",
+        floor=_FLOOR,
     ),
     ("pinocchio", "vloop"): Tolerance(
         1e-9,
         "Pinocchio's Newton projection stops at a step of 1e-10 (scaled) then solves exact linear systems; "
         "measured ≤ 3e-13 of peak on the catalog. 1e-9 leaves four orders of margin.",
+        floor=_FLOOR,
     ),
-    ("pinocchio", "analytic"): Tolerance(1e-9, "As pinocchio vs vloop; measured ≤ 3e-13."),
+    ("pinocchio", "analytic"): Tolerance(1e-9, "As pinocchio vs vloop; measured ≤ 3e-13.", floor=_FLOOR),
     ("exudyn-kinematic", "vloop"): Tolerance(
         1e-8,
         "Newton on Exudyn's own constraint residuals and Jacobians, stopped at ~1e-12; the issue asks 1e-8.",
+        floor=_FLOOR,
     ),
-    ("exudyn-kinematic", "analytic"): Tolerance(1e-8, "As exudyn-kinematic vs vloop."),
+    ("exudyn-kinematic", "analytic"): Tolerance(1e-8, "As exudyn-kinematic vs vloop.", floor=_FLOOR),
     ("exudyn-dynamic", "vloop"): _DYNAMIC,
     ("exudyn-dynamic", "analytic"): _DYNAMIC,
 }

@@ -88,7 +88,11 @@ def _close(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]
     for it in range(1, 51):
         F = loop_residual(sys, q, loops)
         J = loop_jacobian(sys, q, loops, unknowns)
-        step = np.linalg.lstsq(J, -np.concatenate([F.real, F.imag]), rcond=None)[0]
+        rhs = -np.concatenate([F.real, F.imag])
+        try:  # a square group: a plain solve (least squares only for redundant or singular groups)
+            step = np.linalg.solve(J, rhs) if J.shape[0] == J.shape[1] else np.linalg.lstsq(J, rhs, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            step = np.linalg.lstsq(J, rhs, rcond=None)[0]
         q[unknowns] += step
         if np.max(np.abs(step), initial=0.0) <= 1e-14 * (1 + np.max(np.abs(q[unknowns]), initial=0.0)):
             return it

@@ -34,10 +34,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .changepoints import CHANGE_GAP, DIP, ETA_INPUT, ZOOM_POINTS
 from .drivers import evaluate
 from .errors import MotionError, VloopError
+from .kernels import DEFAULT_RTOL, EPS, cross
 from .loops import Block, LoopSystem
-from .solver import DEFAULT_MAX_ITER, DEFAULT_RTOL, DEFAULT_TOL, EPS, ILL_FRACTION, MAX_INPUT_STEP, cross
+from .solver import DEFAULT_MAX_ITER, DEFAULT_TOL, MAX_INPUT_STEP
 from .variants import Designs, VariantModel
 
 TWO_PI = 2.0 * math.pi
@@ -48,6 +50,7 @@ TWO_PI = 2.0 * math.pi
 ROWS = 16_000
 ASSEMBLY_STEPS = 16  # continuation steps from the nominal design to a variant (t = 0, Newton blocks)
 JUMP = 0.5  # a Newton correction beyond this fraction of the predicted move is not trusted
+SURE = 0.1  # a sample whose velocity error bound cond²·ε exceeds this fraction of rtol is left to the single run
 CLOSURE = 1e-9  # a Newton row closes every equation to this fraction of the mechanism size
 MAX_GRID_FACTOR = 64  # internal samples allowed per requested one (plus a lead-in allowance)
 MAX_LEAD = 100_000
@@ -60,11 +63,10 @@ MAX_LEAD = 100_000
 class Grid:
     """Internal times shared by every variant: t[0] = 0 (the assembly), then rows up to every requested
     time with rows inserted where any variant's input moves more than MAX_INPUT_STEP; ``out`` the internal
-    row of each requested time; ``u`` the path length in time (increasing, for the discriminant's minima)."""
+    row of each requested time."""
 
     t: np.ndarray
     out: np.ndarray
-    u: np.ndarray
     times: np.ndarray
 
 
@@ -84,8 +86,7 @@ def make_grid(model: VariantModel, designs: Designs, times: np.ndarray) -> Grid:
     t = np.append(seq[seg] + frac * (seq[seg + 1] - seq[seg]), seq[-1]) if len(seq) > 1 else seq.copy()
     t[starts] = seq
     out = starts[1:] if lead else starts
-    u = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(t)))])
-    return Grid(t, out, u, times)
+    return Grid(t, out, times)
 
 
 def _steps_needed(model: VariantModel, designs: Designs, seq: np.ndarray, lead: bool) -> np.ndarray:
@@ -117,10 +118,11 @@ def _travel(X: np.ndarray, XD: np.ndarray, h: np.ndarray) -> np.ndarray:
 
 
 def _inputs(model: VariantModel, d: Designs, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Drivers' x, ẋ, ẍ per variant at times ``t``: arrays (V, len(t), n_drivers), as vloop.drivers evaluates."""
+    """Drivers' x, ẋ, ẍ per variant at times ``t`` (n,) or, per variant, (V, n): arrays (V, n, n_drivers), as
+    vloop.drivers evaluates them."""
     mech = model.mechanism
     V, m = len(d), len(mech.drivers)
-    X, XD, XDD = (np.zeros((V, len(t), m)) for _ in range(3))
+    X, XD, XDD = (np.zeros((V, np.shape(t)[-1], m)) for _ in range(3))
     for j, drv in enumerate(mech.drivers):
         if drv.profile is not None:
             x, xd, xdd = evaluate(drv, t)
@@ -265,6 +267,16 @@ def _u(st: _State, k: slice, d: Designs, p: _Plan, i: int) -> np.ndarray:
     return p.C[0][t] * d.cd[:, int(p.terms[t]), None] * st.E[:, k, int(p.ang[t])]
 
 
+def _known_magnitude(st: _State, d: Designs, p: _Plan) -> np.ndarray:
+    """Σ |r + s| over the block's known vectors per row: the round-off the known part X carries grows with it
+    (as the single-run solver's Plan.known_magnitude)."""
+    out: np.ndarray | float = 0.0
+    for t in np.nonzero(p.known)[0]:
+        gt, s = int(p.terms[t]), int(p.sl[t])
+        out = out + np.abs(d.r[:, gt, None] + st.S[:, :, s] if s >= 0 else d.r[:, gt, None])
+    return np.broadcast_to(out, st.E.shape[:2])
+
+
 # ---------------------------------------------------------------- closed-form dyads
 
 
@@ -296,7 +308,8 @@ def _closed_form(st: _State, d: Designs, p: _Plan, sigma: float, ref: np.ndarray
         A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
         D2 = X.real**2 + X.imag**2
         k1 = 0.5 * (A2 + D2 - B2)
-        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2)
+        xerr = _known_magnitude(st, d, p) * np.sqrt(D2)  # ~ |X|·Σ|known| / ε: round-off carried by X
+        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2 + k1 * k1 + (A2 + np.abs(k1)) * xerr)
         ok = (h2 >= 0) & (D2 > 0)
         Dd = np.where(D2 > 0, D2, 1.0)
         P = X * (k1 + 1j * sigma * np.sqrt(np.where(ok, h2, 0.0))) / Dd
@@ -309,7 +322,7 @@ def _closed_form(st: _State, d: Designs, p: _Plan, sigma: float, ref: np.ndarray
         W1 = _w(st, k, d, p, a)
         XU, WU = X * Uc, W1 * Uc
         y = XU.imag
-        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2)
+        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2 + np.abs(y) * _known_magnitude(st, d, p))
         ok = h >= 0
         c = sigma * np.sqrt(np.where(ok, h, 0.0))
         _set_angle(st, a, (c + 1j * y) / WU, ref[:, a])
@@ -322,7 +335,8 @@ def _closed_form(st: _State, d: Designs, p: _Plan, sigma: float, ref: np.ndarray
         W = _w(st, k, d, p, a, skip=i)
         bb = (W * np.conj(cdir)).real
         D2 = X.real**2 + X.imag**2
-        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, bb * bb + np.abs(W) ** 2 + D2)
+        size = bb * bb + np.abs(W) ** 2 + D2 + np.sqrt(D2) * _known_magnitude(st, d, p)
+        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, size)
         s = -bb + sigma * np.sqrt(np.where(disc >= 0, disc, 0.0))
         den = W + s * cdir
         ok = (disc >= 0) & (np.abs(den) > 0)
@@ -382,41 +396,55 @@ def _dyad_health(c1: np.ndarray, c2: np.ndarray, angle: tuple[bool, bool], scale
     return cond, np.sign(det)
 
 
-def _deep_minima(u: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Variants whose sampled discriminant has a minimum deep enough to hide a zero between samples (the
-    single run's change-point candidates, :func:`vloop.solver._candidate_minima`, with the run's tail)."""
+def _dips(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(variant, row c) of every dip of the sampled discriminants: a local minimum below DIP of its larger
+    neighbour (bracket c − 1 .. c + 1), or still falling at the end (bracket c = n − 2 .. n − 1): where the
+    single run zooms in for a change point or a limit between samples (vloop.changepoints._candidate_minima)."""
     n = h.shape[1]
     if n < 2:
-        return np.zeros(len(h), bool)
-    out = np.zeros(len(h), bool)
+        return np.zeros(0, int), np.zeros(0, int)
+    vs, cs = [np.zeros(0, int)], [np.zeros(0, int)]
     if n >= 3:
-        mid = (h[:, 1:-1] <= h[:, :-2]) & (h[:, 1:-1] <= h[:, 2:])
-        v, c = np.nonzero(mid)
-        c = c + 1
-        low = _parabola_low(u, h, v, c, c - 1, c + 1)
-        out[v[low <= 0.25 * np.minimum(h[v, c - 1], h[v, c + 1])]] = True
-    falling = h[:, -1] < h[:, -2]
-    if n < 3:
-        out |= falling
-    else:
-        v = np.nonzero(falling)[0]
-        c = np.full(len(v), n - 2)
-        low = _parabola_low(u, h, v, c, c, c + 1)
-        out[v[low <= 0.25 * h[v, -1]]] = True
-    return out
+        mid, lo, hi = h[:, 1:-1], h[:, :-2], h[:, 2:]
+        v, c = np.nonzero((mid <= lo) & (mid <= hi) & (mid < DIP * np.maximum(lo, hi)))
+        vs.append(v)
+        cs.append(c + 1)
+    v = np.nonzero(h[:, -1] < DIP * h[:, -2])[0]
+    vs.append(v)
+    cs.append(np.full(len(v), -(n - 2)))  # negative: a tail bracket n − 2 .. n − 1
+    return np.concatenate(vs), np.concatenate(cs)
 
 
-def _parabola_low(u: np.ndarray, h: np.ndarray, v: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """The least value over [u[lo], u[hi]] of the parabola through samples c − 1, c, c + 1 of h[v]."""
-    u0, u2 = u[c - 1] - u[c], u[c + 1] - u[c]
-    hc = h[v, c]
-    g0, g2 = (h[v, c - 1] - hc) / u0, (h[v, c + 1] - hc) / u2
-    a = (g0 - g2) / (u0 - u2)
-    b = g0 - a * u0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = np.clip(-b / (2 * a), u[lo] - u[c], u[hi] - u[c])
-    low = hc + b * x + a * x * x
-    return np.where(a > 0, low, np.minimum(h[v, lo], h[v, hi]))
+def _harmless(run: _Run, d: Designs, i: int, t: np.ndarray, v: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Whether each dip (variant v, row c) is one the single run's first zoom pass dismisses: h least at an end
+    of the bracket, or √h (Lipschitz) kept clear of CHANGE_GAP between 17 probes — then its result is the plain
+    closed form's, as the batch's. Otherwise (a possible change point, a limit between samples) it is not."""
+    tail = c < 0
+    lo = np.where(tail, -c, c - 1)
+    hi = np.where(tail, -c + 1, c + 1)
+    a, b = t[lo], t[hi]
+    ts = a[:, None] + (b - a)[:, None] * np.linspace(0.0, 1.0, ZOOM_POINTS)[None, :]
+    dv = d.take(v)
+    _, XD, _ = _inputs(run.model, dv, 0.5 * (a + b)[:, None])
+    units = np.array([1.0 if dr.kind == "crank" else run.scale for dr in run.model.mechanism.drivers])
+    rate = np.max(np.abs(XD[:, 0, :]) / units, axis=1, initial=0.0)
+    with np.errstate(divide="ignore"):
+        eta = np.minimum(np.where(rate > 0, ETA_INPUT / rate, np.inf), 0.25 * (b - a))
+    times = np.concatenate([ts, ts - eta[:, None], ts + eta[:, None]], axis=1)
+    sys = run.model.system
+    st = _State(len(v), times.shape[1], sys.n_angles, len(sys.slider_names))
+    _impose(run, st, dv, times, travel=False)
+    ok = np.ones(st.E.shape[:2], bool)
+    for p in run.plans[: i + 1]:
+        okj, h = _closed_form(st, dv, p, p.block.sigma, np.zeros((len(v), sys.n_vars)))
+        ok &= okj
+    n = ZOOM_POINTS
+    mid, g = h[:, :n], h[:, 2 * n :] - h[:, n : 2 * n]
+    with np.errstate(invalid="ignore"):
+        root = np.sqrt(mid)
+        apart = root.min(axis=1) - 0.5 * np.max(np.abs(np.diff(root, axis=1)), axis=1) > 0.5 * CHANGE_GAP * run.scale
+    at_end = ~((g[:, 0] < 0) & (g[:, -1] >= 0))
+    return ok.all(axis=1) & np.all(mid >= 0, axis=1) & (at_end | apart)
 
 
 # ---------------------------------------------------------------- Newton blocks
@@ -533,7 +561,7 @@ class _Newton:
             with np.errstate(invalid="ignore", over="ignore"):
                 cond[ok] = np.sqrt(np.sum(Js[ok] ** 2, axis=(1, 2)) * np.sum(inv**2, axis=(1, 2)))
         cond = np.where(np.isfinite(cond), cond, np.inf)
-        near = np.nonzero(ok & (cond > math.sqrt(ILL_FRACTION * rtol / EPS)))[0]
+        near = np.nonzero(ok & (cond > math.sqrt(SURE * rtol / EPS)))[0]
         if len(near):
             sv = np.linalg.svd(Js[near], compute_uv=False)
             with np.errstate(divide="ignore"):
@@ -657,14 +685,14 @@ def _put_var(st: _State, na: int, v: int, x: float) -> None:
         st.S[:, :, v - na] = x
 
 
-def _impose(run: _Run, st: _State, d: Designs, t: np.ndarray) -> np.ndarray:
+def _impose(run: _Run, st: _State, d: Designs, t: np.ndarray, travel: bool = True) -> np.ndarray:
     """Drivers' inputs into the state; returns the variants whose inputs cannot be resolved (non-finite, or a
     crank angle whose floating-point spacing exceeds rtol: the single run refuses those samples)."""
     sys = run.model.system
     na = sys.n_angles
     X, XD, XDD = _inputs(run.model, d, t)
     bad = ~(np.isfinite(X) & np.isfinite(XD) & np.isfinite(XDD)).all(axis=(1, 2))
-    if len(t) > 1 and sys.drivers:  # an input moving more than MAX_INPUT_STEP per row: turns could be miscounted
+    if travel and len(t) > 1 and sys.drivers:  # an input moving more than MAX_INPUT_STEP per row: turns miscounted
         units = np.array([1.0 if dr.kind == "crank" else run.scale / TWO_PI for dr in run.model.mechanism.drivers])
         h = np.abs(np.diff(t))[None, :, None]
         with np.errstate(invalid="ignore"):
@@ -686,7 +714,6 @@ def _solve_blocks(
     st: _State,
     d: Designs,
     t: np.ndarray,
-    u: np.ndarray,
     out_rows: np.ndarray,
     start: np.ndarray,
     flags: _Flags,
@@ -705,11 +732,17 @@ def _solve_blocks(
         ok, h = _closed_form(st, d, p, p.block.sigma, start)
         flags.refuse(~ok[:, 0], f"cannot assemble at t = 0: {where} cannot close (its links cannot reach)")
         flags.doubt(~ok.all(axis=1))  # a limit: the single run locates it
-        if p.block.kind != "PP" and st.E.shape[1] > 1:
-            flags.doubt(_deep_minima(u, np.where(ok, h, -1.0)))
+        if p.block.kind != "PP":
+            v, c = _dips(h)
+            keep = flags.regular[v] & ok.all(axis=1)[v]
+            v, c = v[keep], c[keep]
+            if len(v) and any(q.block.kind == "newton" for q in run.plans[:i]):
+                flags.doubt(np.isin(np.arange(len(d)), v))  # probing through a Newton block: the single run decides
+            elif len(v):
+                flags.doubt(np.isin(np.arange(len(d)), v[~_harmless(run, d, i, t, v, c)]))
         cols = _columns(st, d, p)
         cond, sgn = _dyad_health(*cols, (p.block.unknowns[0] < na, p.block.unknowns[1] < na), run.scale)
-        flags.doubt(np.any(cond * cond * EPS > ILL_FRACTION * run.rtol, axis=1) | np.any(sgn != sgn[:, :1], axis=1))
+        flags.doubt(np.any(cond * cond * EPS > SURE * run.rtol, axis=1) | np.any(sgn != sgn[:, :1], axis=1))
         flags.cond = np.maximum(flags.cond, np.max(cond[:, out_rows], axis=1))
         _closed_form_rates(st, d, p, cols)
 
@@ -766,7 +799,7 @@ def _newton_block(
         cond = nt.cond(J, run.rtol)
         if wanted[k]:
             flags.cond[vs] = np.maximum(flags.cond[vs], cond)
-        flags.doubt(np.isin(np.arange(len(flags.regular)), vs[~(cond * cond * EPS <= ILL_FRACTION * run.rtol)]))
+        flags.doubt(np.isin(np.arange(len(flags.regular)), vs[~(cond * cond * EPS <= SURE * run.rtol)]))
 
 
 def _assemble_newton(run: _Run, d: Designs, flags: _Flags) -> np.ndarray:
@@ -787,9 +820,7 @@ def _assemble_newton(run: _Run, d: Designs, flags: _Flags) -> np.ndarray:
         st = _State(len(d), 1, sys.n_angles, len(sys.slider_names))
         _impose(run, st, dl, np.zeros(1))
         sub = _Flags(flags.assembled.copy(), flags.assembled.copy(), [""] * len(d), np.ones(len(d)))
-        _solve_blocks(
-            run, st, dl, np.zeros(1), np.zeros(1), np.zeros(1, int), np.where(newton_vars, cur, d.q_start), sub
-        )
+        _solve_blocks(run, st, dl, np.zeros(1), np.zeros(1, int), np.where(newton_vars, cur, d.q_start), sub)
         for v in np.nonzero(flags.assembled & ~sub.assembled)[0]:
             flags.refuse(np.arange(len(d)) == v, sub.why[v])
         cur = np.concatenate([st.TH[:, 0], st.S[:, 0, :-1]], axis=1)
@@ -914,7 +945,7 @@ def _solve_chunk(run: _Run, values: np.ndarray, grid: Grid, names: list[str], ou
     start = _assemble_newton(run, d, flags)
     st = _State(V, len(grid.t), sys.n_angles, len(sys.slider_names))
     flags.doubt(_impose(run, st, d, grid.t))
-    _solve_blocks(run, st, d, grid.t, grid.u, grid.out, start, flags)
+    _solve_blocks(run, st, d, grid.t, grid.out, start, flags)
     cols = columns(run, st, d, grid.out, names)
     finite = np.ones(V, bool)
     for arr in cols.values():
@@ -989,6 +1020,10 @@ def _single(
         return
     except VloopError as exc:
         out.reason[v] = str(exc)
+        out.stopped_sample[v] = 0
+        return
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:  # numbers no solver can work with
+        out.reason[v] = f"{run.model.mechanism.name}: this variant cannot be solved ({type(exc).__name__}: {exc})"
         out.stopped_sample[v] = 0
         return
     for c in names:

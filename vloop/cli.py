@@ -176,6 +176,12 @@ def health_notes(result: Result, redundancy: bool = True) -> list[str]:
         lines.append("  " + result.meta["redundancy"])
     for cp in result.meta.get("change_points", []):
         inputs = ", ".join(f"{k} = {v:.10g}" for k, v in cp["inputs"].items())
+        if cp.get("kind") == "singular":
+            lines.append(
+                f"  singular configuration passed: loop {cp['loop']} ({cp['label']}) at t = {cp['time']:.10g} s, "
+                f"{inputs}: the redundant linkage's only branch goes on; rates there interpolated across it"
+            )
+            continue
         lines.append(
             f"  change point: loop {cp['loop']} ({cp['label']}) at t = {cp['time']:.10g} s, {inputs}: "
             f"continued on the {'smooth' if cp['continued'] == 'smooth' else 'other (as [solver] change_points asks)'}"
@@ -184,7 +190,7 @@ def health_notes(result: Result, redundancy: bool = True) -> list[str]:
     ill = int(np.sum(result.health.get("ill_conditioned", 0)))
     if ill:
         lines.append(
-            f"  {ill} ill-conditioned sample{'s' if ill != 1 else ''} kept (error bound cond²·ε above "
+            f"  {ill} ill-conditioned sample{'s' if ill != 1 else ''} kept (error bound cond³·ε above "
             f"1e-3 of rtol = {result.meta.get('rtol', 1e-9):g}): flagged in health.csv"
         )
     return lines
@@ -365,31 +371,144 @@ def _info_motion(system: Any) -> list[str]:
 # ---------------------------------------------------------------- validate
 
 
+def _validate_files(args: argparse.Namespace) -> list[Path]:
+    """The FILES and DIRs given (a folder: every .toml in it, sorted), plus the catalog with --all."""
+    from .pytest_plugin import catalog
+
+    files: list[Path] = []
+    for f in map(Path, args.files):
+        files += sorted(f.glob("*.toml")) if f.is_dir() else [f]
+    if args.all:
+        files += catalog()
+    return files
+
+
+def _corpus_options(args: argparse.Namespace) -> str:
+    """The generator options that differ from the defaults (a reproduce command must repeat them)."""
+    from .corpus import FAMILIES
+
+    opts = ""
+    if args.families and [f.strip() for f in args.families.split(",")] != list(FAMILIES):
+        opts += f" --families {args.families}"
+    if args.limit_fraction != 0.1:
+        opts += f" --limit-fraction {args.limit_fraction:g}"
+    return opts
+
+
+def _families(args: argparse.Namespace) -> list[str] | None:
+    """--families: family or family/variant names (checked by vloop.corpus)."""
+    from .corpus import _catalogue
+
+    if args.families is None:
+        return None
+    fams = [f.strip() for f in args.families.split(",") if f.strip()]
+    try:
+        _catalogue(fams or [""])
+    except ValueError as exc:
+        raise VloopError(str(exc), entry="families") from None
+    return fams
+
+
+def _check_corpus_args(args: argparse.Namespace, n: int) -> None:
+    if not 1 <= n <= 1_000_000:
+        raise VloopError(f"--n/--corpus must be between 1 and 1000000, got {n}", entry="n")
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        raise VloopError(f"--seed must be a non-negative integer below 2**63, got {args.seed}", entry="seed")
+    if not 0 <= args.start < 10**8:
+        raise VloopError(f"--start must be between 0 and 10**8, got {args.start}", entry="start")
+    if not (0.0 <= args.limit_fraction <= 1.0):
+        raise VloopError(f"--limit-fraction must be between 0 and 1, got {args.limit_fraction}", entry="limit-fraction")
+
+
+def cmd_corpus(args: argparse.Namespace) -> int:
+    """vloop corpus --n N --seed S --out DIR: generate N mechanism files (and sidecars) of known structure."""
+    from . import corpus
+    from .output import default_folder
+
+    _check_corpus_args(args, args.n)
+    seed = args.seed if args.seed is not None else 0
+    out = Path(args.out) if args.out else default_folder(f"corpus-{seed}")
+    items, refused = corpus.generate(
+        args.n, seed, start=args.start, families=_families(args), limit_fraction=args.limit_fraction
+    )
+    settings = {"start": args.start, "families": _families(args), "limit_fraction": args.limit_fraction}
+    corpus.write(items, out, seed=seed, refused=refused, **settings)
+    limits = sum(1 for it in items if it.sidecar["expect"]["stop_sample"] is not None)
+    print(
+        f"wrote {len(items)} mechanisms (seed {seed}, indices {args.start}..{args.start + len(items) - 1}; "
+        f"{limits} run into a limit on purpose) to {out}"
+    )
+    if refused:
+        print(f"note: vloop refused {len(refused)} drawn mechanisms (listed in {out / 'corpus.json'})")
+    return 0
+
+
+def _generate_for_validate(args: argparse.Namespace, out: Path) -> tuple[list[Path], dict]:
+    """--corpus N: a fresh corpus inside the output folder; its seed (drawn if not given) goes to the summary."""
+    import secrets
+
+    from . import corpus
+
+    _check_corpus_args(args, args.corpus)
+    seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
+    folder = out / f"corpus-{seed}"
+    items, refused = corpus.generate(
+        args.corpus, seed, start=args.start, families=_families(args), limit_fraction=args.limit_fraction
+    )
+    corpus.write(items, folder, seed=seed, refused=refused, start=args.start, limit_fraction=args.limit_fraction)
+    from validators.nightly import corpus_command
+
+    info = {
+        "seed": seed,
+        "n": len(items),
+        "start": args.start,
+        "folder": str(folder),
+        "command": corpus_command(seed, len(items), args.start, _corpus_options(args)),
+    }
+    return [folder / f"{it.name}.toml" for it in items], info
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     import datetime as dt
     import json
 
     from validators import harness, nightly
 
-    from .pytest_plugin import catalog
+    from .output import ensure_folder, write_text
 
-    files = [Path(f) for f in args.files]
-    if args.all:
-        files += catalog()
-    if not files:
-        return _fail("validate: name mechanism files or use --all")
     engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
     unknown = [e for e in engines if e not in harness.ENGINES]
     if unknown:
         return _fail(f"validate: unknown engine {', '.join(unknown)} (known: {', '.join(harness.ENGINES)})")
+    if args.scheduler and args.workers:
+        return _fail("validate: give --scheduler ADDRESS or --workers N, not both")
     root = Path(args.out)
-    out = nightly.dated_folder(root) if args.nightly else root
+    out = ensure_folder(nightly.dated_folder(root) if args.nightly else root)
+    files = _validate_files(args)
+    corpus_info = None
+    if args.corpus is not None:
+        generated, corpus_info = _generate_for_validate(args, out)
+        files += generated
+    if not files:
+        return _fail("validate: name mechanism files or folders, use --all, or --corpus N")
+    bar = sys.stderr.isatty()
 
     def progress(msg: str) -> None:
-        print(msg, file=sys.stderr, flush=True)
+        if not bar:
+            print(msg, file=sys.stderr, flush=True)
 
-    validation = harness.run(files, engines, progress=progress)
+    validation = harness.run(
+        files,
+        engines,
+        progress=progress,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        timeout=args.timeout,
+        bar=bar,
+    )
     summary = harness.to_summary(validation)
+    if "corpus" in summary:
+        _corpus_failures(summary, validation, engines, args, corpus_info, out)
     flags: list[dict] = []
     if args.nightly:
         prev = Path(args.previous) if args.previous else nightly.previous_summary(root, out)
@@ -400,23 +519,75 @@ def cmd_validate(args: argparse.Namespace) -> int:
             "previous": str(prev) if prev else None,
             "flags": flags,
         }
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False), encoding="utf-8")
-    written = [out / "summary.json"]
-    if not args.no_report:
-        try:
-            from reports.html import write_report
-        except ImportError as exc:  # the report needs Jinja2; the summary does not
-            print(f"vloop: no report ({exc})", file=sys.stderr)
-        else:
-            written.append(write_report(validation, summary, out, animate=args.animate))
+    written = [write_text(out / "summary.json", json.dumps(summary, indent=1, allow_nan=False))]
+    written += _write_tables_and_pages(validation, summary, out, args)
     print(_table(summary))
     for f in flags:
         print(f"FLAG {f['message']}")
+    _print_corpus_failures(summary)
     print("wrote " + ", ".join(str(w) for w in written))
     if validation.bad_input:
         return 2
     return 0 if validation.passed and not flags else 1
+
+
+def _corpus_failures(
+    summary: dict, validation: Any, engines: tuple[str, ...], args: argparse.Namespace, info: dict | None, out: Path
+) -> None:
+    """summary["corpus"]: how to regenerate it, each failure's reproduce command, the minimized failures."""
+    from validators import nightly
+
+    failures = nightly.corpus_failures(summary, engines, _corpus_options(args))
+    summary["corpus"].update(info or {}, failures=failures)
+    if failures and args.minimize_tries > 0:
+        summary["corpus"]["minimized"] = nightly.minimize_failures(
+            validation.items, engines, out, max_tries=args.minimize_tries
+        )
+
+
+def _print_corpus_failures(summary: dict) -> None:
+    for f in summary.get("corpus", {}).get("failures", []):
+        print(f"FAIL {f['mechanism']}: reproduce with: {f['reproduce']}")
+    for m in summary.get("corpus", {}).get("minimized", []):
+        if m.get("file"):
+            print(f"minimized {m['mechanism']} in {m['tries']} tries: {m['file']} (still fails: {m['still_failing']})")
+
+
+def _write_tables_and_pages(validation: Any, summary: dict, out: Path, args: argparse.Namespace) -> list[Path]:
+    """comparisons.parquet (when pyarrow is there), report.html (catalog + failing generated files), corpus.html."""
+    from validators import harness
+
+    written: list[Path] = []
+    try:
+        written.append(harness.write_parquet(summary, out / "comparisons.parquet"))
+    except VloopError as exc:
+        if "pyarrow" not in str(exc):
+            raise
+        print(f"vloop: no comparisons.parquet ({exc})", file=sys.stderr)
+    if args.no_report:
+        return written
+    try:
+        from reports.html import write_report
+    except ImportError as exc:  # the report needs Jinja2; the summary does not
+        print(f"vloop: no report ({exc})", file=sys.stderr)
+        return written
+    shown = [it for it in validation.items if it.corpus is None or not it.passed]
+    generated_failures = [it for it in shown if it.corpus is not None]
+    if len(generated_failures) > MAX_CORPUS_SECTIONS:  # a broken night must not make a 1,000-section report
+        drop = {id(it) for it in generated_failures[MAX_CORPUS_SECTIONS:]}
+        shown = [it for it in shown if id(it) not in drop]
+    if shown:
+        import dataclasses
+
+        written.append(write_report(dataclasses.replace(validation, items=shown), summary, out, animate=args.animate))
+    if "corpus" in summary:
+        from reports.corpus import write_corpus_page
+
+        written.append(write_corpus_page(summary, out))
+    return written
+
+
+MAX_CORPUS_SECTIONS = 20
 
 
 def _table(summary: dict) -> str:
@@ -424,7 +595,10 @@ def _table(summary: dict) -> str:
     engines = [e for e in summary["engines"] if e != "vloop"]
     head = f"{'mechanism':32s} " + " ".join(f"{e:>17s}" for e in engines) + "  result"
     lines = [head, "-" * len(head)]
+    generated = [m for m in summary["mechanisms"] if m.get("corpus")]
     for m in summary["mechanisms"]:
+        if m.get("corpus") and m["passed"] and len(generated) > 30:
+            continue  # a big corpus: one line per failure here, the rest in corpus.html
         cells = []
         for e in engines:
             run = m.get("runs", {}).get(e)
@@ -447,6 +621,9 @@ def _table(summary: dict) -> str:
                 cells.append(f"{worst:.1e} of tol{mark}")
         verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else "FAIL")
         lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>17s}" for c in cells) + f"  {verdict}")
+    if generated:
+        ok = sum(1 for m in generated if m["passed"])
+        lines.append(f"generated corpus: {ok} of {len(generated)} mechanisms pass (per family: corpus.html)")
     lines.append(f"{'all passed' if summary['passed'] else 'FAILED'} in {summary['seconds']:.1f} s")
     return "\n".join(lines)
 
@@ -550,7 +727,7 @@ def build_parser() -> argparse.ArgumentParser:
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
     lo.set_defaults(func=cmd_loops)
     v = sub.add_parser("validate", help="run every engine on mechanisms, compare, write summary.json and a report")
-    v.add_argument("files", nargs="*", help="mechanism files (or --all)")
+    v.add_argument("files", nargs="*", help="mechanism files or folders of them (or --all)")
     v.add_argument("--all", action="store_true", help="every file in mechanisms/")
     v.add_argument(
         "--engines",
@@ -562,7 +739,22 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--previous", help="summary.json to compare with (default: the newest under --out)")
     v.add_argument("--no-report", action="store_true", help="summary.json only")
     v.add_argument("--animate", action="store_true", help="add an animated GIF per mechanism to the report")
+    _add_runner_options(v)
+    v.add_argument("--corpus", type=int, metavar="N", help="also generate and validate N random mechanisms")
+    _add_corpus_options(v)
+    v.add_argument(
+        "--minimize-tries",
+        type=int,
+        default=40,
+        metavar="T",
+        help="shrink each failing generated mechanism with up to T rebuilt files (0: off; default 40)",
+    )
     v.set_defaults(func=cmd_validate)
+    c = sub.add_parser("corpus", help="generate random mechanism files of known structure (validation corpus)")
+    c.add_argument("--n", type=int, required=True, help="how many mechanisms")
+    c.add_argument("--out", help="output folder (default: out/corpus-SEED)")
+    _add_corpus_options(c)
+    c.set_defaults(func=cmd_corpus)
     i = sub.add_parser("info", help="links, joints, pin orders, mobility, loops, Grashof class")
     _add_file(i)
     i.set_defaults(func=cmd_info)
@@ -574,6 +766,24 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--workers", type=int, metavar="N", help="run the chunks on a local Dask cluster of N processes")
     st.set_defaults(func=cmd_study)
     return p
+
+
+def _add_runner_options(p: argparse.ArgumentParser) -> None:
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run the tasks on this Dask scheduler (tcp://host:8786)")
+    where.add_argument("--workers", type=int, metavar="N", help="run the tasks on a local Dask cluster of N processes")
+    p.add_argument(
+        "--timeout", type=float, default=600.0, metavar="S", help="seconds per task before it counts as hung (600)"
+    )
+
+
+def _add_corpus_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, help="corpus seed (vloop corpus: 0; validate --corpus: a fresh random one)")
+    p.add_argument("--start", "--corpus-start", dest="start", type=int, default=0, help="first mechanism index")
+    p.add_argument("--families", help="families or family/variant pairs, e.g. fourbar/kite,watt2 (default: all)")
+    p.add_argument(
+        "--limit-fraction", type=float, default=0.1, help="fraction of runs driven into a limit on purpose (0.1)"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -5,7 +5,9 @@ modulo 2π), and the check is ``max e ≤ atol + rtol·scale`` where ``scale`` i
 peak magnitude of that quantity over the run (the larger of the two engines'),
 and ``atol = floor·group_scale`` guards quantities that are identically zero:
 ``group_scale`` is the peak over all quantities of the same kind (all point
-positions, all angular velocities, ...), ``floor`` defaults to 1e-12 (round-off).
+positions, all angular velocities, ...), ``floor`` defaults to 1e-12 (round-off). An angular
+acceleration's scale is at least the angular velocities' peak squared (its natural magnitude: α is a
+difference of O(ω²) terms).
 """
 
 from __future__ import annotations
@@ -146,6 +148,10 @@ def compare(
     for c in cols:
         g = _GROUP[_field(c)][0]
         group_scale[g] = max(group_scale.get(g, 0.0), peaks[c])
+    # an angular acceleration is a difference of O(ω²) terms: its natural magnitude is the angular velocities'
+    # peak squared, the scale its error is measured against when its own peak is smaller (a parallelogram at
+    # constant ω has α ≡ 0: 1e-9 of that is not round-off)
+    natural = {"angular acceleration": group_scale.get("angular velocity", 0.0) ** 2}
     errors = []
     for c in cols:
         g = _GROUP[_field(c)][0]
@@ -155,9 +161,10 @@ def compare(
         mx = float(e[k]) if len(e) else 0.0
         r = rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol
         f = floor.get(g, 1e-12) if isinstance(floor, dict) else floor
-        tol = f * group_scale[g] + r * peaks[c]
+        scale = max(peaks[c], natural.get(g, 0.0))
+        tol = f * max(group_scale[g], natural.get(g, 0.0)) + r * scale
         # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
-        ref = max(peaks[c], ZERO_FLOOR * group_scale[g])
+        ref = max(scale, ZERO_FLOOR * group_scale[g])
         rel = mx / ref if ref > 0 else (0.0 if mx == 0 else math.inf)
         rms = float(np.sqrt(np.mean(e * e))) if len(e) else 0.0
         errors.append(QuantityError(c, g, mx, peaks[c], rel, rms, float(b.t[k]) if len(b.t) else 0.0, tol, mx <= tol))

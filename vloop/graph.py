@@ -21,7 +21,6 @@ import numpy as np
 from .model import Body, Mechanism
 
 ORIGIN = "@O"  # the world origin node on the ground
-EXACT_BASIS_MAX_LOOPS = 12  # up to this many loops the exact minimum cycle basis (networkx) is cheap
 
 
 @dataclass
@@ -165,19 +164,16 @@ def origin_name(mech: Mechanism) -> str:
 def cycle_basis(G: nx.Graph) -> list[list]:
     """Step 2: independent cycles (J − L + 1 of them), each as nodes in traversal order, in a canonical order.
 
-    Up to EXACT_BASIS_MAX_LOOPS loops: the exact minimum cycle basis (networkx, de Pina's algorithm),
-    whose cost grows like the cube of the size. Beyond: the shortest cycle through every edge (a
-    breadth-first search that stops at the first cycle, so near-linear for a linkage whose loops are
-    short), kept greedily by length while independent (GF(2) elimination on edge bitsets), completed
-    by fundamental cycles if needed. Both give short loops, which is what the block structure needs.
+    The shortest cycle through each non-tree edge of a breadth-first spanning forest (a breadth-first
+    search that stops at the first cycle: near-linear for a linkage, whose loops are short), kept
+    greedily by length while independent (GF(2) elimination on edge bitsets), completed by fundamental
+    cycles if needed. Short loops are what the block structure needs; on every catalog mechanism this is
+    the minimum cycle basis networkx computes (de Pina's algorithm, whose cost grows like the cube of
+    the size: tests/test_graph.py compares them).
     """
     rank = G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
     order = {n: i for i, n in enumerate(G.nodes)}
-    if rank <= EXACT_BASIS_MAX_LOOPS:
-        raw = [_walk_cycle(G, c) for c in nx.minimum_cycle_basis(G)]
-    else:
-        raw = _short_cycle_basis(G, rank)
-    cycles = [_canonical(c, order) for c in raw]
+    cycles = [_canonical(c, order) for c in _short_cycle_basis(G, rank)]
     cycles.sort(key=lambda c: sorted(order[n] for n in c))
     return cycles
 
@@ -248,8 +244,9 @@ def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
 def _fundamental_cycles(G: nx.Graph) -> list[list]:
     """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space)."""
     out = []
+    order = {n: i for i, n in enumerate(G.nodes)}
     for comp in nx.connected_components(G):
-        root = next(iter(comp))
+        root = min(comp, key=order.__getitem__)  # not next(iter(comp)): set order follows the hash seed
         parent = {root: None}
         depth = {root: 0}
         for a, b in nx.bfs_edges(G, root):

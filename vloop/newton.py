@@ -26,16 +26,17 @@ determinant and reported like a closed-form dyad's; any other sign change is a b
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import solver as _s
+from . import kernels as _s
 
 if TYPE_CHECKING:
-    from .solver import _Plan, _Run, _State
+    from .kernels import _Plan, _Run, _State
 
 COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π per mechanism size)
 TWO_PI = 2.0 * math.pi
@@ -188,12 +189,12 @@ def _invert_rows(A: np.ndarray) -> np.ndarray:
 def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
     """Condition number of the scaled Jacobians: the Frobenius-norm one ‖J‖_F·‖J⁺‖_F (an upper bound
     of the 2-norm one, at most nu times it) on every row, replaced by the exact 2-norm one (singular
-    values) where the bound reaches the level at which a sample is flagged (cond²·ε > ILL_FRACTION·rtol),
+    values) where the bound reaches the level at which a sample is flagged (cond³·ε > ILL_FRACTION·rtol),
     so flags and refusals follow the 2-norm rule exactly while most rows skip the SVD."""
     with np.errstate(invalid="ignore", over="ignore"):
         cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum(Jinv_s * Jinv_s, axis=(1, 2)))
     cond = np.where(np.isfinite(cond), cond, np.inf)
-    level = math.sqrt(_s.ILL_FRACTION * rtol / _s.EPS)
+    level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
     near = np.nonzero(cond > level)[0]
     if len(near):
         sv = np.linalg.svd(Js[near], compute_uv=False)
@@ -487,14 +488,14 @@ def _passes_change_point(ctx: _Ctx, a: int, k: int) -> bool:
 def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     """det J of the block at time t, reached by Newton from row a's Taylor predictor (None: no convergence)."""
     run = ctx.run
-    sub_run = _s.dataclasses.replace(run, detect=False, check=False, rates=False)
+    sub_run = dataclasses.replace(run, detect=False, check=False, rates=False)
     trial = _s._State(2, run.sys.n_angles, len(run.sys.slider_names))
     for name in ("E", "TH", "S", "W", "AL", "SD", "SDD"):
         getattr(trial, name)[0] = getattr(ctx.st, name)[a]
     grid = np.array([ctx.tg[a], t])
     _s._impose_drivers(run.sys, trial, *run.inputs(grid))
     if ctx.i > 0:
-        solved = _s._run_blocks(sub_run, trial, grid, 2, upto=ctx.i - 1)
+        solved = sub_run.blocks(sub_run, trial, grid, 2, upto=ctx.i - 1)
         if solved.n_ok < 2:
             return None
     h = t - ctx.tg[a]

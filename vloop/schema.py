@@ -303,7 +303,7 @@ def direction(value: Any, what: str, entry: str, probs: Problems) -> tuple[float
     if xy is None:
         return None
     big = max(abs(xy[0]), abs(xy[1]))
-    if big < 1e-300:
+    if big == 0.0:
         probs.add(entry, f"{what} has zero length")
         return None
     x, y = xy[0] / big, xy[1] / big

@@ -39,6 +39,18 @@ DISTRIBUTIONS = ("uniform", "normal")
 SENSITIVITY = ("nominal", "each", "none")
 STATS = ("range", "min", "max", "peak", "mean", "rms", "start", "end", "series")
 _OUTPUT_NAME = re.compile(r"[^\W_.][\w.-]*|_[\w.-]*")
+RESERVED = (
+    "variant",
+    "grid",
+    "draw",
+    "assembled",
+    "completed",
+    "stopped_at",
+    "stopped_sample",
+    "reason",
+    "solver",
+    "max_cond",
+)  # the table's own columns
 
 SECTIONS: tuple[Section, ...] = (
     Section(
@@ -260,6 +272,18 @@ def check(spec: StudySpec) -> None:
         raise MechanismError(
             f"{where}: [study] 'samples' draws Monte-Carlo variants, but no parameter has a tolerance", entry="samples"
         )
+    taken = set(RESERVED) | {p.name for p in spec.parameters}
+    for i, o in enumerate(spec.outputs):
+        cols = {o.name, f"{o.name}.x", f"{o.name}.y"} if o.stat == "path" else {o.name}
+        cols |= {f"{o.name}.is_grashof"} if o.stat == "class" else set()
+        clash = sorted(cols & taken)
+        if clash:
+            raise MechanismError(
+                f"{where}: [outputs[{i}]] the name {clash[0]!r} is a column of the table already: "
+                "give the output another 'name'",
+                entry=f"outputs[{i}]",
+            )
+        taken |= cols
     n = math.prod(len(p.values) for p in spec.parameters if p.values is not None) * (spec.samples or 1)
     if n > MAX_DESIGNS:
         raise MechanismError(f"{where}: the study has {n:,} variants, more than {MAX_DESIGNS:,}", entry="study")

@@ -57,6 +57,15 @@ def units(columns: list[str], length: str) -> dict[str, str]:
     return {c: "s" if c == "t" else per.get(c.rsplit(".", 1)[-1], "1") for c in columns}
 
 
+def _arrow(a: np.ndarray) -> object:
+    """A numpy column as an Arrow array over the same memory (pa.array would import pandas to inspect it)."""
+    import pyarrow as pa
+
+    a = np.ascontiguousarray(a)
+    kind = {"f8": pa.float64(), "f4": pa.float32(), "i8": pa.int64(), "i1": pa.int8()}[a.dtype.str[1:]]
+    return pa.Array.from_buffers(kind, len(a), [None, pa.py_buffer(a)])
+
+
 def health_columns(res: Result) -> dict[str, np.ndarray]:
     """The compact health table of a chunk (see the module docstring)."""
     out: dict[str, np.ndarray] = {"t": res.t}
@@ -113,14 +122,14 @@ class _Table:
             ]
             np.savetxt(self._fh, np.column_stack([cols[n].astype(float) for n in self.names]), fmt=fmt, delimiter=",")
             return
-        table = pa.table({n: cols[n] for n in self.names})
+        table = pa.Table.from_arrays([_arrow(cols[n]) for n in self.names], names=self.names)
         pcsv.write_csv(table, self._fh, pcsv.WriteOptions(include_header=False))
 
     def _write_parquet(self, cols: dict[str, np.ndarray]) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        arrays = [pa.array(cols[n]) for n in self.names]
+        arrays = [_arrow(cols[n]) for n in self.names]
         if self._pq is None:
             fields = [
                 pa.field(n, a.type, metadata={"unit": self.units[n]}) for n, a in zip(self.names, arrays, strict=True)

@@ -1,0 +1,264 @@
+"""The generated corpus (vloop.corpus): deterministic, valid files of known structure, checked against closed forms.
+
+* Generation is a pure function of (seed, index); every file loads, has safe names and a sidecar.
+* Every family is drawn, and the four-bars cover every Grashof class and the change points (classified
+  here independently by validators.analytic_fourbar.grashof).
+* On a 200-mechanism corpus, every closed form (validators.analytic, incl. the dyad chain for the random
+  attachments) agrees with vloop to 1e-9 of each quantity's peak, with the expected sample counts.
+* Change points: the closed form continues on the velocity-continuous branch (proved here by finite
+  differences, independently of vloop); vloop's agreement waits for the lead's change-point fix.
+* Runs into a limit stop at the recorded sample in every engine, and the recorded limit angle is the
+  four-bar closed form's toggle angle.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+
+import vloop
+from tests.conftest import mechanism_files
+from validators import analytic, analytic_chain, analytic_changepoint, analytic_fourbar, harness
+from vloop import corpus
+from vloop.cli import main
+from vloop.compare import assert_histories_close
+
+SEED = 2026
+N = 200
+SAFE = re.compile(r"^[A-Za-z0-9_-]+$")
+CHANGE_POINT_FIX = "the lead's change-point fix (vloop continues on the velocity-continuous branch) is not merged yet"
+
+
+@pytest.fixture(scope="module")
+def corpus200() -> list[corpus.Item]:
+    items, refused = corpus.generate(N, SEED)
+    assert refused == []  # vloop accepted every file the generator drew
+    return items
+
+
+@pytest.fixture(scope="module")
+def solved(corpus200):
+    """vloop and the closed form on every mechanism of the 200 (in this process: ~3 s)."""
+    return {
+        it.name: (harness.run_engine("vloop", it.mechanism), harness.run_engine("analytic", it.mechanism))
+        for it in corpus200
+    }
+
+
+def test_generation_is_deterministic_and_index_addressable():
+    a, _ = corpus.generate(12, 9)
+    b, _ = corpus.generate(12, 9)
+    assert [x.text for x in a] == [x.text for x in b]
+    (seventh,), _ = corpus.generate(1, 9, start=7)
+    assert seventh.text == a[7].text and seventh.name == "c00007-" + a[7].spec.family + "-" + a[7].spec.variant
+    c, _ = corpus.generate(12, 10)
+    assert [x.text for x in c] != [x.text for x in a]
+    # a Spec rebuilds the same file (what minimization relies on)
+    assert corpus.build(corpus.Spec.from_dict(a[3].sidecar)).text == a[3].text
+
+
+def test_every_file_loads_with_safe_names_and_a_sidecar(corpus200, tmp_path):
+    corpus.write(corpus200[:60], tmp_path, seed=SEED)
+    manifest = json.loads((tmp_path / "corpus.json").read_text())
+    assert manifest["n"] == 60 and manifest["seed"] == SEED and len(manifest["files"]) == 60
+    for it in corpus200[:60]:
+        path = tmp_path / f"{it.name}.toml"
+        mech = vloop.load(path)
+        side = corpus.read_sidecar(path)
+        assert side is not None and side["name"] == mech.name == it.name
+        names = [mech.name, *mech.joints, *mech.links, *mech.sliders, *mech.points]
+        assert all(SAFE.match(n) for n in names), names
+        assert side["samples"] == len(mech.times)
+        assert "# Expected: " in path.read_text() and f"seed {SEED}, index {it.spec.index}" in path.read_text()
+    for it in corpus200:
+        exp = it.sidecar["expect"]
+        assert exp["samples"] == (exp["stop_sample"] if exp["stop_sample"] is not None else len(it.mechanism.times))
+        # the generator's claim that a closed form exists is what validators.analytic finds
+        assert analytic.available(it.mechanism) == it.sidecar["closed_form"], it.name
+
+
+def test_every_family_and_grashof_class_is_drawn(corpus200):
+    families = {it.spec.family for it in corpus200}
+    assert families == set(corpus.FAMILIES)
+    classes = {analytic_fourbar.grashof(it.mechanism) for it in corpus200 if it.spec.family == "fourbar"}
+    assert classes == {"crank-rocker", "drag-link", "double-rocker", "non-Grashof (triple rocker)", "change-point"}
+    variants = {it.spec.variant for it in corpus200 if it.spec.family == "fourbar"}
+    assert variants == set(corpus.FAMILIES["fourbar"].variants)  # incl. rocker-crank, parallelogram, kite
+    drives = {it.spec.drive for it in corpus200}
+    assert drives == {"constant", "rocking", "ramp", "limit"}
+    assert any(it.mechanism.drivers[0].profile is not None for it in corpus200)  # tabulated rocking inputs
+    assert any(len(it.mechanism.drivers) == 2 for it in corpus200)  # five-bars
+    # the Newton path: the Stephenson III driven at its output has no closed form
+    assert any(it.spec.family == "stephenson3" and it.spec.variant == "output" for it in corpus200)
+
+
+def _disagreements(items, solved) -> list[str]:
+    bad = []
+    for it in items:
+        v, a = solved[it.name]
+        want = it.sidecar["expect"]["samples"]
+        if a.status == "skipped":
+            if it.sidecar["closed_form"]:
+                bad.append(f"{it.name}: no closed form applied")
+            continue
+        c = harness.check(a, v, it.name)
+        if not c.passed or v.samples != want or a.samples != want:
+            bad.append(
+                f"seed {SEED} index {it.spec.index} {it.name}: {c.message[:300]} ({v.samples}/{a.samples} of {want})"
+            )
+    return bad
+
+
+def test_closed_forms_agree_with_vloop_on_200_mechanisms(corpus200, solved):
+    """Every family with a closed form (all but the output-driven Stephenson III), 1e-9 of peak."""
+    items = [it for it in corpus200 if not it.sidecar["change_point"]]
+    assert len(items) > 170
+    with_cf = [it for it in items if solved[it.name][1].status != "skipped"]
+    assert {it.spec.family for it in with_cf} == set(corpus.FAMILIES)
+    assert _disagreements(items, solved) == []
+    # the checks were real: the worst error is round-off, far below what the tolerance allows
+    worst = max(
+        e.max_abs / e.tol
+        for it in with_cf
+        for e in harness.check(solved[it.name][1], solved[it.name][0], it.name).comparison.errors
+    )
+    print(f"worst error / allowed over {len(with_cf)} mechanisms: {worst:.2e}")
+    assert 0 < worst < 1e-2
+
+
+def test_change_points_agree_with_the_velocity_continuous_closed_form(corpus200, solved):
+    items = [it for it in corpus200 if it.sidecar["change_point"]]
+    assert items
+    assert _disagreements(items, solved) == []
+
+
+@pytest.mark.parametrize("variant", ["parallelogram", "antiparallelogram", "kite", "change-point"])
+def test_change_point_closed_form_keeps_velocities_continuous(variant):
+    """Independently of vloop: on a fine grid through the change points, ω is continuous and matches
+    central differences of θ; the fixed-branch closed form (analytic_fourbar) jumps there instead."""
+    items, _ = corpus.generate(3, 31, families=[f"fourbar/{variant}"])
+    crossed = 0
+    for it in items:
+        mech = it.mechanism
+        t = np.linspace(mech.times[0], mech.times[-1], 20001)
+        h = t[1] - t[0]
+        res = analytic_changepoint.solve(mech, t)
+        crossed += res.meta["branch_flips"]
+        # a link may stand still on its branch (a parallelogram's coupler, the folded kite's rocker): the
+        # angular-velocity scale is the group's, the crank's included
+        scale = max(np.max(np.abs(res[f"{b}.omega"])) for b in ("crank", "coupler", "rocker"))
+        for link in ("coupler", "rocker"):
+            th, om, al = res[f"{link}.theta"], res[f"{link}.omega"], res[f"{link}.alpha"]
+            fd = (th[2:] - th[:-2]) / (2 * h)
+            # central differences: truncation h²/6·θ''' (< 1e-4 of the peak at this h)
+            assert np.max(np.abs(fd - om[1:-1])) < 1e-4 * scale, (it.name, link)
+            assert np.max(np.abs(np.diff(om))) < 1e-2 * scale + 2 * h * np.max(np.abs(al)), (it.name, link)
+        if res.meta["branch_flips"]:
+            fixed = analytic_fourbar.solve(mech, t)
+            jumps = np.max(np.abs(np.diff(fixed["rocker.omega"])))
+            assert jumps > 0.1 * np.max(np.abs(fixed["rocker.omega"])), it.name  # the fixed branch does jump
+    assert crossed > 0
+
+
+def test_limit_runs_stop_at_the_recorded_sample_in_every_engine():
+    """A corpus of runs into a limit only: vloop, the closed form, Pinocchio and Exudyn (kinematic) all
+    return exactly the K samples before the limit, K computed by the generator from the closed form."""
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    items, _ = corpus.generate(18, 77, limit_fraction=1.0)
+    assert {it.spec.family for it in items} == {"fourbar", "slider_crank", "inverted_slider_crank"}
+    engines = ("vloop", "analytic", "pinocchio", "exudyn-kinematic")
+    for it in items:
+        stop = it.sidecar["expect"]["stop_sample"]
+        assert stop is not None and 10 <= stop < len(it.mechanism.times)
+        v = harness.validate_mechanism(it.name, engines, mechanism=it.mechanism, corpus=it.sidecar)
+        assert v.expectation["passed"], (it.name, v.expectation["message"])
+        assert set(v.expectation["observed"].values()) == {stop}
+        assert all(r.status == "stopped" for r in v.runs.values())
+        assert v.passed, (it.name, [c.message for c in v.checks if not c.passed])
+
+
+def test_recorded_limit_angle_is_the_four_bar_toggle(corpus200):
+    """The generator's limit angle (its own law of cosines) is one of analytic_fourbar.limit_angles."""
+    items = [it for it in corpus200 if it.spec.family == "fourbar" and it.sidecar["expect"]["stop_sample"]]
+    assert items
+    for it in items:
+        lim = it.sidecar["expect"]["limit"]["angle"]
+        toggles = analytic_fourbar.limit_angles(it.mechanism)
+        assert min(abs(math.remainder(lim - t, 2 * math.pi)) for t in toggles) < 1e-9
+
+
+def test_dyad_chain_closed_form_matches_the_hand_derived_ones():
+    """analytic_chain (structure-driven) against every catalog closed form it can also solve."""
+    checked = 0
+    for path in mechanism_files():
+        mech = vloop.load(path)
+        if not analytic_chain.applies(mech):
+            assert not analytic.available(mech) or path.stem == "fourbar_nongrashof_past_limit", path.stem
+            continue
+        times = mech.times
+        if path.stem == "fourbar_nongrashof_past_limit":
+            times = times[:170]
+        assert_histories_close(analytic_chain.solve(mech, times), analytic.solve(mech, times), rtol=1e-9)
+        checked += 1
+    assert checked >= 13
+    assert not analytic_chain.applies(vloop.load(mechanism_files()[0].parent / "sixbar_stephenson3_output_driven.toml"))
+
+
+def test_cli_corpus_writes_the_files_and_refuses_bad_arguments(tmp_path, capsys):
+    out = tmp_path / "c"
+    assert main(["corpus", "--n", "4", "--seed", "3", "--out", str(out), "--families", "watt2,fourbar/kite"]) == 0
+    files = sorted(out.glob("*.toml"))
+    assert len(files) == 4 and all(vloop.load(f) for f in files)
+    assert {corpus.read_sidecar(f)["family"] for f in files} <= {"watt2", "fourbar"}
+    assert "wrote 4 mechanisms (seed 3" in capsys.readouterr().out
+    for bad, what in [
+        (["--n", "0"], "--n/--corpus must be between 1"),
+        (["--n", "2", "--seed", "-1"], "--seed must be a non-negative"),
+        (["--n", "2", "--families", "fourbar/hexagon"], "unknown corpus family 'fourbar/hexagon'"),
+        (["--n", "2", "--limit-fraction", "nan"], "--limit-fraction must be between 0 and 1"),
+        (["--n", "2", "--start", "-3"], "--start must be between"),
+    ]:
+        assert main(["corpus", *bad, "--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert what in err and err.count("\n") == 1, err
+    (tmp_path / "file").write_text("not a folder")
+    assert main(["corpus", "--n", "1", "--out", str(tmp_path / "file")]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_limit_runs_stop_at_the_recorded_sample_in_exudyn_dynamic_too():
+    """Every engine, Exudyn's time integration included (~3 s a mechanism): the same recorded stop sample."""
+    pytest.importorskip("exudyn")
+    items, _ = corpus.generate(12, 78, limit_fraction=1.0)
+    for it in items:
+        v = harness.validate_mechanism(it.name, harness.ENGINES, mechanism=it.mechanism, corpus=it.sidecar)
+        assert v.expectation["passed"], (it.name, v.expectation["message"])
+        assert set(v.expectation["observed"].values()) == {it.sidecar["expect"]["stop_sample"]}
+        assert v.passed, (it.name, [c.message for c in v.checks if not c.passed])
+
+
+@pytest.mark.xfail(
+    strict=False,
+    reason="finding for vloop.solver (seed 2026, index 42): on the Newton path the branch check reports 'loop 1: "
+    "the Jacobian changed sign: a toggle was crossed' when crank and coupler pass collinear, which is no "
+    "singularity of the output-driven six-bar (Pinocchio and Exudyn agree to 1e-12 through it)",
+)
+def test_output_driven_stephenson_runs_through_crank_coupler_collinearity():
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    it = corpus.draw_item(2026, 42).item
+    assert it.spec.family == "stephenson3" and it.spec.variant == "output"
+    pin = harness.run_engine("pinocchio", it.mechanism)
+    exu = harness.run_engine("exudyn-kinematic", it.mechanism)
+    assert pin.status == exu.status == "ok" and pin.samples == exu.samples == len(it.mechanism.times) == 115
+    # two independent engines agree through the collinearity (Exudyn kinematic's tolerance, 1e-8 of peak)
+    assert_histories_close(exu.result, pin.result, rtol=1e-8)
+    v = harness.run_engine("vloop", it.mechanism)
+    assert v.status == "ok", v.message
+    assert harness.check(pin, v, it.name).passed

@@ -1,0 +1,528 @@
+"""The solver's building blocks: state arrays over the sample grid and the numerics of one block.
+
+Shared by :mod:`vloop.solver` (the run: blocks in order, limits, late starts, chunks, the Result),
+:mod:`vloop.newton` (Newton blocks vectorized over samples) and :mod:`vloop.changepoints` (where two
+assembly branches meet). See :mod:`vloop.solver` for the state's layout and the formulas.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .drivers import evaluate_all
+from .loops import Block, LoopSystem
+from .model import Mechanism
+
+EPS = float(np.finfo(float).eps)
+
+
+DEFAULT_RTOL = 1e-9  # accuracy asked of every output, relative (refusals and flags follow it: see _velocity_bound)
+
+
+ILL_FRACTION = 1e-3  # a kept sample whose error bound exceeds this fraction of rtol is flagged ill-conditioned
+
+
+TWO_PI = 2.0 * math.pi
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Im(conj(a)·b): the 2-D cross product of complex numbers seen as vectors."""
+    return a.real * b.imag - a.imag * b.real
+
+
+def _add_real_product(out: np.ndarray, A: np.ndarray, H: np.ndarray) -> None:
+    """out += A @ H for real A and complex H, as two real BLAS products (numpy's mixed
+    real-complex matmul takes a slow generic loop)."""
+    out.real += A @ H.real
+    out.imag += A @ H.imag
+
+
+@dataclass
+class _Sum:
+    """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small matrix products:
+    rigid vectors by the angle that turns them (G, constant), vectors fixed to the ground (c0),
+    slider vectors on the ground (Hf: only s varies) and slider vectors on moving guides.
+    Evaluated for positions, velocities or accelerations from the state arrays."""
+
+    c0: np.ndarray  # (K,): the rigid vectors fixed to the ground
+    avars: np.ndarray  # angle columns turning rigid vectors
+    G: np.ndarray  # (len(avars), K): Σ M·r·e^{jδ} of the rigid vectors turning with each angle
+    f_sl: np.ndarray  # sliders along ground lines ...
+    f_r: np.ndarray
+    Hf: np.ndarray  # (n, K): M·e^{jδ}
+    s_ang: np.ndarray  # slider vectors on moving guides: angle, slider, r, e^{jδ}, M
+    s_sl: np.ndarray
+    s_r: np.ndarray
+    s_cd: np.ndarray
+    Ms: np.ndarray
+
+    @classmethod
+    def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
+        ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
+        cd = np.exp(1j * sys.t_delta[terms])
+        M = M.astype(complex).reshape(len(terms), -1)
+        rigid = sl < 0
+        fixed = rigid & (ang < 0)
+        c0 = ((r * cd)[fixed][:, None] * M[fixed]).sum(0)
+        avars = np.unique(ang[rigid & (ang >= 0)])
+        G = np.array([((r * cd)[rigid & (ang == a)][:, None] * M[rigid & (ang == a)]).sum(0) for a in avars])
+        G = G.reshape(len(avars), M.shape[1])
+        f = ~rigid & (ang < 0)
+        mv = ~rigid & (ang >= 0)
+        return cls(c0, avars, G, sl[f], r[f], cd[f][:, None] * M[f], ang[mv], sl[mv], r[mv], cd[mv], M[mv])
+
+    def pos(self, st: _State, k: slice) -> np.ndarray:
+        out = st.E[k][:, self.avars] @ self.G + self.c0
+        if len(self.f_sl):
+            _add_real_product(out, self.f_r + st.S[k][:, self.f_sl], self.Hf)
+        if len(self.s_sl):
+            es = self.s_cd * st.E[k][:, self.s_ang]
+            out += ((self.s_r + st.S[k][:, self.s_sl]) * es) @ self.Ms
+        return out
+
+    def vel(self, st: _State, k: slice) -> np.ndarray:
+        out = 1j * ((st.W[k][:, self.avars] * st.E[k][:, self.avars]) @ self.G)
+        if len(self.f_sl):
+            _add_real_product(out, st.SD[k][:, self.f_sl], self.Hf)
+        if len(self.s_sl):
+            es = self.s_cd * st.E[k][:, self.s_ang]
+            ms = self.s_r + st.S[k][:, self.s_sl]
+            out += ((st.SD[k][:, self.s_sl] + 1j * st.W[k][:, self.s_ang] * ms) * es) @ self.Ms
+        return out
+
+    def acc(self, st: _State, k: slice) -> np.ndarray:
+        w = st.W[k][:, self.avars]
+        out = ((1j * st.AL[k][:, self.avars] - w * w) * st.E[k][:, self.avars]) @ self.G
+        if len(self.f_sl):
+            _add_real_product(out, st.SDD[k][:, self.f_sl], self.Hf)
+        if len(self.s_sl):
+            es = self.s_cd * st.E[k][:, self.s_ang]
+            ms = self.s_r + st.S[k][:, self.s_sl]
+            ws = st.W[k][:, self.s_ang]
+            sd = st.SD[k][:, self.s_sl]
+            coriolis = 2j * sd * ws  # a slider on a rotating guide
+            out += ((st.SDD[k][:, self.s_sl] + coriolis + (1j * st.AL[k][:, self.s_ang] - ws * ws) * ms) * es) @ self.Ms
+        return out
+
+
+@dataclass
+class _Plan:
+    """Index data of one block (precomputed once per LoopSystem)."""
+
+    block: Block
+    C: np.ndarray  # (m, n_terms_block) signs of the block's terms in its loops
+    Ct: np.ndarray  # C.T as complex: complex @ complex matmuls are far faster than complex @ float
+    ang: np.ndarray  # per term: angle variable, slider, r, e^{jδ}
+    sl: np.ndarray
+    r: np.ndarray
+    cd: np.ndarray
+    unk_ang: list[int]  # angle variables among the unknowns
+    unk_sl: list[int]  # slider indices among the unknowns
+    masks: list[np.ndarray]  # per unknown: the block terms it enters
+    total: _Sum  # Σ over the block's loops (K = m)
+    known_sum: _Sum  # Σ over the vectors independent of the unknowns
+    # per unknown angle a: W_a(t) = const + Σ coef·s (the block's vectors turning with a, unrotated)
+    w_const: dict[int, complex]
+    w_sl: dict[int, list[tuple[int, complex]]]
+    # per unknown slider i: its vector's direction U = coef·E[:, ang]
+    u_dir: dict[int, tuple[int, complex]]
+    known: np.ndarray = None  # type: ignore[assignment]  # the block terms independent of the unknowns
+
+    def known_magnitude(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
+        """Σ |r + s| over the known vectors per row: what the known part X is summed from (its round-off
+        grows with it, not with |X|: a mechanism far from the origin sums large vectors to a small X)."""
+        return np.abs(self.r[self.known] + st.S[k][:, self.sl[self.known]]).sum(axis=1)
+
+
+def _plans(sys: LoopSystem) -> list[_Plan]:
+    plans = sys.cache.get("plans")
+    if plans is not None:
+        return plans
+    na = sys.n_angles
+    cd_all = np.exp(1j * sys.t_delta)
+    plans = []
+    for b in sys.blocks:
+        Cb = sys.C[list(b.loops)]
+        terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
+        Cb = Cb[:, terms]
+        ang, sl = sys.t_ang[terms], sys.t_sl[terms]
+        unk_ang = [v for v in b.unknowns if v < na]
+        unk_sl = [v - na for v in b.unknowns if v >= na]
+        known = ~(np.isin(ang, unk_ang) | np.isin(sl, unk_sl))
+        masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
+        g = Cb[0]
+        w_const, w_sl, u_dir = {}, {}, {}
+        for a in unk_ang:
+            on = np.nonzero(ang == a)[0]
+            w_const[a] = complex(sum(g[t] * sys.t_r[terms[t]] * cd_all[terms[t]] for t in on))
+            w_sl[a] = [(int(sl[t]), complex(g[t] * cd_all[terms[t]])) for t in on if sl[t] >= 0]
+        for i in unk_sl:
+            t = int(np.nonzero(sl == i)[0][0])
+            u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
+        plan = _Plan(
+            b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
+            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], Cb.T[known]), w_const, w_sl, u_dir, known,
+        )  # fmt: skip
+        plans.append(plan)
+    sys.cache["plans"] = plans
+    return plans
+
+
+def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
+    """Sums giving every point's position (and rates) and every loop's closure residual (cached)."""
+    if "sums" not in sys.cache:
+        terms = np.arange(len(sys.t_r))
+        sys.cache["sums"] = (_Sum.build(sys, terms, sys.path), _Sum.build(sys, terms, sys.C.T))
+    return sys.cache["sums"]
+
+
+class _State:
+    """Arrays over the sample grid; the last column of each is the 'fixed' padding."""
+
+    def __init__(self, n: int, na: int, ns: int) -> None:
+        self.E = np.ones((n, na + 1), complex)
+        self.TH = np.zeros((n, na))
+        self.W = np.zeros((n, na + 1))
+        self.AL = np.zeros((n, na + 1))
+        self.S = np.zeros((n, ns + 1))
+        self.SD = np.zeros((n, ns + 1))
+        self.SDD = np.zeros((n, ns + 1))
+
+    def z(
+        self, k: slice, ang: np.ndarray, sl: np.ndarray, r: np.ndarray, cd: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Term vectors z = (r + s)·e^{j(θ + δ)} and their unit directions over rows ``k``."""
+        e = cd * self.E[k][:, ang]
+        return (r + self.S[k][:, sl]) * e, e
+
+
+class _Failure(Exception):
+    """Why sample ``sample`` cannot be solved; ``loop`` (index) where a loop is to blame."""
+
+    def __init__(self, sample: int, loop: int | None, why: str) -> None:
+        self.sample, self.loop, self.why = sample, loop, why
+
+
+def _w(p: _Plan, st: _State, k: slice, a: int, skip: int = -2) -> np.ndarray | complex:
+    """W_a: the block's vectors turning with unknown angle a, before rotation (slider ``skip`` left out)."""
+    w: np.ndarray | complex = p.w_const[a]
+    for i, coef in p.w_sl[a]:
+        if i != skip:
+            w = w + coef * st.S[k, i]
+    return w
+
+
+def _u(p: _Plan, st: _State, k: slice, i: int) -> np.ndarray:
+    a, coef = p.u_dir[i]
+    return coef * st.E[k, a]
+
+
+def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form positions of a one-loop dyad for rows ``k`` on branches ``sig`` (±1 per row).
+
+    Returns the mask of assemblable rows and the discriminant h [length²]: the dyad's two
+    assembly solutions lie 2·√h apart (h < 0: no solution, the input is past a limit position;
+    h = 0: the two branches meet — a toggle, or a change point where they cross).
+    """
+    b = p.block
+    X = -p.known_sum.pos(st, k)[:, 0]
+    if b.kind == "RRR":
+        # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
+        W1, W2 = _w(p, st, k, p.unk_ang[0]), _w(p, st, k, p.unk_ang[1])
+        A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
+        D2 = X.real**2 + X.imag**2
+        k1 = 0.5 * (A2 + D2 - B2)
+        xerr = p.known_magnitude(st, k) * np.sqrt(D2)  # ~ |X|·Σ|known| / ε: round-off carried by X
+        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2 + k1 * k1 + (A2 + np.abs(k1)) * xerr)
+        ok = (h2 >= 0) & (D2 > 0)
+        Dd = np.where(D2 > 0, D2, 1.0)
+        P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / Dd
+        _set_angle(st, k, p.unk_ang[0], P / W1)
+        _set_angle(st, k, p.unk_ang[1], (X - P) / W2)
+        return ok, h2 / Dd
+    if b.kind == "RRP":
+        # W1·E1 + s·U = X with U a known unit direction: project on U's normal
+        i = p.unk_sl[0]
+        Uc = np.conj(_u(p, st, k, i))
+        W1 = _w(p, st, k, p.unk_ang[0])
+        XU, WU = X * Uc, W1 * Uc
+        y = XU.imag
+        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2 + np.abs(y) * p.known_magnitude(st, k))
+        ok = h >= 0
+        c = sig * np.sqrt(np.where(ok, h, 0.0))
+        _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
+        st.S[k, i] = XU.real - c
+        return ok, h
+    if b.kind == "RPR":
+        # (W + s·c)·E = X with c a unit direction fixed to the same link: |W + s·c| = |X|
+        i, a = p.unk_sl[0], p.unk_ang[0]
+        cdir = p.u_dir[i][1]
+        W = _w(p, st, k, a, skip=i)
+        bb = (W * np.conj(cdir)).real
+        D2 = X.real**2 + X.imag**2
+        size = bb * bb + np.abs(W) ** 2 + D2 + np.sqrt(D2) * p.known_magnitude(st, k)
+        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, size)
+        s = -bb + sig * np.sqrt(np.where(disc >= 0, disc, 0.0))
+        den = W + s * cdir
+        ok = (disc >= 0) & (np.abs(den) > 0)
+        st.S[k, i] = s
+        _set_angle(st, k, a, X / np.where(ok, den, 1.0))
+        return ok, disc
+    # PP: s1·U1 + s2·U2 = X (linear: one solution, no branches)
+    U1, U2 = _u(p, st, k, p.unk_sl[0]), _u(p, st, k, p.unk_sl[1])
+    det = cross(U1, U2)
+    ok = np.abs(det) > 1e-12
+    dd = np.where(ok, det, 1.0)
+    st.S[k, p.unk_sl[0]] = cross(X, U2) / dd
+    st.S[k, p.unk_sl[1]] = cross(U1, X) / dd
+    return ok, np.full(len(ok), np.inf)
+
+
+def _round_off_zero(h: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """A discriminant whose magnitude is within round-off of the terms it was computed from (``size``)
+    is zero: the two branches meet (an input exactly at a limit or change point, up to round-off)."""
+    return np.where(np.abs(h) <= 16 * EPS * size, 0.0, h)
+
+
+def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
+    """Store e^{jθ} and the unwrapped θ = φ + 2π·n for rows ``k`` (row k.start keeps its turn count).
+
+    φ is the principal angle of E, n the whole turns counted by continuity from the first row:
+    the stored θ is then exactly φ + 2πn whatever the sampling before it, so a run that starts
+    late gives the same numbers as one from t = 0.
+    """
+    E = E / np.abs(E)
+    st.E[k, a] = E
+    phi = np.angle(st.E[k, a])
+    start = st.TH[k.start or 0, a]
+    est = start + np.concatenate(
+        ([np.angle(np.exp(1j * (phi[0] - start)))], np.cumsum(np.angle(np.exp(1j * np.diff(phi)))))
+    )
+    st.TH[k, a] = phi + TWO_PI * np.round((est - phi) / TWO_PI)
+
+
+def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Real block Jacobians (rows, 2m, 2m) of [Re; Im] of the block's loops."""
+    cols = []
+    for v, mask in zip(p.block.unknowns, p.masks, strict=True):
+        d = (1j * z if v in p.unk_ang else e) * mask
+        cols.append(d @ p.Ct)  # (rows, m)
+    Jc = np.stack(cols, axis=-1)  # (rows, m, nu)
+    return np.concatenate([Jc.real, Jc.imag], axis=1)
+
+
+def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: tuple | None = None) -> np.ndarray:
+    """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``.
+
+    The unknowns' own rate columns must still be zero: the sum is then the known part.
+    ``J``: the block Jacobians for blocks larger than 2×2 (Cramer's rule otherwise).
+    """
+    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))  # (rows, m) complex
+    if J is None:
+        c1, c2 = cols if cols is not None else _columns(p, st, k)
+        det = cross(c1, c2)
+        R0 = R[:, 0]
+        out = np.empty((len(R0), 2))
+        out[:, 0] = cross(R0, c2) / det
+        out[:, 1] = cross(c1, R0) / det
+        return out
+    rhs = np.concatenate([R.real, R.imag], axis=1)
+    return _solve_block(J, rhs)
+
+
+def _solve_block(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve J·x = rhs (batched over leading axes); a block with more equations than unknowns (redundant
+    constraints) by least squares with the pseudo-inverse (exact when the equations are consistent)."""
+    if J.shape[-1] == J.shape[-2]:
+        return np.linalg.solve(J, rhs[..., None])[..., 0]
+    return (np.linalg.pinv(J) @ rhs[..., None])[..., 0]
+
+
+def _det_sign(J: np.ndarray) -> np.ndarray:
+    """Sign of det J (the assembly branch); a rectangular (redundant) block has no branch sign: +1."""
+    if J.shape[-1] == J.shape[-2]:
+        return np.sign(np.linalg.det(J))
+    return np.ones(J.shape[:-2])
+
+
+def _columns(p: _Plan, st: _State, k: slice) -> tuple[np.ndarray, np.ndarray]:
+    """The two complex Jacobian columns of a one-loop block: j·W_a·E_a for an angle, U for a slider."""
+    cols = []
+    for v in p.block.unknowns:
+        if v in p.unk_ang:
+            cols.append(1j * _w(p, st, k, v) * st.E[k, v])
+        else:
+            cols.append(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]))
+    return cols[0], cols[1]
+
+
+def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int) -> None:
+    for i, v in enumerate(p.block.unknowns):
+        if v < na:
+            (st.W if what == "v" else st.AL)[k, v] = vals[:, i]
+        else:
+            (st.SD if what == "v" else st.SDD)[k, v - na] = vals[:, i]
+
+
+def _block_health(
+    p: _Plan, st: _State, k: slice, scale: float, cols: tuple | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Condition number (angle columns divided by the mechanism size) and det sign per row."""
+    if len(p.block.unknowns) == 2:
+        c1, c2 = cols if cols is not None else _columns(p, st, k)
+        if p.block.unknowns[0] in p.unk_ang:
+            c1 = c1 / scale
+        if p.block.unknowns[1] in p.unk_ang:
+            c2 = c2 / scale
+        det = cross(c1, c2)
+        f2 = (c1.real**2 + c1.imag**2) + (c2.real**2 + c2.imag**2)
+        ad = np.abs(det)
+        root = np.sqrt(np.maximum(f2 * f2 - 4 * det * det, 0.0))
+        with np.errstate(divide="ignore"):
+            cond = np.where(ad > 0, (f2 + root) / (2 * np.where(ad > 0, ad, 1.0)), np.inf)
+        return cond, np.sign(det)
+    J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
+    colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
+    Js = J * colscale
+    return np.linalg.cond(Js), _det_sign(J)
+
+
+@dataclass
+class _Inputs:
+    """The drivers' values, rates and accelerations at internal grid times.
+
+    From ``t_first`` on: the file's drivers. Before it, a path in input space x0 + u·R with
+    u = (t − lead_from)/span: the lead-in of a run that starts late (from the inputs at t = 0
+    to those at ``t_first`` less their whole crank turns, see :func:`_lead_in`), or the one-turn
+    probe that measures winding numbers (``t_first`` = ∞).
+    """
+
+    mech: Mechanism
+    t_first: float = -math.inf
+    lead_from: float = 0.0
+    span: float = 1.0
+    x0: np.ndarray | None = None
+    R: np.ndarray | None = None
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t, float)
+        m = len(self.mech.drivers)
+        X, XD, XDD = np.zeros((len(t), m)), np.zeros((len(t), m)), np.zeros((len(t), m))
+        if m == 0:
+            return X, XD, XDD
+        real = t >= self.t_first
+        if real.any():
+            X[real], XD[real], XDD[real] = evaluate_all(self.mech, t[real])
+        if not real.all():
+            u = (t[~real] - self.lead_from) / self.span
+            X[~real] = self.x0 + u[:, None] * self.R
+            XD[~real] = self.R / self.span
+        return X, XD, XDD
+
+
+@dataclass(frozen=True)
+class _ChangePoint:
+    """Where block ``block``'s assembly branches meet (a change point), or where a redundant block's
+    Jacobian loses rank on its one smooth branch (kind "singular"), at internal time ``time``."""
+
+    block: int
+    time: float
+    flip: bool  # whether σ changes there (True on the smooth continuation of a crossing)
+    smooth: bool  # whether this continuation is the one whose velocities stay continuous
+    kind: str = "change point"
+
+
+@dataclass
+class _Run:
+    """What one solve needs besides the state arrays; probes share ``events`` with their run."""
+
+    sys: LoopSystem
+    inputs: _Inputs
+    scale: float
+    tol: float
+    max_iter: int
+    rtol: float
+    events: dict[int, list[_ChangePoint]] = field(default_factory=dict)
+    detect: bool = True  # look for change points (the main run only)
+    check: bool = True  # refuse ill-conditioned samples and branch flips
+    rates: bool = True
+    newton_sign: dict[int, float] = field(default_factory=dict)  # det sign of each Newton block's t = 0 branch
+    tail: bool = True  # the rows end the run (not a chunk followed by another)
+    t_start: float = 0.0  # the run's first requested time
+    memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
+    blocks: Callable[..., Any] | None = None  # the solver's block runner, for probes (set by vloop.solver)
+
+    def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
+        """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
+        sig = np.full(len(t), _plans(self.sys)[i].block.sigma)
+        for ev in self.events.get(i, ()):
+            if ev.flip:
+                sig[t > ev.time] *= -1.0
+        return sig
+
+
+@dataclass
+class _Solved:
+    n_ok: int
+    failure: _Failure | None
+    conds: list[np.ndarray]
+    signs: list[np.ndarray]
+    discs: list[np.ndarray]  # closed-form blocks' discriminants h (None for Newton blocks)
+    at_change: np.ndarray  # rows whose rates were taken across a change point
+
+
+def _rates_by(p: _Plan, st: _State, k: slice, inv: np.ndarray, what: str) -> np.ndarray:
+    """Rates of a Newton block from its factored Jacobians (J⁻¹, or the least-squares (JᵀJ)⁻¹Jᵀ)."""
+    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))
+    rhs = np.concatenate([R.real, R.imag], axis=1)
+    return (inv @ rhs[..., None])[..., 0]
+
+
+def _fail(out: _Solved, failure: _Failure) -> None:
+    """Keep the earliest failure; rows from it on are not solved."""
+    if failure.sample < out.n_ok:
+        out.n_ok, out.failure = failure.sample, failure
+
+
+def _error_bound(cond: np.ndarray) -> np.ndarray:
+    """Relative error bound of a sample's accelerations: cond³·ε. Next to a fold the positions themselves are
+    only known to cond·ε (the inputs' round-off, amplified), the velocities to cond²·ε, the accelerations to
+    cond³·ε (measured on a parallelogram at its folding: the bound holds, with a margin of ~10)."""
+    return cond * cond * cond * EPS
+
+
+def _velocity_bound(cond: np.ndarray) -> np.ndarray:
+    """Relative error bound of a sample's velocities: cond²·ε (a sample beyond rtol here is refused)."""
+    return cond * cond * EPS
+
+
+def _impose_drivers(sys: LoopSystem, st: _State, X: np.ndarray, XD: np.ndarray, XDD: np.ndarray) -> None:
+    na = sys.n_angles
+    for j, v in enumerate(sys.drivers):
+        if v < na:
+            st.TH[:, v] = X[:, j]
+            st.E[:, v] = np.cos(X[:, j]) + 1j * np.sin(X[:, j])
+            st.W[:, v], st.AL[:, v] = XD[:, j], XDD[:, j]
+        else:
+            st.S[:, v - na], st.SD[:, v - na], st.SDD[:, v - na] = X[:, j], XD[:, j], XDD[:, j]
+
+
+def _initial_state(sys: LoopSystem, n: int) -> _State:
+    """A state of n rows whose row 0 is the t = 0 assembly."""
+    na, ns = sys.n_angles, len(sys.slider_names)
+    st = _State(n, na, ns)
+    st.TH[0, :] = sys.q0[:na]
+    st.E[0, :na] = np.exp(1j * sys.q0[:na])
+    st.S[0, :ns] = sys.q0[na:]
+    return st
+
+
+def _change_point_choices(sys: LoopSystem, loop_number: int) -> list[str]:
+    """``[solver] change_points`` for a loop: "smooth" (default) or "other", or a list for successive ones."""
+    spec = sys.mechanism.options.get("change_points", {}).get(loop_number, "smooth")
+    return [spec] if isinstance(spec, str) else list(spec)
