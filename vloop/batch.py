@@ -16,13 +16,14 @@ Blocks are solved in the structure's order, over every sample at once:
   (term vectors and driver numbers blended in ASSEMBLY_STEPS steps), on the nominal branch (the sign of its
   Jacobian's determinant).
 
-A variant the batch is not sure of — its motion passes a limit (the loop stops closing), a sampled minimum
-of a dyad's discriminant deep enough to hide a change point or a limit between samples, an
-ill-conditioned sample (cond²·ε above the single run's flag level), a branch sign change, a Newton step
-that does not converge, close, or stay near its prediction, inputs too large to resolve, a non-finite
-number — is solved again on its own by the single-run solver (:func:`vloop.solver.solve` on the variant's
-LoopSystem: same structure, its own constants), which locates limits, passes change points and says why a
-motion stops, exactly as ``vloop.solve`` of that variant's file would. A variant that does not assemble at
+A variant the batch is not sure of — its motion passes a limit (the loop stops closing), a dip of a dyad's
+discriminant that the single run's first zoom pass would not dismiss (a possible change point, or a limit
+between samples), a sample whose velocity error bound cond²·ε exceeds a tenth of rtol (the single run
+refuses at rtol), a branch sign change, a Newton step that does not converge, close, or stay near its
+prediction, inputs too large to resolve or moving too far per sample, a non-finite number — is solved
+again on its own by the single-run solver (:func:`vloop.solver.solve` on the variant's LoopSystem: same
+structure, its own constants), which locates limits, passes change points and says why a motion stops,
+exactly as ``vloop.solve`` of that variant's file would. A variant that does not assemble at
 t = 0 on the nominal branch is reported, not solved.
 """
 
