@@ -276,3 +276,14 @@ def test_a_chain_of_200_dyads_compiles_and_solves():
     assert len(system.loops) == 200 and all(b.kind == "RRR" for b in system.blocks)
     res = vloop.solve(system)
     assert res.health["residual"].max() < 1e-12
+
+
+def test_published_files_follow_the_umask(tmp_path):
+    from vloop.output import write_text
+
+    old = os.umask(0o022)
+    try:
+        p = write_text(tmp_path / "x.txt", "hi")
+    finally:
+        os.umask(old)
+    assert (p.stat().st_mode & 0o777) == 0o644

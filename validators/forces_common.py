@@ -23,25 +23,8 @@ import math
 
 import numpy as np
 
-from vloop.forces import ForceResult
+from vloop.forces import ForceResult, reaction_names  # the output's naming convention (public)
 from vloop.mechanism import Load, Mechanism, length_factor
-
-
-def carrier(mech: Mechanism, joint: str) -> str:
-    """The body a pin's reactions are reported from: the ground if it is at the pin, else the first."""
-    bodies = mech.bodies_at(joint)
-    return mech.ground if mech.ground in bodies else bodies[0]
-
-
-def connections(mech: Mechanism) -> list[tuple[str, str, str]]:
-    """Every reported pin reaction as (joint, from, on)."""
-    out = []
-    for j in mech.joints:
-        bodies = mech.bodies_at(j)
-        if len(bodies) >= 2:
-            c = carrier(mech, j)
-            out += [(j, c, b) for b in bodies if b != c]
-    return out
 
 
 def factor(mech: Mechanism) -> float:
@@ -89,7 +72,7 @@ def force_result(
     world positions [m]; ``axes``: slider → (n, 2) unit axis u over the samples.
     """
     cols: dict[str, np.ndarray] = dict(drivers)
-    for j, c, b in connections(mech):
+    for j, c, b in reaction_names(mech):
         f = pins[(j, b)]
         cols[f"{j}:{c}>{b}.fx"], cols[f"{j}:{c}>{b}.fy"] = f[:, 0], f[:, 1]
         cols[f"{j}:{c}>{b}.mag"] = np.hypot(f[:, 0], f[:, 1])
@@ -116,7 +99,7 @@ def shaking(
         fx, fy = fx - f[:, 0], fy - f[:, 1]
         mz = mz - (p[:, 0] * f[:, 1] - p[:, 1] * f[:, 0])
 
-    for j, c, b in connections(mech):
+    for j, c, b in reaction_names(mech):
         if c == mech.ground:
             on_ground(np.column_stack([cols[f"{j}:{c}>{b}.fx"], cols[f"{j}:{c}>{b}.fy"]]), positions[j])
     for s in mech.sliders.values():

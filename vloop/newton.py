@@ -46,6 +46,7 @@ LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is the
 FRESH = 1e-14  # a last step above this (relative) refreshes the Jacobian the rates are taken from
 CLOSURE = 1e-9  # a solved row closes every equation to this fraction of the mechanism size
 LOCATE_STEPS = 40  # bisection steps locating a Newton block's change point
+SUBSTEPS = 16  # a step whose branch sign flipped far from its prediction is re-walked in this many
 
 
 @dataclass
@@ -447,6 +448,13 @@ def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
                 int(np.argmax(np.abs(F[0]) if np.all(np.isfinite(F)) else 0)) % len(ctx.p.block.loops)
             ]
             return _s._Failure(k, worst, f"Newton did not converge (closure {res:.2g} of the mechanism size)")
+        if flipped and sign != 0 and far and run.detect:  # Newton may have jumped: follow the path in small steps
+            smooth = _smooth_to(ctx, a, k)
+            if smooth is not None:
+                blk.put(st, rows, smooth[None])
+                F, J = blk.residual_jacobian(st, rows)
+                sign = float(blk.sign(J)[0])
+                flipped, far = sign != float(ctx.expected_sign(rows)[0]), False
         if flipped and sign != 0:
             if not (run.detect and not far and _passes_change_point(ctx, a, k)):
                 return _s._Failure(
@@ -483,6 +491,45 @@ def _passes_change_point(ctx: _Ctx, a: int, k: int) -> bool:
             break
     run.events.setdefault(i, []).append(_s._ChangePoint(i, 0.5 * (lo + hi), True, True))
     return True
+
+
+def _smooth_to(ctx: _Ctx, a: int, k: int) -> np.ndarray | None:
+    """The block's unknowns at row k reached from row a along the continuous path: Newton at intermediate
+    times, each predicted by the secant through the two before, the step halved wherever a solve corrects
+    its prediction by more than JUMP of the move (a path bending fast next to a singular point); None if the
+    step falls below 2⁻¹⁶ of the interval or a solve does not converge."""
+    t_a, t_k = float(ctx.tg[a]), float(ctx.tg[k])
+    span = t_k - t_a
+    t, dt = t_a, span / SUBSTEPS
+    x_prev = ctx.blk.read(ctx.st, np.array([a]))[0]
+    rate = ctx.xd[a]
+    while t < t_k - 1e-12 * span:
+        dt = min(dt, t_k - t)
+        guess = x_prev + rate * dt
+        x = _solve_at(ctx, a, t + dt, guess)
+        if x is None or bool(_far(ctx.blk, (x - guess)[None], (rate * dt)[None], x_prev[None])[0]):
+            dt *= 0.5
+            if dt < span / 2**16:
+                return None
+            continue
+        rate, x_prev, t = (x - x_prev) / dt, x, t + dt
+        dt *= 1.5
+    return x_prev
+
+
+def _solve_at(ctx: _Ctx, a: int, t: float, guess: np.ndarray) -> np.ndarray | None:
+    """The block's unknowns at time t by Newton from ``guess`` (earlier blocks solved there from row a)."""
+    run = ctx.run
+    sub_run = dataclasses.replace(run, detect=False, check=False, rates=False)
+    trial = _s._State(2, run.sys.n_angles, len(run.sys.slider_names))
+    for name in ("E", "TH", "S", "W", "AL", "SD", "SDD"):
+        getattr(trial, name)[0] = getattr(ctx.st, name)[a]
+    grid = np.array([ctx.tg[a], t])
+    _s._impose_drivers(run.sys, trial, *run.inputs(grid))
+    if ctx.i > 0 and sub_run.blocks(sub_run, trial, grid, 2, upto=ctx.i - 1).n_ok < 2:
+        return None
+    x, conv = newton(ctx.blk, trial, np.array([1]), guess[None], run.tol, run.max_iter)
+    return x[0] if conv[0] else None
 
 
 def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:

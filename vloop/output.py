@@ -92,6 +92,7 @@ def atomic_write(path: str | Path, mode: str = "w", **open_kw: Any) -> Iterator[
         open_kw.setdefault("newline", "")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes it private (0600); a published file follows the umask
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {describe_os_error(exc)}", entry="out") from None
     try:
@@ -105,6 +106,12 @@ def atomic_write(path: str | Path, mode: str = "w", **open_kw: Any) -> Iterator[
     except BaseException:
         _unlink_quietly(tmp)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def write_text(path: str | Path, text: str) -> Path:
