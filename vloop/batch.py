@@ -38,7 +38,7 @@ import numpy as np
 from .changepoints import CHANGE_GAP, DIP, ETA_INPUT, ZOOM_POINTS
 from .drivers import evaluate
 from .errors import MotionError, VloopError
-from .kernels import DEFAULT_RTOL, EPS, cross
+from .kernels import DEFAULT_RTOL, EPS, cross, invert_rows
 from .loops import Block, LoopSystem
 from .solver import DEFAULT_MAX_ITER, DEFAULT_TOL, MAX_INPUT_STEP
 from .variants import Designs, VariantModel
@@ -619,21 +619,8 @@ def _pinv_rows(A: np.ndarray) -> np.ndarray:
     out = np.full(A.transpose(0, 2, 1).shape, np.nan)
     finite = np.all(np.isfinite(A), axis=(1, 2))
     if finite.any():
-        out[finite] = np.linalg.pinv(A[finite]) if A.shape[1] != A.shape[2] else _inv_rows(A[finite])
+        out[finite] = np.linalg.pinv(A[finite]) if A.shape[1] != A.shape[2] else invert_rows(A[finite])
     return out
-
-
-def _inv_rows(A: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        out = np.full(A.shape, np.nan)
-        for i in range(len(A)):
-            try:
-                out[i] = np.linalg.inv(A[i])
-            except np.linalg.LinAlgError:
-                pass
-        return out
 
 
 # ---------------------------------------------------------------- the run

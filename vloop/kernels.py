@@ -526,3 +526,17 @@ def _change_point_choices(sys: LoopSystem, loop_number: int) -> list[str]:
     """``[solver] change_points`` for a loop: "smooth" (default) or "other", or a list for successive ones."""
     spec = sys.mechanism.options.get("change_points", {}).get(loop_number, "smooth")
     return [spec] if isinstance(spec, str) else list(spec)
+
+
+def invert_rows(A: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of square matrices; a singular one gives NaN (the others are kept)."""
+    try:
+        return np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        out = np.full(A.shape, np.nan)
+        for k in range(len(A)):
+            try:
+                out[k] = np.linalg.inv(A[k])
+            except np.linalg.LinAlgError:
+                pass
+        return out

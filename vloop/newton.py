@@ -125,7 +125,7 @@ class _Block:
         by the step, round-off for a converged row)."""
         F, J = self.residual_jacobian(st, rows)
         if self.square:
-            inv = _invert_rows(J)
+            inv = _s.invert_rows(J)
         else:  # the pseudo-inverse by SVD: normal equations would square the condition number
             finite = np.all(np.isfinite(J), axis=(1, 2))
             inv = np.full(J.transpose(0, 2, 1).shape, np.nan)
@@ -172,19 +172,6 @@ def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
             except np.linalg.LinAlgError:
                 pass
     return X[..., 0] if vec else X
-
-
-def _invert_rows(A: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        out = np.full(A.shape, np.nan)
-        for k in range(len(A)):
-            try:
-                out[k] = np.linalg.inv(A[k])
-            except np.linalg.LinAlgError:
-                pass
-        return out
 
 
 def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:

@@ -212,10 +212,11 @@ SECTION = {s.name: s for s in SECTIONS}
 TOP_LEVEL = SECTION["file"].allowed | {"joints", "links", "sliders", "points", "drivers", "time", "solver", "loads"}
 
 
-def markdown() -> str:
-    """The file format as Markdown tables, one per section (the README's copy must equal this)."""
+def markdown(sections: tuple[Section, ...] | None = None) -> str:
+    """A file format as Markdown tables, one per section (default: the mechanism file's; the README's copy
+    must equal this)."""
     out = []
-    for s in SECTIONS:
+    for s in SECTIONS if sections is None else sections:
         out.append(f"**{s.form}** — {s.doc}\n")
         out.append("| key | type | default | unit | meaning |")
         out.append("|---|---|---|---|---|")

@@ -30,6 +30,7 @@ import numpy as np
 from .errors import MechanismError
 from .model import Mechanism
 from .schema import Key, Problems, Section, real, show
+from .schema import markdown as schema_markdown
 
 MAX_VALUES = 1_000_000  # grid values of one parameter
 MAX_SAMPLES = 10_000_000  # Monte-Carlo draws
@@ -146,15 +147,7 @@ SECTION = {s.name: s for s in SECTIONS}
 
 def markdown() -> str:
     """The study file format as Markdown tables, one per section (the README's copy must equal this)."""
-    out = []
-    for s in SECTIONS:
-        out.append(f"**{s.form}** — {s.doc}\n")
-        out.append("| key | type | default | unit | meaning |")
-        out.append("|---|---|---|---|---|")
-        for k in s.keys:
-            out.append(f"| `{k.name}` | {k.type} | {k.default} | {k.unit or '—'} | {k.doc} |")
-        out.append("")
-    return "\n".join(out).rstrip() + "\n"
+    return schema_markdown(SECTIONS)
 
 
 # ---------------------------------------------------------------- the specification
