@@ -21,6 +21,8 @@ import numpy as np
 from .model import Body, Mechanism
 
 ORIGIN = "@O"  # the world origin node on the ground
+SMALL_RANK = 64  # up to this many loops every candidate cycle is shortened by a search
+SHORT_CYCLE = 16  # beyond, a fundamental cycle this short is kept as it is
 
 
 @dataclass
@@ -209,6 +211,9 @@ def _short_cycle_basis(G: nx.Graph, rank: int) -> list[list]:
     fundamental = _fundamental_cycles(G)
     candidates = []
     for cyc in fundamental:  # each closes on one non-tree edge (its last and first nodes)
+        if rank > SMALL_RANK and len(cyc) <= SHORT_CYCLE:
+            candidates.append(cyc)  # already short: a search would cross the ground's hub (O(size) each)
+            continue
         path = _shortest_path_avoiding(adjacency, cyc[-1], cyc[0])
         candidates.append(path if path is not None else cyc)
     candidates.sort(key=len)

@@ -93,36 +93,47 @@ class LoopSystem:
 # ------------------------------------------------------------------ numerics shared with the solver
 
 
-def term_values(sys: LoopSystem, q: np.ndarray) -> np.ndarray:
-    """Complex term vectors z for variables ``q`` (shape (..., n_vars))."""
+def term_values(sys: LoopSystem, q: np.ndarray, terms: np.ndarray | None = None) -> np.ndarray:
+    """Complex term vectors z for variables ``q`` (shape (..., n_vars)); only ``terms`` if given."""
     q = np.asarray(q, float)
     na = sys.n_angles
     phi = np.concatenate([q[..., :na], np.zeros((*q.shape[:-1], 1))], axis=-1)
     s = np.concatenate([q[..., na:], np.zeros((*q.shape[:-1], 1))], axis=-1)
-    return (sys.t_r + s[..., sys.t_sl]) * np.exp(1j * (phi[..., sys.t_ang] + sys.t_delta))
+    k = slice(None) if terms is None else terms
+    return (sys.t_r[k] + s[..., sys.t_sl[k]]) * np.exp(1j * (phi[..., sys.t_ang[k]] + sys.t_delta[k]))
+
+
+def loop_terms(sys: LoopSystem, loops: list[int]) -> np.ndarray:
+    """The terms ``loops`` use (a loop's equations involve only these)."""
+    return np.nonzero(np.any(sys.C[loops] != 0, axis=0))[0]
 
 
 def loop_jacobian(sys: LoopSystem, q: np.ndarray, loops: list[int], cols: list[int]) -> np.ndarray:
     """Real Jacobian of [Re; Im] of ``loops`` w.r.t. variables ``cols`` at one configuration ``q``.
 
-    d/dθ_a of r·e^{j(θ_a + δ)} is j·z; d/ds of (r + s)·e^{jφ} is e^{jφ}.
+    d/dθ_a of r·e^{j(θ_a + δ)} is j·z; d/ds of (r + s)·e^{jφ} is e^{jφ}. Only the loops' own terms are
+    evaluated, so a small group of a large mechanism costs little.
     """
-    z = term_values(sys, q)
+    k = loop_terms(sys, loops)
+    z = term_values(sys, q, k)
     na = sys.n_angles
     phi = np.append(q[:na], 0.0)
-    e = np.exp(1j * (phi[sys.t_ang] + sys.t_delta))
+    ang, sl = sys.t_ang[k], sys.t_sl[k]
+    e = np.exp(1j * (phi[ang] + sys.t_delta[k]))
     cols_a = np.asarray(cols, int)
-    D = (1j * z)[:, None] * (sys.t_ang[:, None] == cols_a[None, :]) + e[:, None] * (
-        (sys.t_sl[:, None] == cols_a[None, :] - na) & (cols_a[None, :] >= na)
+    D = (1j * z)[:, None] * (ang[:, None] == cols_a[None, :]) + e[:, None] * (
+        (sl[:, None] == cols_a[None, :] - na) & (cols_a[None, :] >= na)
     )
-    J = sys.C[loops] @ D
+    J = sys.C[np.ix_(loops, k)] @ D
     return np.vstack([J.real, J.imag])
 
 
 def loop_residual(sys: LoopSystem, q: np.ndarray, loops: list[int] | None = None) -> np.ndarray:
     """Complex closure residual of each loop (or of ``loops``) at ``q``."""
-    C = sys.C if loops is None else sys.C[loops]
-    return term_values(sys, q) @ C.T
+    if loops is None:
+        return term_values(sys, q) @ sys.C.T
+    k = loop_terms(sys, loops)
+    return term_values(sys, q, k) @ sys.C[np.ix_(loops, k)].T
 
 
 def loop_polygon(sys: LoopSystem, q: np.ndarray, loop: Loop) -> list[complex]:

@@ -201,9 +201,18 @@ class Mechanism:
 
     def bodies_at(self, joint: str) -> tuple[str, ...]:
         """Bodies that name ``joint`` (a slider block names its own joint)."""
-        out = [n for n, lk in self.links.items() if joint in lk.joints]
-        out += [s.name for s in self.sliders.values() if s.joint == joint]
-        return tuple(out)
+        return self._bodies_by_joint.get(joint, ())
+
+    @cached_property
+    def _bodies_by_joint(self) -> dict[str, tuple[str, ...]]:
+        """joint → the bodies naming it: links in file order, then slider blocks (built once)."""
+        out: dict[str, list[str]] = {}
+        for n, lk in self.links.items():
+            for j in lk.joints:
+                out.setdefault(j, []).append(n)
+        for s in self.sliders.values():
+            out.setdefault(s.joint, []).append(s.name)
+        return {j: tuple(bs) for j, bs in out.items()}
 
     def body_of_point(self, name: str) -> str:
         """The body that carries a joint/point for position purposes (first naming body)."""
