@@ -677,9 +677,21 @@ def _study_lines(res: Any) -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line: one sub-parser per command, each built by its own function."""
     p = argparse.ArgumentParser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
     p.add_argument("--version", action="version", version=f"vloop {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
+    _parser_run(sub)
+    _parser_view(sub)
+    _parser_loops(sub)
+    _parser_validate(sub)
+    _parser_corpus(sub)
+    _parser_info(sub)
+    _parser_study(sub)
+    return p
+
+
+def _parser_run(sub: Any) -> None:
     r = sub.add_parser("run", help="solve P/V/A over the file's time span and write results.csv (and plots)")
     _add_file(r)
     r.add_argument("--out", help="output folder (default: out/NAME)")
@@ -717,15 +729,24 @@ def build_parser() -> argparse.ArgumentParser:
         "VLOOP_MEMORY_BUDGET, the file's [solver] memory_budget, else half the available memory)",
     )
     r.set_defaults(func=cmd_run)
+
+
+def _parser_view(sub: Any) -> None:
     vw = sub.add_parser("view", help="write one offline HTML page that animates the mechanism (loops, arrows, plots)")
     _add_file(vw)
     vw.add_argument("--out", help="output folder (default: out/NAME); the page is NAME.html")
     vw.add_argument("--open", action="store_true", help="open the page in the default web browser")
     vw.set_defaults(func=cmd_view)
+
+
+def _parser_loops(sub: Any) -> None:
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     _add_file(lo)
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
     lo.set_defaults(func=cmd_loops)
+
+
+def _parser_validate(sub: Any) -> None:
     v = sub.add_parser("validate", help="run every engine on mechanisms, compare, write summary.json and a report")
     v.add_argument("files", nargs="*", help="mechanism files or folders of them (or --all)")
     v.add_argument("--all", action="store_true", help="every file in mechanisms/")
@@ -750,14 +771,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="shrink each failing generated mechanism with up to T rebuilt files (0: off; default 40)",
     )
     v.set_defaults(func=cmd_validate)
+
+
+def _parser_corpus(sub: Any) -> None:
     c = sub.add_parser("corpus", help="generate random mechanism files of known structure (validation corpus)")
     c.add_argument("--n", type=int, required=True, help="how many mechanisms")
     c.add_argument("--out", help="output folder (default: out/corpus-SEED)")
     _add_corpus_options(c)
     c.set_defaults(func=cmd_corpus)
+
+
+def _parser_info(sub: Any) -> None:
     i = sub.add_parser("info", help="links, joints, pin orders, mobility, loops, Grashof class")
     _add_file(i)
     i.set_defaults(func=cmd_info)
+
+
+def _parser_study(sub: Any) -> None:
     st = sub.add_parser("study", help="a design study: grids and tolerances over many variants, with sensitivities")
     st.add_argument("file", help="study file (TOML; README: Design studies)")
     st.add_argument("--out", help="output folder (default: out/STUDY)")
@@ -765,7 +795,6 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--scheduler", metavar="ADDRESS", help="run the chunks on this Dask scheduler (tcp://host:8786)")
     st.add_argument("--workers", type=int, metavar="N", help="run the chunks on a local Dask cluster of N processes")
     st.set_defaults(func=cmd_study)
-    return p
 
 
 def _add_runner_options(p: argparse.ArgumentParser) -> None:
