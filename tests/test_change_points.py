@@ -234,3 +234,26 @@ def test_cli_reports_change_points(tmp_path, capsys):
 def test_bad_change_point_option(tmp_path):
     with pytest.raises(vloop.MechanismError, match="change_points"):
         parallelogram(solver='[solver]\nchange_points = { 1 = "sideways" }')
+
+
+@pytest.mark.parametrize(
+    ("index", "why"),
+    [
+        (515, "a fast crank (0.12 rad a sample): its folding at 3π fell between grid points of the first zoom"),
+        (336, "a change point between the first two samples"),
+    ],
+)
+def test_corpus_change_points_found_by_the_nightly(index, why):
+    """Seed 2026 of the generated corpus (vloop corpus): both once missed a change point and jumped
+    branches silently; the velocity-continuous closed form (validators/analytic_changepoint.py) is the
+    reference, and Pinocchio (which passes a change point on its predicted path) agrees too."""
+    from validators import analytic, pinocchio
+    from vloop import corpus
+
+    mech = corpus.draw_item(2026, index).item.mechanism
+    res = vloop.solve(mech)
+    assert res.meta["change_points"], why
+    assert_histories_close(res, analytic.solve(mech), rtol=1e-9, floor=1e-9, min_columns=15)
+    if index == 515:
+        pytest.importorskip("pinocchio")
+        assert_histories_close(pinocchio.solve(mech), res, rtol=1e-9, floor=1e-9, min_columns=15)

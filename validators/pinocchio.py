@@ -466,6 +466,10 @@ RESIDUAL_TOL = 1e-9  # scaled residual (lengths / mechanism size, rad) a converg
 # inside Newton's basin, so a coarse sampling cannot carry the solve onto another branch.
 MAX_CRANK_STEP = 0.25
 MAX_SLIDER_STEP = 0.05
+# A step across det J = 0 is accepted as a change point (branches crossing) when Newton corrected the
+# Taylor prediction by less than this fraction of the predicted move: on the smooth branch the predictor
+# errs by O(h³) against a move of O(h); a jump to the other branch needs a correction of O(move).
+CROSS_JUMP = 0.01
 
 
 class _NoConvergence(Exception):
@@ -490,6 +494,7 @@ class _Solver:
     def __init__(self, pm: PinocchioModel, tol: float, max_iter: int, max_bisect: int, max_cond: float) -> None:
         self.pm, self.w = pm, _Work(pm)
         self.tol, self.max_iter, self.max_bisect, self.max_cond = tol, max_iter, max_bisect, max_cond
+        self.crossings = 0  # change points passed (det J changed sign on the predicted path)
         crank = np.array([d.kind == "crank" for d in pm.mech.drivers])
         self.max_dx = np.where(crank, MAX_CRANK_STEP, MAX_SLIDER_STEP * pm.mech.scale)
 
@@ -552,9 +557,23 @@ class _Solver:
     def step(self, prev: _State, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray, guess: np.ndarray) -> _State:
         q, F, J, it = self.project(guess, x)
         st = self.state(t, q, F, J, xd, xdd, it)
-        if st.det_sign != prev.det_sign:  # crossed det J = 0: a limit/toggle or a jump to the other branch
+        if st.det_sign != prev.det_sign and not self.smooth(prev, q, guess):
+            # crossed det J = 0 off the predicted path: a limit/toggle or a jump to the other branch
             raise _NoConvergence("assembly branch changed (the constraint Jacobian's determinant changed sign)")
         return st
+
+    def smooth(self, prev: _State, q: np.ndarray, guess: np.ndarray) -> bool:
+        """Whether a step whose determinant changed sign stayed on the Taylor-predicted path: a change point
+        (two assembly branches crossing) passed on the branch whose velocities stay continuous. The
+        correction Newton made must be a small part (CROSS_JUMP) of the move; a jump to the other branch, or
+        a projection pulled back from past a limit, corrects by about the move itself."""
+        sc = self.pm.q_scale
+        move = float(np.max(np.abs(guess - prev.q) / sc))
+        correction = float(np.max(np.abs(q - guess) / sc))
+        if correction > CROSS_JUMP * move:
+            return False
+        self.crossings += 1
+        return True
 
     def march(self, prev: _State, t: float, inputs: Inputs, n_min: int = 1) -> _State:
         """From ``prev`` to time ``t`` in at least ``n_min`` equal steps, more if the drivers move far."""

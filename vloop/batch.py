@@ -443,7 +443,7 @@ def _harmless(run: _Run, d: Designs, i: int, t: np.ndarray, v: np.ndarray, c: np
     mid, g = h[:, :n], h[:, 2 * n :] - h[:, n : 2 * n]
     with np.errstate(invalid="ignore"):
         root = np.sqrt(mid)
-        apart = root.min(axis=1) - 0.5 * np.max(np.abs(np.diff(root, axis=1)), axis=1) > 0.5 * CHANGE_GAP * run.scale
+        apart = root.min(axis=1) - np.max(np.abs(np.diff(root, axis=1)), axis=1) > 0.5 * CHANGE_GAP * run.scale
     at_end = ~((g[:, 0] < 0) & (g[:, -1] >= 0))
     return ok.all(axis=1) & np.all(mid >= 0, axis=1) & (at_end | apart)
 

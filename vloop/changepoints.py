@@ -57,6 +57,8 @@ def _candidate_minima(t: np.ndarray, h: np.ndarray, tail: bool = True) -> list[t
     m = np.nonzero((h[1:-1] <= h[:-2]) & (h[1:-1] <= h[2:]))[0] + 1
     dips = m[h[m] < DIP * np.maximum(h[m - 1], h[m + 1])]
     out = [(int(c) - 1, int(c) + 1) for c in dips]
+    if n > 2 and h[0] < DIP * h[1] and h[1] <= h[2]:  # rising from the first sample: a zero may lie just after it
+        out.insert(0, (0, 1))
     if tail and h[-1] < DIP * h[-2]:  # still falling at the end: a zero may lie before the last sample
         out.append((n - 2, n - 1))
     return out
@@ -128,8 +130,9 @@ def _zoom(run: _Run, st: _State, tg: np.ndarray, i: int, lo: int, hi: int) -> tu
             return float(ts[j]), float(mid[j])
         if first and not (g[0] < 0 <= g[-1]):  # h least at an end of the bracket: no minimum inside it
             return a, math.inf  # (e.g. a limit approached but not passed: h falls to the last sample)
-        root = np.sqrt(mid)  # √h is Lipschitz: no lower between grid points than this bound allows
-        if first and root.min() - 0.5 * np.max(np.abs(np.diff(root))) > 0.5 * CHANGE_GAP * run.scale:
+        root = np.sqrt(mid)  # √h is Lipschitz: no lower between grid points than this bound allows (the
+        # slope is taken twice the largest seen, since √h bends: steepest at its vertex, between grid points)
+        if first and root.min() - np.max(np.abs(np.diff(root))) > 0.5 * CHANGE_GAP * run.scale:
             j = int(np.argmin(mid))
             return float(ts[j]), float(mid[j])  # the branches stay apart: no change point here
         first = False
