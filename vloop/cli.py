@@ -154,11 +154,9 @@ def _write_extras(stage: Path, args: argparse.Namespace, mech: Any, result: Resu
 def _forces(mech: Any, result: Result, stage: Path, plot: bool) -> Any:
     """forces.csv (and forces.png) when the file has masses or loads; returns the ForceResult (or None).
     Reactions a redundant linkage leaves undetermined get no column, and a line on stderr says which."""
-    from .forces import has_forces, solve_forces
-
-    if not has_forces(mech) or not len(result):
+    forces = _solve_forces(mech, result)
+    if forces is None:
         return None
-    forces = solve_forces(mech, result)
     forces.to_csv(stage / "forces.csv")
     if plot:
         from .forces_plot import plot_forces
@@ -232,7 +230,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     result, error = solve_for_view(mech)
     out = _out_folder(args, mech)
     with OutputSet(out) as files:
-        forces = _forces_quiet(mech, result)
+        forces = _solve_forces(mech, result)
         _view_page(mech, result, files.stage, error, forces)
     (page,) = files.published
     print(f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
@@ -245,7 +243,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def _forces_quiet(mech: Any, result: Result) -> Any:
+def _solve_forces(mech: Any, result: Result) -> Any:
+    """The ForceResult when the file has masses or loads (and the run has samples), else None."""
     from .forces import has_forces, solve_forces
 
     return solve_forces(mech, result) if has_forces(mech) and len(result) else None

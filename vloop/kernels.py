@@ -237,8 +237,15 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
         D2 = X.real**2 + X.imag**2
         k1 = 0.5 * (A2 + D2 - B2)
-        xerr = p.known_magnitude(st, k) * np.sqrt(D2)  # ~ |X|·Σ|known| / ε: round-off carried by X
-        h2 = _round_off_zero(A2 * D2 - k1 * k1, A2 * D2 + k1 * k1 + (A2 + np.abs(k1)) * xerr)
+        h2 = _round_off_zero(
+            A2 * D2 - k1 * k1,
+            A2 * D2 + k1 * k1,
+            lambda m: (
+                (np.broadcast_to(A2, k1.shape)[m] + np.abs(k1[m]))
+                * np.sqrt(D2[m])
+                * p.known_magnitude(st, _sub_rows(k, m))
+            ),
+        )
         ok = (h2 >= 0) & (D2 > 0)
         Dd = np.where(D2 > 0, D2, 1.0)
         P = X * (k1 + 1j * sig * np.sqrt(np.where(ok, h2, 0.0))) / Dd
@@ -252,7 +259,8 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         W1 = _w(p, st, k, p.unk_ang[0])
         XU, WU = X * Uc, W1 * Uc
         y = XU.imag
-        h = _round_off_zero(np.abs(W1) ** 2 - y * y, np.abs(W1) ** 2 + np.abs(y) * p.known_magnitude(st, k))
+        A2 = np.abs(W1) ** 2 * np.ones(len(y))
+        h = _round_off_zero(A2 - y * y, A2, lambda m: np.abs(y[m]) * p.known_magnitude(st, _sub_rows(k, m)))
         ok = h >= 0
         c = sig * np.sqrt(np.where(ok, h, 0.0))
         _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
@@ -265,8 +273,11 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         W = _w(p, st, k, a, skip=i)
         bb = (W * np.conj(cdir)).real
         D2 = X.real**2 + X.imag**2
-        size = bb * bb + np.abs(W) ** 2 + D2 + np.sqrt(D2) * p.known_magnitude(st, k)
-        disc = _round_off_zero(bb * bb - np.abs(W) ** 2 + D2, size)
+        disc = _round_off_zero(
+            bb * bb - np.abs(W) ** 2 + D2,
+            bb * bb + np.abs(W) ** 2 + D2,
+            lambda m: np.sqrt(D2[m]) * p.known_magnitude(st, _sub_rows(k, m)),
+        )
         s = -bb + sig * np.sqrt(np.where(disc >= 0, disc, 0.0))
         den = W + s * cdir
         ok = (disc >= 0) & (np.abs(den) > 0)
@@ -283,10 +294,25 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
     return ok, np.full(len(ok), np.inf)
 
 
-def _round_off_zero(h: np.ndarray, size: np.ndarray) -> np.ndarray:
-    """A discriminant whose magnitude is within round-off of the terms it was computed from (``size``)
-    is zero: the two branches meet (an input exactly at a limit or change point, up to round-off)."""
-    return np.where(np.abs(h) <= 16 * EPS * size, 0.0, h)
+def _round_off_zero(h: np.ndarray, size: np.ndarray, carried: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """A discriminant whose magnitude is within round-off of the terms it was computed from is zero: the
+    two branches meet (an input exactly at a limit or change point, up to round-off). ``size`` bounds the
+    terms; ``carried(mask)`` adds, on the rows of ``mask``, the round-off the known part X brings in (large
+    for a mechanism far from the origin) — evaluated only on rows whose h is small at all."""
+    small = np.abs(h) <= 1e-4 * size
+    if not small.any():
+        return h
+    bound = 16 * EPS * size[small]
+    bound = bound + 16 * EPS * carried(small)
+    out = h.copy()
+    out[np.nonzero(small)[0][np.abs(h[small]) <= bound]] = 0.0
+    return out
+
+
+def _sub_rows(k: slice | np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The state rows of ``k`` that ``mask`` selects."""
+    rows = np.arange(k.start or 0, k.stop)[: len(mask)] if isinstance(k, slice) else np.asarray(k)
+    return rows[mask]
 
 
 def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:

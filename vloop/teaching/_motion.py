@@ -43,17 +43,6 @@ def omega(mech: Mechanism, result: Result, body: str) -> np.ndarray:
     return result[f"{body}.omega"]
 
 
-def body_velocity(mech: Mechanism, result: Result, body: str, at: np.ndarray) -> np.ndarray:
-    """Velocity [length/s, complex] of the point of ``body`` that is at world position ``at`` [complex].
-
-    v(X) = v_P + j·ω·(X − P), P the body's first joint (its pin for a block); 0 for the ground.
-    """
-    if body == mech.ground:
-        return np.zeros(np.broadcast(result.t, at).shape, complex)
-    ref = reference_joint(mech, body)
-    return point_velocity(result, ref) + 1j * omega(mech, result, body) * (at - point(result, ref))
-
-
 def single_driver(mech: Mechanism, what: str) -> None:
     """Raise MechanismError unless the mechanism has exactly one driver (``what`` needs one input)."""
     if len(mech.drivers) != 1:
