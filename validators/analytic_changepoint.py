@@ -127,23 +127,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         resolve=lambda tt: solve(mech, tt),
     )
     th3 = np.angle(delta) + sigma * np.arctan2(np.sqrt(np.maximum(q2, 0.0)), p)
-    rB = m.b * np.exp(1j * th3)
-    zB = zA + rB
-    th4 = np.angle(zB - zO4)
-    s34 = np.sin(th3 - th4)
-    w3 = m.a * w2 * np.sin(th4 - phi2) / (m.b * s34)
-    w4 = m.a * w2 * np.sin(th3 - phi2) / (m.c * s34)
-    R = (1j * al2 - w2 * w2) * rA - m.b * w3 * w3 * np.exp(1j * th3) + m.c * w4 * w4 * np.exp(1j * th4)
-    al3 = (R * np.exp(-1j * th4)).real / (m.b * s34)
-    al4 = (R * np.exp(-1j * th3)).real / (m.c * s34)
-
-    asm = Assembly(mech, t, inserted, anchor)
-    asm.set_angle(r.crank, th_in, w2, al2)
-    asm.set_from_vector(r.coupler, r.A, r.B, th3, w3, al3)
-    asm.set_from_vector(r.rocker, r.O4, r.B, th4, w4, al4)
-    zAd, zAdd = 1j * w2 * rA, (1j * al2 - w2 * w2) * rA
-    asm.set_point(r.A, zA, zAd, zAdd)
-    asm.set_point(r.B, zB, zAd + 1j * w3 * rB, zAdd + (1j * al3 - w3 * w3) * rB)
+    asm = fourbar.coupler_and_rocker(Assembly(mech, t, inserted, anchor), r, m, (th_in, w2, al2), th3)
     flips = int(np.count_nonzero(np.diff(sigma)))
     meta = {"branch": int(sigma0), "change_angles": list(angles), "branch_flips": flips}
     return asm.result(NAME, meta)

@@ -236,6 +236,20 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     )
 
     th3 = np.angle(delta) + sigma * np.arctan2(np.sqrt(q2), p)
+    asm = coupler_and_rocker(Assembly(mech, t, inserted, anchor), r, m, (th_in, w2, al2), th3)
+    meta = {"branch": int(sigma), "a": m.a, "b": m.b, "c": m.c, "d": m.d, "grashof": grashof(mech)}
+    return asm.result(NAME, meta)
+
+
+def coupler_and_rocker(asm: Assembly, r: Roles, m: Dims, crank: tuple[np.ndarray, ...], th3: np.ndarray) -> Assembly:
+    """Fill ``asm`` from the coupler's angle θ3 (rad) and the crank's input ``crank`` = (θ, ω, α):
+    the rocker's θ4 = arg(B − O4), and the rates by the four-bar's rigid-link conditions
+    (ω3 = a·ω2·sin(θ4 − φ2)/(b·sin(θ3 − θ4)), ω4 likewise; α3, α4 by the same projections)."""
+    th_in, w2, al2 = crank
+    phi2 = th_in + m.beta2
+    rA = m.a * np.exp(1j * phi2)
+    zA = complex(*asm.mech.joints[r.O2]) + rA
+    zO4 = complex(*asm.mech.joints[r.O4])
     rB = m.b * np.exp(1j * th3)
     zB = zA + rB
     th4 = np.angle(zB - zO4)
@@ -245,13 +259,10 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     R = (1j * al2 - w2 * w2) * rA - m.b * w3 * w3 * np.exp(1j * th3) + m.c * w4 * w4 * np.exp(1j * th4)
     al3 = (R * np.exp(-1j * th4)).real / (m.b * s34)
     al4 = (R * np.exp(-1j * th3)).real / (m.c * s34)
-
-    asm = Assembly(mech, t, inserted, anchor)
     asm.set_angle(r.crank, th_in, w2, al2)
     asm.set_from_vector(r.coupler, r.A, r.B, th3, w3, al3)
     asm.set_from_vector(r.rocker, r.O4, r.B, th4, w4, al4)
     zAd, zAdd = 1j * w2 * rA, (1j * al2 - w2 * w2) * rA
     asm.set_point(r.A, zA, zAd, zAdd)
     asm.set_point(r.B, zB, zAd + 1j * w3 * rB, zAdd + (1j * al3 - w3 * w3) * rB)
-    meta = {"branch": int(sigma), "a": m.a, "b": m.b, "c": m.c, "d": m.d, "grashof": grashof(mech)}
-    return asm.result(NAME, meta)
+    return asm
