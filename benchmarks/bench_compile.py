@@ -43,7 +43,8 @@ def dyad_chain(n: int) -> vloop.Mechanism:
 
 def main(sizes: list[int]) -> None:
     print(
-        f"{'dyads':>6} {'links':>6} {'loops':>6} {'load [s]':>9} {'compile [s]':>12} {'per link [ms]':>14} {'growth':>7}"
+        f"{'dyads':>6} {'links':>6} {'loops':>6} {'load [s]':>9} {'compile [s]':>12}"
+        f" {'per link [ms]':>14} {'growth':>7}"
     )
     prev = None
     for n in sizes:
@@ -58,7 +59,8 @@ def main(sizes: list[int]) -> None:
         if prev is not None:
             growth = f"{math.log((t2 - t1) / prev[1]) / math.log(links / prev[0]):7.2f}"
         print(
-            f"{n:6d} {links:6d} {len(system.loops):6d} {t1 - t0:9.3f} {t2 - t1:12.3f} {1e3 * (t2 - t1) / links:14.2f} {growth}"
+            f"{n:6d} {links:6d} {len(system.loops):6d} {t1 - t0:9.3f} {t2 - t1:12.3f}"
+            f" {1e3 * (t2 - t1) / links:14.2f} {growth}"
         )
         prev = (links, t2 - t1)
 

@@ -38,7 +38,7 @@ import numpy as np
 from .changepoints import CHANGE_GAP, DIP, ETA_INPUT, ZOOM_POINTS
 from .drivers import evaluate
 from .errors import MotionError, VloopError
-from .kernels import DEFAULT_RTOL, EPS, cross, invert_rows
+from .kernels import DEFAULT_RTOL, EPS, block_terms, cross, det_sign, least_squares_rows, pinv_rows, solve_rows
 from .loops import Block, LoopSystem
 from .solver import DEFAULT_MAX_ITER, DEFAULT_TOL, MAX_INPUT_STEP
 from .variants import Designs, VariantModel
@@ -170,14 +170,7 @@ class _Plan:
 
     @classmethod
     def build(cls, sys: LoopSystem, b: Block) -> _Plan:
-        na = sys.n_angles
-        Cb = sys.C[list(b.loops)]
-        terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
-        Cb = Cb[:, terms]
-        ang, sl = sys.t_ang[terms], sys.t_sl[terms]
-        unk_ang = [v for v in b.unknowns if v < na]
-        unk_sl = [v - na for v in b.unknowns if v >= na]
-        known = ~(np.isin(ang, unk_ang) | np.isin(sl, unk_sl))
+        terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
         g = Cb[0]
         on_angle = {a: [int(t) for t in np.nonzero((ang == a) & (g != 0))[0]] for a in unk_ang}
         own = {i: int(np.nonzero((sl == i) & (g != 0))[0][0]) for i in unk_sl if np.any((sl == i) & (g != 0))}
@@ -498,15 +491,6 @@ class _Newton:
                         J[:, li, u] += c * e
         return np.concatenate([F.real, F.imag], 1), np.concatenate([J.real, J.imag], 1)
 
-    def step(self, J: np.ndarray, F: np.ndarray) -> np.ndarray:
-        if not self.square:
-            Jt = J.transpose(0, 2, 1)
-            J, F = Jt @ J, (Jt @ F[..., None])[..., 0]
-        return _solve_rows(J, -F)
-
-    def sign(self, J: np.ndarray) -> np.ndarray:
-        return np.sign(np.linalg.det(J)) if self.square else np.ones(len(J))
-
     def newton(self, st: _State, d: Designs, vs: np.ndarray, k: int, x: np.ndarray, tol: float, max_iter: int):
         """Batched Newton at row k of variants ``vs`` from ``x``: (solution, converged)."""
         x = x.copy()
@@ -515,7 +499,7 @@ class _Newton:
         for _ in range(max_iter):
             self.put(st, vs[act], k, x[act])
             F, J = self.residual_jacobian(st, d.take(vs[act]), vs[act], k)
-            dx = self.step(J, F)
+            dx = least_squares_rows(J, -F)
             xa = x[act] + dx
             x[act] = xa
             finite = np.all(np.isfinite(xa), axis=1)
@@ -540,10 +524,7 @@ class _Newton:
                 [-sub.loop_sum(dv, self.p, self.p.C[li], everything, what) for li in range(self.p.C.shape[0])], 1
             )
             rhs = np.concatenate([R.real, R.imag], axis=1)
-            if self.square:
-                val = _solve_rows(J, rhs)
-            else:
-                val = (_pinv_rows(J) @ rhs[..., None])[..., 0]
+            val = solve_rows(J, rhs) if self.square else (pinv_rows(J) @ rhs[..., None])[..., 0]
             for u, v in enumerate(self.p.block.unknowns):
                 if v < self.na:
                     (st.W if what == "v" else st.AL)[vs, k, v] = val[:, u]
@@ -558,7 +539,7 @@ class _Newton:
         ok = np.all(np.isfinite(Js), axis=(1, 2))
         cond = np.full(len(J), np.inf)
         if ok.any():
-            inv = _pinv_rows(Js[ok])
+            inv = pinv_rows(Js[ok])
             with np.errstate(invalid="ignore", over="ignore"):
                 cond[ok] = np.sqrt(np.sum(Js[ok] ** 2, axis=(1, 2)) * np.sum(inv**2, axis=(1, 2)))
         cond = np.where(np.isfinite(cond), cond, np.inf)
@@ -596,31 +577,6 @@ class _Sub:
                 sd = self.SD[:, s]
                 out = out + c * ((self.SDD[:, s] + 2j * sd * w) * e + (1j * self.AL[:, a] - w * w) * z)
         return out
-
-
-def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """A⁻¹·B for stacks of small systems; a singular row gives NaN."""
-    if not len(A):
-        return np.zeros(B.shape)
-    try:
-        return np.linalg.solve(A, B[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        X = np.full(B.shape, np.nan)
-        for i in range(len(A)):
-            try:
-                X[i] = np.linalg.solve(A[i], B[i])
-            except np.linalg.LinAlgError:
-                pass
-        return X
-
-
-def _pinv_rows(A: np.ndarray) -> np.ndarray:
-    """Pseudo-inverses of a stack (NaN where not finite)."""
-    out = np.full(A.transpose(0, 2, 1).shape, np.nan)
-    finite = np.all(np.isfinite(A), axis=(1, 2))
-    if finite.any():
-        out[finite] = np.linalg.pinv(A[finite]) if A.shape[1] != A.shape[2] else invert_rows(A[finite])
-    return out
 
 
 # ---------------------------------------------------------------- the run
@@ -661,7 +617,7 @@ class _Run:
                 if p.block.kind == "newton":
                     nt = _Newton(p, sys.n_angles, run.scale)
                     _, J = nt.residual_jacobian(st, nominal, np.zeros(1, int), 0)
-                    run.newton_sign[i] = float(nt.sign(J)[0] or 1.0)
+                    run.newton_sign[i] = float(det_sign(J)[0] or 1.0)
         return run
 
 
@@ -766,7 +722,7 @@ def _newton_block(
         F, J = nt.residual_jacobian(st, d.take(vs), vs, k)
         with np.errstate(invalid="ignore"):
             closure = np.max(np.abs(F), axis=1) / run.scale
-        bad = ~conv | ~(closure <= CLOSURE) | (nt.sign(J) != expected)
+        bad = ~conv | ~(closure <= CLOSURE) | (det_sign(J) != expected)
         if k == 0:
             mask = np.zeros(len(flags.regular), bool)
             mask[vs[bad]] = True

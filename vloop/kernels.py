@@ -139,6 +139,19 @@ class _Plan:
         return np.abs(self.r[self.known] + st.S[k][:, self.sl[self.known]]).sum(axis=1)
 
 
+def block_terms(sys: LoopSystem, b: Block) -> tuple:
+    """A block's terms (those in its loops, as global term ids), their signs in its loops (m, n_terms),
+    their angle variables and sliders, the unknown angles and sliders, and which terms depend on none."""
+    Cb = sys.C[list(b.loops)]
+    terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
+    Cb = Cb[:, terms]
+    ang, sl = sys.t_ang[terms], sys.t_sl[terms]
+    unk_ang = [v for v in b.unknowns if v < sys.n_angles]
+    unk_sl = [v - sys.n_angles for v in b.unknowns if v >= sys.n_angles]
+    known = ~(np.isin(ang, unk_ang) | np.isin(sl, unk_sl))
+    return terms, Cb, ang, sl, unk_ang, unk_sl, known
+
+
 def _plans(sys: LoopSystem) -> list[_Plan]:
     plans = sys.cache.get("plans")
     if plans is not None:
@@ -147,13 +160,7 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
     cd_all = np.exp(1j * sys.t_delta)
     plans = []
     for b in sys.blocks:
-        Cb = sys.C[list(b.loops)]
-        terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
-        Cb = Cb[:, terms]
-        ang, sl = sys.t_ang[terms], sys.t_sl[terms]
-        unk_ang = [v for v in b.unknowns if v < na]
-        unk_sl = [v - na for v in b.unknowns if v >= na]
-        known = ~(np.isin(ang, unk_ang) | np.isin(sl, unk_sl))
+        terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
         masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
         g = Cb[0]
         w_const, w_sl, u_dir = {}, {}, {}
@@ -369,7 +376,7 @@ def _solve_block(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return (np.linalg.pinv(J) @ rhs[..., None])[..., 0]
 
 
-def _det_sign(J: np.ndarray) -> np.ndarray:
+def det_sign(J: np.ndarray) -> np.ndarray:
     """Sign of det J (the assembly branch); a rectangular (redundant) block has no branch sign: +1."""
     if J.shape[-1] == J.shape[-2]:
         return np.sign(np.linalg.det(J))
@@ -415,7 +422,7 @@ def _block_health(
     J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
     colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
     Js = J * colscale
-    return np.linalg.cond(Js), _det_sign(J)
+    return np.linalg.cond(Js), det_sign(J)
 
 
 @dataclass
@@ -566,3 +573,38 @@ def invert_rows(A: np.ndarray) -> np.ndarray:
             except np.linalg.LinAlgError:
                 pass
         return out
+
+
+def solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A⁻¹·B for a stack of small systems (B of shape (rows, n)); a row whose A is singular gives NaN."""
+    if not len(A):
+        return np.zeros(B.shape)
+    try:
+        return np.linalg.solve(A, B[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        X = np.full(B.shape, np.nan)
+        for k in range(len(A)):
+            try:
+                X[k] = np.linalg.solve(A[k], B[k])
+            except np.linalg.LinAlgError:
+                pass
+        return X
+
+
+def least_squares_rows(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """x with J·x = rhs per row: the solve for a square J, the normal equations JᵀJ·x = Jᵀ·rhs for a block
+    with more equations than unknowns (redundant constraints; exact when they are consistent); NaN where
+    singular. Newton's step is ``least_squares_rows(J, −F)``."""
+    if J.shape[-1] != J.shape[-2]:
+        Jt = J.transpose(0, 2, 1)
+        J, rhs = Jt @ J, (Jt @ rhs[..., None])[..., 0]
+    return solve_rows(J, rhs)
+
+
+def pinv_rows(A: np.ndarray) -> np.ndarray:
+    """Inverses (square) or pseudo-inverses (rectangular, by SVD) of a stack; NaN where not finite."""
+    out = np.full(A.transpose(0, 2, 1).shape, np.nan)
+    finite = np.all(np.isfinite(A), axis=(1, 2))
+    if finite.any():
+        out[finite] = np.linalg.pinv(A[finite]) if A.shape[1] != A.shape[2] else invert_rows(A[finite])
+    return out

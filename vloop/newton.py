@@ -106,30 +106,12 @@ class _Block:
         Jc = (np.concatenate([1j * z, e], axis=1) @ self.D).reshape(len(rows), -1, self.nu)
         return np.concatenate([F.real, F.imag], axis=1), np.concatenate([Jc.real, Jc.imag], axis=1)
 
-    def step(self, J: np.ndarray, F: np.ndarray) -> np.ndarray:
-        """Newton (square) or Gauss–Newton (rectangular) steps for every row; NaN where singular."""
-        if not self.square:
-            Jt = J.transpose(0, 2, 1)
-            J, F = Jt @ J, (Jt @ F[..., None])[..., 0]
-        return _solve_rows(J, -F)
-
-    def sign(self, J: np.ndarray) -> np.ndarray:
-        """det J's sign per row (the assembly branch); a rectangular (redundant) block has none: +1."""
-        if self.square:
-            return np.sign(np.linalg.det(J))
-        return np.ones(len(J))
-
     def factor(self, st: _State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
         """The Factor at the state's rows, the closure residual of each (fraction of the size) and whether
         the Newton step from there is below tol·(1 + |x|); that last step is applied (J is kept: it moves
         by the step, round-off for a converged row)."""
         F, J = self.residual_jacobian(st, rows)
-        if self.square:
-            inv = _s.invert_rows(J)
-        else:  # the pseudo-inverse by SVD: normal equations would square the condition number
-            finite = np.all(np.isfinite(J), axis=(1, 2))
-            inv = np.full(J.transpose(0, 2, 1).shape, np.nan)
-            inv[finite] = np.linalg.pinv(J[finite])
+        inv = _s.pinv_rows(J)  # by SVD when rectangular: normal equations would square the condition number
         cond = _condition(J * self.colscale, inv / self.colscale[:, None], rtol)
         res = np.max(np.abs(F), axis=1, initial=0.0) / self.scale
         dx = -(inv @ F[..., None])[..., 0]
@@ -147,31 +129,15 @@ class _Block:
         every eigenvalue of J_{k−1}⁻¹J_k = I + E lies within 1 of 1, so det J_k has det J_{k−1}'s sign; rows
         where that bound fails (near a singular row) get their determinant computed."""
         if not self.square or len(J) < 2:
-            return self.sign(J)
+            return _s.det_sign(J)
         E = inv[:-1] @ (J[1:] - J[:-1])
         with np.errstate(invalid="ignore"):
             close = np.sum(E * E, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
         exact = np.concatenate([[0], np.nonzero(~close)[0] + 1])
         sign = np.full(len(J), np.nan)
-        sign[exact] = self.sign(J[exact])
+        sign[exact] = _s.det_sign(J[exact])
         last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
         return sign[last]
-
-
-def _solve_rows(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """A⁻¹·B for stacks (B of shape (rows, n) or (rows, n, k)); rows whose A is singular give NaN."""
-    vec = B.ndim == 2
-    Bm = B[..., None] if vec else B
-    try:
-        X = np.linalg.solve(A, Bm)
-    except np.linalg.LinAlgError:
-        X = np.full((*Bm.shape[:1], A.shape[2], *Bm.shape[2:]), np.nan)
-        for k in range(len(A)):
-            try:
-                X[k] = np.linalg.solve(A[k], Bm[k])
-            except np.linalg.LinAlgError:
-                pass
-    return X[..., 0] if vec else X
 
 
 def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
@@ -203,7 +169,7 @@ def newton(
         r = rows[act]
         blk.put(st, r, x[act])
         F, J = blk.residual_jacobian(st, r)
-        dx = blk.step(J, F)
+        dx = _s.least_squares_rows(J, -F)
         xa = x[act] + dx
         x[act] = xa
         finite = np.all(np.isfinite(xa), axis=1)
@@ -241,16 +207,13 @@ class _Ctx:
         return ref * self.run.sigma(self.i, self.tg[rows])
 
     def rates_rows(self, rows: np.ndarray, J: np.ndarray) -> None:
-        """ẋ and ẍ at several rows at once (as :meth:`rates_at`)."""
+        """ẋ and ẍ of the block at these rows (exact linear solves; least squares for a redundant block), kept
+        for the Taylor predictor; a row too ill-conditioned to predict from is marked weak."""
         p, st, na = self.p, self.st, self.na
         for what, out in (("v", self.xd), ("a", self.xdd)):
             R = -(p.total.vel(st, rows) if what == "v" else p.total.acc(st, rows))
             rhs = np.concatenate([R.real, R.imag], axis=1)
-            if self.blk.square:
-                val = _solve_rows(J, rhs)
-            else:
-                Jt = J.transpose(0, 2, 1)
-                val = _solve_rows(Jt @ J, (Jt @ rhs[..., None])[..., 0])
+            val = _s.least_squares_rows(J, rhs)
             out[rows] = val
             if what == "v":
                 _s._store(p, st, rows, val, "v", na)
@@ -262,30 +225,13 @@ class _Ctx:
             sv = np.linalg.svd(Js[ok], compute_uv=False)
             with np.errstate(divide="ignore", invalid="ignore"):
                 cond[ok] = sv[:, 0] / sv[:, -1]
-        self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~np.all(np.isfinite(self.xd[rows]), axis=1)
+        # next to a singular row (a change point) the rates are not accurate enough to predict from
+        finite = np.all(np.isfinite(self.xd[rows]), axis=1) & np.all(np.isfinite(self.xdd[rows]), axis=1)
+        self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~finite
 
     def rates_at(self, k: int, J: np.ndarray) -> None:
-        """ẋ and ẍ of the block at row k (exact linear solves), kept for the Taylor predictor."""
-        p, st, row = self.p, self.st, np.array([k])
-        fac = J[None] if self.blk.square else None
-        for what, out in (("v", self.xd), ("a", self.xdd)):
-            R = -(p.total.vel(st, row) if what == "v" else p.total.acc(st, row))
-            rhs = np.concatenate([R.real, R.imag], axis=1)
-            if fac is not None:
-                val = _solve_rows(fac, rhs)
-            else:
-                Jt = J.T[None]
-                val = _solve_rows(Jt @ J[None], (Jt @ rhs[..., None])[..., 0])
-            out[k] = val[0]
-            if what == "v":
-                _s._store(p, st, row, val, "v", self.na)
-        _s._store(p, st, row, np.zeros((1, self.blk.nu)), "v", self.na)  # the sums need them zero again
-        Js = J * self.blk.colscale
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sv = np.linalg.svd(Js, compute_uv=False) if np.all(np.isfinite(Js)) else np.array([1.0, 0.0])
-            cond = sv[0] / sv[-1] if sv[-1] > 0 else math.inf
-        # next to a singular row (a change point) the rates are not accurate enough to predict from
-        self.weak[k] = not (cond * cond * _s.EPS <= self.run.rtol) or not np.all(np.isfinite(out[k]))
+        """:meth:`rates_rows` at row k alone."""
+        self.rates_rows(np.array([k]), J[None])
 
 
 def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int) -> tuple[_s._Failure | None, Factor]:
@@ -293,10 +239,9 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
     before it). Rows from the failure on are left unsolved."""
     ctx = _Ctx(run, st, tg, i, p, n)
     blk = ctx.blk
-    if i not in run.newton_sign:
-        _, J0 = blk.residual_jacobian(st, np.array([0]))
-        run.newton_sign[i] = float(blk.sign(J0)[0] or 1.0) * float(run.sigma(i, tg[:1])[0])
     _, J0 = blk.residual_jacobian(st, np.array([0]))
+    if i not in run.newton_sign:
+        run.newton_sign[i] = float(_s.det_sign(J0)[0] or 1.0) * float(run.sigma(i, tg[:1])[0])
     if n > 1:
         ctx.rates_at(0, J0[0])
     coarse, n_ok, failure = _coarse_pass(ctx)
@@ -397,7 +342,7 @@ def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
     F, J = blk.residual_jacobian(st, rows)
     with np.errstate(invalid="ignore"):
         res = np.max(np.abs(F), axis=1) / run.scale
-    ok = conv & (res <= CLOSURE) & ~_far(blk, x - pred, incr, x_a) & (blk.sign(J) == ctx.expected_sign(rows))
+    ok = conv & (res <= CLOSURE) & ~_far(blk, x - pred, incr, x_a) & (_s.det_sign(J) == ctx.expected_sign(rows))
     m = int(np.argmin(ok)) if not ok.all() else len(rows)
     if m == 0:
         return np.zeros(0, int)
@@ -424,7 +369,7 @@ def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
     F, J = blk.residual_jacobian(st, rows)
     res = float(np.max(np.abs(F))) / run.scale if np.all(np.isfinite(F)) else math.inf
     far = bool(_far(blk, x - pred, incr[None], x_a[None])[0])
-    sign = float(blk.sign(J)[0])
+    sign = float(_s.det_sign(J)[0])
     flipped = sign != float(ctx.expected_sign(rows)[0])
     if strict:
         if not conv[0] or res > CLOSURE or far or flipped:
@@ -440,7 +385,7 @@ def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
             if smooth is not None:
                 blk.put(st, rows, smooth[None])
                 F, J = blk.residual_jacobian(st, rows)
-                sign = float(blk.sign(J)[0])
+                sign = float(_s.det_sign(J)[0])
                 flipped, far = sign != float(ctx.expected_sign(rows)[0]), False
         if flipped and sign != 0:
             if not (run.detect and not far and _passes_change_point(ctx, a, k)):
