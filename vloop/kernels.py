@@ -7,6 +7,7 @@ assembly branches meet). See :mod:`vloop.solver` for the state's layout and the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -35,26 +36,51 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a.real * b.imag - a.imag * b.real
 
 
-def _add_real_product(out: np.ndarray, A: np.ndarray, H: np.ndarray) -> None:
-    """out += A @ H for real A and complex H, as two real BLAS products (numpy's mixed
-    real-complex matmul takes a slow generic loop)."""
-    out.real += A @ H.real
-    out.imag += A @ H.imag
+def row_max(A: np.ndarray) -> np.ndarray:
+    """max over the columns of A (rows, K) for the few columns of a mechanism: an element-wise maximum
+    column by column (numpy's reduction along a short last axis costs a loop per row)."""
+    if A.shape[1] > 16 or A.shape[1] == 0:
+        return np.max(A, axis=1, initial=-np.inf)
+    out = A[:, 0].copy()
+    for c in range(1, A.shape[1]):
+        np.maximum(out, A[:, c], out=out)
+    return out
+
+
+def _real_rep(G: np.ndarray) -> np.ndarray:
+    """The real (2a, 2K) matrix R with ``Z.view(float) @ R == (Z @ G).view(float)`` for complex Z (n, a): one real
+    BLAS product on the interleaved [Re, Im] view instead of a complex one (half the work, no temporaries)."""
+    a, K = G.shape
+    R = np.empty((2 * a, 2 * K))
+    R[0::2, 0::2], R[0::2, 1::2] = G.real, G.imag
+    R[1::2, 0::2], R[1::2, 1::2] = -G.imag, G.real
+    return R
+
+
+def _columns_of(A: np.ndarray, cols: np.ndarray | None) -> np.ndarray:
+    """The state columns ``cols`` of A (all of them, as a view, for None), C-contiguous."""
+    return A if cols is None else A.take(cols, axis=1)
+
+
+def _used(idx: np.ndarray, width: int) -> np.ndarray | None:
+    """The state columns a sum reads (None: most of them, read whole rows rather than gather)."""
+    cols = np.unique(idx)
+    return None if 2 * len(cols) > width else cols
 
 
 @dataclass
 class _Sum:
-    """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small matrix products:
-    rigid vectors by the angle that turns them (G, constant), vectors fixed to the ground (c0),
-    slider vectors on the ground (Hf: only s varies) and slider vectors on moving guides.
+    """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small real matrix products: rigid
+    vectors by the angle that turns them (G; the vectors fixed to the ground on the padding column, whose E
+    is 1 and ω, α are 0), slider vectors on the ground (H: only s varies) and slider vectors on moving guides.
+    Complex products are taken as real ones on the interleaved [Re, Im] view (_real_rep): half the work.
     Evaluated for positions, velocities or accelerations from the state arrays."""
 
-    c0: np.ndarray  # (K,): the rigid vectors fixed to the ground
-    avars: np.ndarray  # angle columns turning rigid vectors
-    G: np.ndarray  # (len(avars), K): Σ M·r·e^{jδ} of the rigid vectors turning with each angle
-    f_sl: np.ndarray  # sliders along ground lines ...
-    f_r: np.ndarray
-    Hf: np.ndarray  # (n, K): M·e^{jδ}
+    acols: np.ndarray | None  # state angle columns read (None: all), padding included
+    R: np.ndarray  # (2·len(acols), 2K): real representation of G = Σ M·r·e^{jδ} per turning angle
+    Rj: np.ndarray  # ... of j·G (velocities)
+    scols: np.ndarray | None  # state slider columns read
+    H: np.ndarray  # (len(scols), 2K) real: Σ M·e^{jδ} of each slider's vectors on ground lines, interleaved
     s_ang: np.ndarray  # slider vectors on moving guides: angle, slider, r, e^{jδ}, M
     s_sl: np.ndarray
     s_r: np.ndarray
@@ -63,47 +89,66 @@ class _Sum:
 
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
+        na, ns = sys.n_angles, len(sys.slider_names)
         ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
         cd = np.exp(1j * sys.t_delta[terms])
         M = M.astype(complex).reshape(len(terms), -1)
-        rigid = sl < 0
-        fixed = rigid & (ang < 0)
-        c0 = ((r * cd)[fixed][:, None] * M[fixed]).sum(0)
-        avars = np.unique(ang[rigid & (ang >= 0)])
-        G = np.array([((r * cd)[rigid & (ang == a)][:, None] * M[rigid & (ang == a)]).sum(0) for a in avars])
-        G = G.reshape(len(avars), M.shape[1])
-        f = ~rigid & (ang < 0)
-        mv = ~rigid & (ang >= 0)
-        return cls(c0, avars, G, sl[f], r[f], cd[f][:, None] * M[f], ang[mv], sl[mv], r[mv], cd[mv], M[mv])
+        col = np.where(ang < 0, na, ang)  # the padding column stands for the ground
+        ground = (sl < 0) | (ang < 0)  # rigid, or a slider along a ground line: r (and s) times a constant
+        G = np.zeros((na + 1, M.shape[1]), complex)
+        np.add.at(G, col[ground], (r * cd)[ground][:, None] * M[ground])
+        on_line = (sl >= 0) & (ang < 0)
+        H = np.zeros((ns + 1, M.shape[1]), complex)
+        np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
+        acols, scols = _used(col[ground], na + 1), _used(sl[on_line], ns + 1)
+        G = G if acols is None else G[acols]
+        H = H if scols is None else H[scols]
+        H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * M.shape[1])
+        mv = (sl >= 0) & (ang >= 0)
+        return cls(acols, _real_rep(G), _real_rep(1j * G), scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
 
-    def pos(self, st: _State, k: slice) -> np.ndarray:
-        out = st.E[k][:, self.avars] @ self.G + self.c0
-        if len(self.f_sl):
-            _add_real_product(out, self.f_r + st.S[k][:, self.f_sl], self.Hf)
+    def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
+        """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
+        E = _columns_of(E, self.acols)
+        if factor is not None:
+            E = E * _columns_of(factor, self.acols)
+        return np.ascontiguousarray(E).view(float) @ R
+
+    def _on_lines(self, out: np.ndarray, S: np.ndarray) -> np.ndarray:
+        """out (real, interleaved) += the slider vectors along ground lines for slider values (or rates) S."""
+        if len(self.H):
+            out += _columns_of(S, self.scols) @ self.H
+        return out.view(complex)
+
+    def pos(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
+        out = self._on_lines(self._rigid(st.E[k], self.R), st.S[k])
         if len(self.s_sl):
             es = self.s_cd * st.E[k][:, self.s_ang]
             out += ((self.s_r + st.S[k][:, self.s_sl]) * es) @ self.Ms
         return out
 
-    def vel(self, st: _State, k: slice) -> np.ndarray:
-        out = 1j * ((st.W[k][:, self.avars] * st.E[k][:, self.avars]) @ self.G)
-        if len(self.f_sl):
-            _add_real_product(out, st.SD[k][:, self.f_sl], self.Hf)
+    def vel(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
+        E = st.E[k]
+        out = self._on_lines(self._rigid(E, self.Rj, st.W[k]), st.SD[k])
         if len(self.s_sl):
-            es = self.s_cd * st.E[k][:, self.s_ang]
+            es = self.s_cd * E[:, self.s_ang]
             ms = self.s_r + st.S[k][:, self.s_sl]
             out += ((st.SD[k][:, self.s_sl] + 1j * st.W[k][:, self.s_ang] * ms) * es) @ self.Ms
         return out
 
-    def acc(self, st: _State, k: slice) -> np.ndarray:
-        w = st.W[k][:, self.avars]
-        out = ((1j * st.AL[k][:, self.avars] - w * w) * st.E[k][:, self.avars]) @ self.G
-        if len(self.f_sl):
-            _add_real_product(out, st.SDD[k][:, self.f_sl], self.Hf)
+    def acc(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
+        E, w = st.E[k], st.W[k]
+        wc = _columns_of(w, self.acols)
+        f = np.empty(wc.shape, complex)  # (jα − ω²)·e^{jθ}: tangential and normal accelerations in one product
+        np.multiply(wc, wc, out=f.real)
+        np.negative(f.real, out=f.real)
+        f.imag = _columns_of(st.AL[k], self.acols)
+        f *= _columns_of(E, self.acols)
+        out = self._on_lines(f.view(float) @ self.R, st.SDD[k])
         if len(self.s_sl):
-            es = self.s_cd * st.E[k][:, self.s_ang]
+            es = self.s_cd * E[:, self.s_ang]
             ms = self.s_r + st.S[k][:, self.s_sl]
-            ws = st.W[k][:, self.s_ang]
+            ws = w[:, self.s_ang]
             sd = st.SD[k][:, self.s_sl]
             coriolis = 2j * sd * ws  # a slider on a rotating guide
             out += ((st.SDD[k][:, self.s_sl] + coriolis + (1j * st.AL[k][:, self.s_ang] - ws * ws) * ms) * es) @ self.Ms
@@ -125,7 +170,7 @@ class _Plan:
     unk_sl: list[int]  # slider indices among the unknowns
     masks: list[np.ndarray]  # per unknown: the block terms it enters
     total: _Sum  # Σ over the block's loops (K = m)
-    known_sum: _Sum  # Σ over the vectors independent of the unknowns
+    known_sum: _Sum  # −Σ over the vectors independent of the unknowns (what the unknown vectors must add up to)
     # per unknown angle a: W_a(t) = const + Σ coef·s (the block's vectors turning with a, unrotated)
     w_const: dict[int, complex]
     w_sl: dict[int, list[tuple[int, complex]]]
@@ -173,7 +218,7 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
             u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
         plan = _Plan(
             b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
-            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], Cb.T[known]), w_const, w_sl, u_dir, known,
+            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], -Cb.T[known]), w_const, w_sl, u_dir, known,
         )  # fmt: skip
         plans.append(plan)
     sys.cache["plans"] = plans
@@ -224,9 +269,15 @@ def _w(p: _Plan, st: _State, k: slice, a: int, skip: int = -2) -> np.ndarray | c
     return w
 
 
-def _u(p: _Plan, st: _State, k: slice, i: int) -> np.ndarray:
+def _u(p: _Plan, st: _State, k: slice, i: int) -> np.ndarray | complex:
+    """U: the unit direction of unknown slider i's vector (a constant for a slider along a ground line)."""
     a, coef = p.u_dir[i]
-    return coef * st.E[k, a]
+    return coef if a < 0 else coef * st.E[k, a]
+
+
+def _rows_of(x: np.ndarray | complex, n: int) -> np.ndarray:
+    """x as an array of n rows (a constant repeated)."""
+    return np.broadcast_to(x, (n,))
 
 
 def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -237,7 +288,7 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
     h = 0: the two branches meet — a toggle, or a change point where they cross).
     """
     b = p.block
-    X = -p.known_sum.pos(st, k)[:, 0]
+    X = p.known_sum.pos(st, k)[:, 0]
     if b.kind == "RRR":
         # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
         W1, W2 = _w(p, st, k, p.unk_ang[0]), _w(p, st, k, p.unk_ang[1])
@@ -266,11 +317,13 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         W1 = _w(p, st, k, p.unk_ang[0])
         XU, WU = X * Uc, W1 * Uc
         y = XU.imag
-        A2 = np.abs(W1) ** 2 * np.ones(len(y))
+        A2 = _rows_of(np.abs(W1) ** 2, len(y))
         h = _round_off_zero(A2 - y * y, A2, lambda m: np.abs(y[m]) * p.known_magnitude(st, _sub_rows(k, m)))
         ok = h >= 0
         c = sig * np.sqrt(np.where(ok, h, 0.0))
-        _set_angle(st, k, p.unk_ang[0], (c + 1j * y) / WU)
+        E = np.empty(len(y), complex)
+        E.real, E.imag = c, y
+        _set_angle(st, k, p.unk_ang[0], E * (1.0 / WU) if np.ndim(WU) == 0 else E / WU)
         st.S[k, i] = XU.real - c
         return ok, h
     if b.kind == "RPR":
@@ -292,7 +345,7 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         _set_angle(st, k, a, X / np.where(ok, den, 1.0))
         return ok, disc
     # PP: s1·U1 + s2·U2 = X (linear: one solution, no branches)
-    U1, U2 = _u(p, st, k, p.unk_sl[0]), _u(p, st, k, p.unk_sl[1])
+    U1, U2 = (_rows_of(_u(p, st, k, i), len(X)) for i in p.unk_sl[:2])
     det = cross(U1, U2)
     ok = np.abs(det) > 1e-12
     dd = np.where(ok, det, 1.0)
@@ -331,12 +384,20 @@ def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
     """
     E = E / np.abs(E)
     st.E[k, a] = E
-    phi = np.angle(st.E[k, a])
+    phi = np.arctan2(E.imag, E.real)
     start = st.TH[k.start or 0, a]
-    est = start + np.concatenate(
-        ([np.angle(np.exp(1j * (phi[0] - start)))], np.cumsum(np.angle(np.exp(1j * np.diff(phi)))))
-    )
-    st.TH[k, a] = phi + TWO_PI * np.round((est - phi) / TWO_PI)
+    turns = np.empty(len(phi))  # whole turns between each row's principal angle and the one before
+    turns[:1] = phi[:1] - start
+    np.subtract(phi[1:], phi[:-1], out=turns[1:])
+    turns *= 1.0 / TWO_PI
+    np.rint(turns, out=turns)
+    jumps = np.flatnonzero(turns != 0)  # few: where φ wraps past ±π
+    th = phi
+    if len(jumps):  # θ = φ + 2π·n, n the turns counted so far (piecewise constant between jumps)
+        n = np.zeros(len(phi))
+        n[jumps[0] :] = np.repeat(-np.cumsum(turns[jumps]), np.diff(np.append(jumps, len(phi))))
+        th = phi + TWO_PI * n
+    st.TH[k, a] = th
 
 
 def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -349,22 +410,21 @@ def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
     return np.concatenate([Jc.real, Jc.imag], axis=1)
 
 
-def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: tuple | None = None) -> np.ndarray:
+def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: _Cols2 | None = None) -> np.ndarray:
     """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``.
 
     The unknowns' own rate columns must still be zero: the sum is then the known part.
     ``J``: the block Jacobians for blocks larger than 2×2 (Cramer's rule otherwise).
     """
-    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))  # (rows, m) complex
+    R = p.total.vel(st, k) if what == "v" else p.total.acc(st, k)  # (rows, m) complex: the known part
     if J is None:
-        c1, c2 = cols if cols is not None else _columns(p, st, k)
-        det = cross(c1, c2)
-        R0 = R[:, 0]
-        out = np.empty((len(R0), 2))
-        out[:, 0] = cross(R0, c2) / det
-        out[:, 1] = cross(c1, R0) / det
+        c = cols if cols is not None else _columns(p, st, k)
+        Rr, Ri = R[:, 0].real, R[:, 0].imag  # c1·x1 + c2·x2 = −R, by Cramer's rule
+        out = np.empty((len(Rr), 2))
+        np.multiply(Ri * c.c2r - Rr * c.c2i, c.inv_det, out=out[:, 0])
+        np.multiply(Rr * c.c1i - Ri * c.c1r, c.inv_det, out=out[:, 1])
         return out
-    rhs = np.concatenate([R.real, R.imag], axis=1)
+    rhs = np.concatenate([-R.real, -R.imag], axis=1)
     return _solve_block(J, rhs)
 
 
@@ -383,15 +443,36 @@ def det_sign(J: np.ndarray) -> np.ndarray:
     return np.ones(J.shape[:-2])
 
 
-def _columns(p: _Plan, st: _State, k: slice) -> tuple[np.ndarray, np.ndarray]:
-    """The two complex Jacobian columns of a one-loop block: j·W_a·E_a for an angle, U for a slider."""
+@dataclass
+class _Cols2:
+    """The two Jacobian columns of a one-loop block (j·W_a·E_a for an angle, U for a slider) as contiguous real
+    and imaginary parts, their cross product det and 1/det: shared by the health columns and both rates."""
+
+    c1r: np.ndarray
+    c1i: np.ndarray
+    c2r: np.ndarray
+    c2i: np.ndarray
+    det: np.ndarray
+    inv_det: np.ndarray
+
+    def head(self, n: int) -> _Cols2:
+        """The first n rows."""
+        return _Cols2(*(getattr(self, f.name)[:n] for f in dataclasses.fields(self)))
+
+
+def _columns(p: _Plan, st: _State, k: slice) -> _Cols2:
+    """The Jacobian columns of a one-loop (two-unknown) block on rows ``k``."""
     cols = []
     for v in p.block.unknowns:
         if v in p.unk_ang:
             cols.append(1j * _w(p, st, k, v) * st.E[k, v])
         else:
-            cols.append(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]))
-    return cols[0], cols[1]
+            n = len(st.E[k])
+            cols.append(_rows_of(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]), n))
+    c1r, c1i, c2r, c2i = (np.ascontiguousarray(part) for c in cols for part in (c.real, c.imag))
+    det = c1r * c2i - c1i * c2r
+    with np.errstate(divide="ignore"):
+        return _Cols2(c1r, c1i, c2r, c2i, det, 1.0 / det)
 
 
 def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int) -> None:
@@ -403,22 +484,20 @@ def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int)
 
 
 def _block_health(
-    p: _Plan, st: _State, k: slice, scale: float, cols: tuple | None = None
+    p: _Plan, st: _State, k: slice, scale: float, cols: _Cols2 | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Condition number (angle columns divided by the mechanism size) and det sign per row."""
     if len(p.block.unknowns) == 2:
-        c1, c2 = cols if cols is not None else _columns(p, st, k)
-        if p.block.unknowns[0] in p.unk_ang:
-            c1 = c1 / scale
-        if p.block.unknowns[1] in p.unk_ang:
-            c2 = c2 / scale
-        det = cross(c1, c2)
-        f2 = (c1.real**2 + c1.imag**2) + (c2.real**2 + c2.imag**2)
-        ad = np.abs(det)
-        root = np.sqrt(np.maximum(f2 * f2 - 4 * det * det, 0.0))
-        with np.errstate(divide="ignore"):
-            cond = np.where(ad > 0, (f2 + root) / (2 * np.where(ad > 0, ad, 1.0)), np.inf)
-        return cond, np.sign(det)
+        c = cols if cols is not None else _columns(p, st, k)
+        s1 = 1.0 / scale if p.block.unknowns[0] in p.unk_ang else 1.0  # angle columns in lengths: per size
+        s2 = 1.0 / scale if p.block.unknowns[1] in p.unk_ang else 1.0
+        f2 = (c.c1r * c.c1r + c.c1i * c.c1i) * (s1 * s1) + (c.c2r * c.c2r + c.c2i * c.c2i) * (s2 * s2)
+        ad = np.abs(c.det) * (s1 * s2)
+        root = np.sqrt(np.maximum(f2 * f2 - 4 * ad * ad, 0.0))  # σ_max² − σ_min² of the scaled 2×2 block
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cond = (f2 + root) / (2 * ad)  # σ_max/σ_min = (σ_max² + ... )/(2·|det|); |det| = 0 gives inf
+        cond[ad == 0] = np.inf
+        return cond, np.sign(c.det)
     J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
     colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
     Js = J * colscale
@@ -448,6 +527,8 @@ class _Inputs:
         X, XD, XDD = np.zeros((len(t), m)), np.zeros((len(t), m)), np.zeros((len(t), m))
         if m == 0:
             return X, XD, XDD
+        if len(t) and t[0] >= self.t_first:  # (ascending) every time is the file's own: no lead-in path
+            return evaluate_all(self.mech, t)
         real = t >= self.t_first
         if real.any():
             X[real], XD[real], XDD[real] = evaluate_all(self.mech, t[real])
@@ -539,7 +620,8 @@ def _impose_drivers(sys: LoopSystem, st: _State, X: np.ndarray, XD: np.ndarray, 
     for j, v in enumerate(sys.drivers):
         if v < na:
             st.TH[:, v] = X[:, j]
-            st.E[:, v] = np.cos(X[:, j]) + 1j * np.sin(X[:, j])
+            np.cos(X[:, j], out=st.E[:, v].real)
+            np.sin(X[:, j], out=st.E[:, v].imag)
             st.W[:, v], st.AL[:, v] = XD[:, j], XDD[:, j]
         else:
             st.S[:, v - na], st.SD[:, v - na], st.SDD[:, v - na] = X[:, j], XD[:, j], XDD[:, j]

@@ -64,6 +64,7 @@ from .kernels import (
     _Sum,
     _system_sums,
     _velocity_bound,
+    row_max,
 )
 from .loops import LoopSystem
 from .result import Result
@@ -110,7 +111,7 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
                 _fail(out, _Failure(int(bad[0]), p.block.loops[0], _toggle_reason(cond[bad[0]], run.rtol)))
                 k = slice(0, out.n_ok)
                 cond, sgn, near = cond[k], sgn[k], near[k]
-                cols = None if cols is None else (cols[0][k], cols[1][k])
+                cols = None if cols is None else cols.head(out.n_ok)
         out.conds.append(cond)
         out.signs.append(sgn)
         if out.n_ok == 0 or not run.rates:
@@ -297,9 +298,10 @@ def solve(
     vloop.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
     """
     run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
-    budget.check(run.sys, len(times), False, CHUNK_ROWS, run.memory_budget)
+    chunk = IN_MEMORY * CHUNK  # the results are all kept in memory anyway: fewer chunk borders to join
+    budget.check(run.sys, len(times), False, 2 * chunk, run.memory_budget)
     with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
-        return _solve(run, times)
+        return _solve(run, times, chunk)
 
 
 def solve_iter(
@@ -325,6 +327,7 @@ def _prepare(
 ) -> tuple[_Run, np.ndarray]:
     """The run context and checked times of a solve."""
     mech = system.mechanism
+    budget.keep_heap()
     tol = float(mech.options.get("tol", DEFAULT_TOL if tol is None else tol))
     max_iter = int(mech.options.get("max_iter", DEFAULT_MAX_ITER if max_iter is None else max_iter))
     rtol = float(rtol if rtol is not None else mech.options.get("rtol", DEFAULT_RTOL))
@@ -345,6 +348,7 @@ class _Grid:
 
     t: np.ndarray
     out: np.ndarray  # internal row of each requested sample (increasing)
+    inputs: tuple | None = None  # the inputs (X, XD, XDD) at t, where _grid has evaluated them already
     skip: int = 0  # leading requested samples already given by the chunk before (its last one)
     offset: int = 0  # index in the whole run of the requested sample at out[0]
     total: int = 0  # requested samples in the whole run
@@ -370,11 +374,11 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
     n = len(times)
     steps = np.ones(max(n - 1, 0), np.int64)
     if mech.drivers and n > 1:
-        X, XD, _ = run.inputs(times)
+        X, XD, XDD = run.inputs(times)
         units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
         h = np.diff(times)[:, None]
         travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
-        need = np.ceil(travel.max(axis=1) / MAX_INPUT_STEP)
+        need = np.ceil(row_max(travel) / MAX_INPUT_STEP)
         need = np.where(np.isfinite(need) & (need <= MAX_INSERTED), need, 1.0)  # absurd inputs: refused later
         if need.sum() - len(need) > MAX_INSERTED:
             raise MotionError(
@@ -384,6 +388,8 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
                 entry="time",
             )
         steps = np.maximum(need, 1).astype(np.int64)
+    if len(lead) == 0 and mech.drivers and n > 1 and int(steps.sum()) == n - 1:  # the requested times, as they are
+        return _Grid(times, np.arange(n), inputs=(X, XD, XDD))
     starts = np.concatenate([[0], np.cumsum(steps)])  # internal index of each requested sample
     k = np.arange(starts[-1])
     seg = np.repeat(np.arange(len(steps)), steps)
@@ -397,6 +403,9 @@ CHUNK = 16_384  # requested samples solved together: the state stays in cache, m
 
 
 CHUNK_ROWS = 2 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
+
+
+IN_MEMORY = 4  # solve() takes chunks this many times longer than streamed runs
 
 
 def _solve(run: _Run, times: np.ndarray, chunk: int | None = None) -> Result:
@@ -444,7 +453,7 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
     i0, n_total, size, at_least = 0, len(times), chunk, 1
     while i0 < n_total:
         i1 = min(i0 + size, n_total)
-        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least)
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, 2 * chunk)
         run.tail = grid.offset + len(grid.out) == n_total
         st = _initial_state(sys, len(grid.t))
         if carry is not None:
@@ -456,7 +465,7 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
             failure = None
         except MotionError as exc:
             res, failure = exc.partial, exc
-        reach = _border_reach(run, grid)
+        reach = math.inf if run.tail else _border_reach(run, grid)
         cut = len(grid.out) - 1 if run.tail else _cut(run, grid, res, reach)
         if failure is not None and (run.tail or failure.time is None or failure.time <= reach):
             raise failure
@@ -475,16 +484,24 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
 
 
 def _chunk_grid(
-    run: _Run, lead: np.ndarray, carry: tuple | None, times: np.ndarray, i0: int, i1: int, n_total: int, at_least: int
+    run: _Run,
+    lead: np.ndarray,
+    carry: tuple | None,
+    times: np.ndarray,
+    i0: int,
+    i1: int,
+    n_total: int,
+    at_least: int,
+    max_rows: int = CHUNK_ROWS,
 ) -> _Grid:
-    """The internal grid of requested samples i0..i1-1 (after the carried rows), halved until it fits CHUNK_ROWS
+    """The internal grid of requested samples i0..i1-1 (after the carried rows), halved until it fits ``max_rows``
     or holds ``at_least`` requested samples."""
     while True:
         if carry is None:
             grid = _grid(run, lead, times[i0:i1])
         else:
             grid = _grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
-        if len(grid.t) <= CHUNK_ROWS or i1 - i0 <= at_least:
+        if len(grid.t) <= max_rows or i1 - i0 <= at_least:
             break
         i1 = max(i0 + (i1 - i0) // 2, i0 + at_least)
     return dataclasses.replace(grid, skip=0 if carry is None else 1, offset=i0 - (carry is not None), total=n_total)
@@ -520,7 +537,7 @@ def _solve_grid(run: _Run, grid: _Grid, st: _State, turns: np.ndarray | None) ->
     """Solve one chunk's grid (row 0 assembled; rows 0–1 carried from the chunk before, if any)."""
     sys = run.sys
     tg, n, first = grid.t, len(grid.t), grid.first
-    X, XD, XDD = run.inputs(tg)
+    X, XD, XDD = grid.inputs if grid.inputs is not None else run.inputs(tg)
     _impose_drivers(sys, st, X, XD, XDD)
     early = _check_inputs(sys, X, XD, XDD, first, run.rtol)
     solved = _run_blocks(run, st, tg, early.sample if early else n)
@@ -533,8 +550,8 @@ def _solve_grid(run: _Run, grid: _Grid, st: _State, turns: np.ndarray | None) ->
     limit = None
     if failure is not None and failure.sample > first and failure.loop is not None and failure is not early:
         limit = _locate_failure(run, st, tg, failure.sample, X)
-    result = _result(run, st, grid, n_ok, solved)
-    bad = _first_non_finite(result)
+    result, sources = _result(run, st, grid, n_ok, solved)
+    bad = None if all(np.isfinite(np.sum(a)) for a in sources) else _first_non_finite(result)
     if bad is not None:
         row, column = bad
         failure = _Failure(
@@ -572,7 +589,8 @@ def _check_inputs(
 
 
 def _first_non_finite(result: Result) -> tuple[int, str] | None:
-    """(row, column) of the first non-finite output value, if any."""
+    """(row, column) of the first non-finite output value, if any (searched column by column only where a sum
+    over the arrays the columns come from is not finite: a NaN or ±∞ anywhere makes it so)."""
     first = None
     for name, col in result.columns.items():
         bad = ~np.isfinite(col)
@@ -583,7 +601,8 @@ def _first_non_finite(result: Result) -> tuple[int, str] | None:
     return first
 
 
-def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> Result:
+def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> tuple[Result, list[np.ndarray]]:
+    """The Result of a chunk's solved rows, and the arrays its columns are taken from (to check finiteness)."""
     sys = run.sys
     mech = sys.mechanism
     rows = grid.out[grid.skip :][grid.out[grid.skip :] < n_ok]  # the requested samples solved
@@ -591,11 +610,15 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
     k = _as_slice(rows)
     P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
     cols: dict[str, np.ndarray] = {}
+
+    def column(A: np.ndarray, j: int) -> np.ndarray:  # a state column's rows, as an array of its own
+        return A[k, j].copy() if isinstance(k, slice) else A[k, j]
+
     for name, a, offset in sys.link_outputs:
         if a >= 0:
-            cols[f"{name}.theta"] = st.TH[rows, a] + offset
-            cols[f"{name}.omega"] = st.W[rows, a]
-            cols[f"{name}.alpha"] = st.AL[rows, a]
+            cols[f"{name}.theta"] = st.TH[k, a] + offset
+            cols[f"{name}.omega"] = column(st.W, a)
+            cols[f"{name}.alpha"] = column(st.AL, a)
         else:
             cols[f"{name}.theta"] = np.full(len(rows), offset % TWO_PI)
             cols[f"{name}.omega"] = np.zeros(len(rows))
@@ -605,7 +628,8 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
         cols[f"{name}.vx"], cols[f"{name}.vy"] = V[:, i].real, V[:, i].imag
         cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
     for i, name in enumerate(sys.slider_names):
-        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = st.S[rows, i], st.SD[rows, i], st.SDD[rows, i]
+        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = (column(A, i) for A in (st.S, st.SD, st.SDD))
+    sources = [P, V, A, *(getattr(st, name)[k] for name in ("TH", "W", "AL", "S", "SD", "SDD"))]
     t = grid.t[rows]
     seen = grid.t[grid.out[: grid.skip + len(rows)]]  # requested times solved in this chunk and the one before
     span = np.array([run.t_start, seen[-1]]) if len(seen) else np.zeros(0)
@@ -621,7 +645,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> R
             **_events_meta(run, span),
             **_redundancy(sys),
         },
-    )
+    ), sources
 
 
 def _as_slice(rows: np.ndarray) -> slice | np.ndarray:
@@ -635,10 +659,16 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
     """Per requested sample (``rows``): closure residual, worst block condition number, branch signature,
     flags. ``t``: the times of the rows, after the last sample of the chunk before if there is one."""
     sys = run.sys
-    residual = (
-        np.max(np.abs(loops.pos(st, _as_slice(rows))), axis=1) / run.scale if len(sys.loops) else np.zeros(len(rows))
-    )
-    cond = np.max(np.stack([c[rows] for c in solved.conds]), axis=0) if solved.conds else np.ones(len(rows))
+    residual = np.zeros(len(rows))
+    if len(sys.loops):
+        F = loops.pos(st, _as_slice(rows)).view(float)
+        np.sqrt(row_max(F[:, 0::2] * F[:, 0::2] + F[:, 1::2] * F[:, 1::2]), out=residual)
+        residual /= run.scale
+    cond = np.ones(len(rows))
+    if solved.conds:
+        cond = solved.conds[0][rows]
+        for c in solved.conds[1:]:
+            np.maximum(cond, c[rows], out=cond)
     branch = np.zeros(len(rows), np.int64)
     for bit, sgn in enumerate(solved.signs):
         branch |= (sgn[rows] > 0).astype(np.int64) << bit
