@@ -17,7 +17,9 @@ pair. Each is solved over its file's time span with ``steps`` samples:
   turns its crank at a constant rate per step, so it runs the same geometry at the file's initial ω.
 
 Times are the best of ``--repeat`` runs; BLAS is pinned to one thread (threadpoolctl) since the products
-are small and a second thread only waits for the other core. Every run is checked: auto against the
+are small and a second thread only waits for the other core. vloop asks glibc to keep freed heap for reuse
+(vloop.budget.keep_heap, at its first solve; the whole process, so every contender here runs with it);
+``VLOOP_KEEP_HEAP=0 python benchmarks/bench_speed.py`` measures without it. Every run is checked: auto against the
 closed form (1e-9 of peak) and newton against auto.
 """
 
@@ -42,6 +44,7 @@ sys.path.insert(0, str(ROOT))
 
 import vloop  # noqa: E402
 from validators import analytic  # noqa: E402
+from vloop.budget import keep_heap  # noqa: E402
 
 MECHANISMS = (
     "eightbar",
@@ -206,6 +209,12 @@ def main(argv: list[str] | None = None) -> int:
         have_pylinkage = False
         print("pylinkage not installed (pip install 'vloop[bench]'): no pylinkage baseline\n")
     ctx = threadpool_limits(1) if threadpool_limits else None
+    kept = keep_heap()  # what vloop's first solve does; every contender runs in this process after it
+    print(
+        "allocator: glibc keeps freed heap for reuse (vloop's default)"
+        if kept
+        else "allocator: system default (VLOOP_KEEP_HEAP=0, MALLOC_* set, or not glibc): temporaries are page-faulted"
+    )
     try:
         for name in args.only:
             print("\n".join(bench(name, args.steps, args.repeat, have_pylinkage)), flush=True)

@@ -71,14 +71,16 @@ def _used(idx: np.ndarray, width: int) -> np.ndarray | None:
 @dataclass
 class _Sum:
     """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small real matrix products: rigid
-    vectors by the angle that turns them (G; the vectors fixed to the ground on the padding column, whose E
-    is 1 and ω, α are 0), slider vectors on the ground (H: only s varies) and slider vectors on moving guides.
-    Complex products are taken as real ones on the interleaved [Re, Im] view (_real_rep): half the work.
+    vectors by the angle that turns them (G), vectors fixed to the ground (c0), slider vectors on the ground
+    (H: only s varies) and slider vectors on moving guides. Complex products are taken as real ones on the
+    interleaved [Re, Im] view (_real_rep): half the work. A sum that reads most angle columns reads whole state
+    rows, the ground vectors on the padding column (E = 1, ω = α = 0); one that reads a few gathers them.
     Evaluated for positions, velocities or accelerations from the state arrays."""
 
-    acols: np.ndarray | None  # state angle columns read (None: all), padding included
+    acols: np.ndarray | None  # state angle columns read (None: whole rows, padding included, c0 in R)
     R: np.ndarray  # (2·len(acols), 2K): real representation of G = Σ M·r·e^{jδ} per turning angle
     Rj: np.ndarray  # ... of j·G (velocities)
+    c0: np.ndarray  # (2K,): the ground vectors, interleaved (zero where R has them: acols None)
     scols: np.ndarray | None  # state slider columns read
     H: np.ndarray  # (len(scols), 2K) real: Σ M·e^{jδ} of each slider's vectors on ground lines, interleaved
     s_ang: np.ndarray  # slider vectors on moving guides: angle, slider, r, e^{jδ}, M
@@ -93,22 +95,29 @@ class _Sum:
         ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
         cd = np.exp(1j * sys.t_delta[terms])
         M = M.astype(complex).reshape(len(terms), -1)
+        K = M.shape[1]
         col = np.where(ang < 0, na, ang)  # the padding column stands for the ground
         ground = (sl < 0) | (ang < 0)  # rigid, or a slider along a ground line: r (and s) times a constant
-        G = np.zeros((na + 1, M.shape[1]), complex)
+        G = np.zeros((na + 1, K), complex)
         np.add.at(G, col[ground], (r * cd)[ground][:, None] * M[ground])
         on_line = (sl >= 0) & (ang < 0)
-        H = np.zeros((ns + 1, M.shape[1]), complex)
+        H = np.zeros((ns + 1, K), complex)
         np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
         acols, scols = _used(col[ground], na + 1), _used(sl[on_line], ns + 1)
-        G = G if acols is None else G[acols]
+        c0 = np.zeros(2 * K)
+        if acols is not None:  # gathered: the ground vectors are a constant, the padding column is not read
+            c0 = np.ascontiguousarray(G[na]).view(float).copy()
+            acols = acols[acols < na]
+            G = G[acols]
         H = H if scols is None else H[scols]
-        H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * M.shape[1])
+        H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * K)
         mv = (sl >= 0) & (ang >= 0)
-        return cls(acols, _real_rep(G), _real_rep(1j * G), scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
+        return cls(acols, _real_rep(G), _real_rep(1j * G), c0, scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
+        if self.acols is not None and not len(self.acols):
+            return np.zeros((len(E), R.shape[1]))
         E = _columns_of(E, self.acols)
         if factor is not None:
             E = E * _columns_of(factor, self.acols)
@@ -121,7 +130,10 @@ class _Sum:
         return out.view(complex)
 
     def pos(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
-        out = self._on_lines(self._rigid(st.E[k], self.R), st.S[k])
+        rigid = self._rigid(st.E[k], self.R)
+        if self.acols is not None:
+            rigid += self.c0
+        out = self._on_lines(rigid, st.S[k])
         if len(self.s_sl):
             es = self.s_cd * st.E[k][:, self.s_ang]
             out += ((self.s_r + st.S[k][:, self.s_sl]) * es) @ self.Ms
@@ -144,7 +156,7 @@ class _Sum:
         np.negative(f.real, out=f.real)
         f.imag = _columns_of(st.AL[k], self.acols)
         f *= _columns_of(E, self.acols)
-        out = self._on_lines(f.view(float) @ self.R, st.SDD[k])
+        out = self._on_lines(f.view(float) @ self.R if f.shape[1] else np.zeros((len(f), self.R.shape[1])), st.SDD[k])
         if len(self.s_sl):
             es = self.s_cd * E[:, self.s_ang]
             ms = self.s_r + st.S[k][:, self.s_sl]
