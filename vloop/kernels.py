@@ -103,11 +103,10 @@ class _Sum:
         on_line = (sl >= 0) & (ang < 0)
         H = np.zeros((ns + 1, K), complex)
         np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
-        acols, scols = _used(col[ground], na + 1), _used(sl[on_line], ns + 1)
+        acols, scols = _used(ang[ground & (ang >= 0)], na + 1), _used(sl[on_line], ns + 1)
         c0 = np.zeros(2 * K)
         if acols is not None:  # gathered: the ground vectors are a constant, the padding column is not read
             c0 = np.ascontiguousarray(G[na]).view(float).copy()
-            acols = acols[acols < na]
             G = G[acols]
         H = H if scols is None else H[scols]
         H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * K)

@@ -659,33 +659,36 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
     """Per requested sample (``rows``): closure residual, worst block condition number, branch signature,
     flags. ``t``: the times of the rows, after the last sample of the chunk before if there is one."""
     sys = run.sys
+    k = _as_slice(rows)
     residual = np.zeros(len(rows))
     if len(sys.loops):
-        F = loops.pos(st, _as_slice(rows)).view(float)
+        F = loops.pos(st, k).view(float)
         np.sqrt(row_max(F[:, 0::2] * F[:, 0::2] + F[:, 1::2] * F[:, 1::2]), out=residual)
         residual /= run.scale
     cond = np.ones(len(rows))
     if solved.conds:
-        cond = solved.conds[0][rows]
+        cond = solved.conds[0][k].copy()
         for c in solved.conds[1:]:
-            np.maximum(cond, c[rows], out=cond)
+            np.maximum(cond, c[k], out=cond)
     branch = np.zeros(len(rows), np.int64)
     for bit, sgn in enumerate(solved.signs):
-        branch |= (sgn[rows] > 0).astype(np.int64) << bit
-    at_change = solved.at_change[rows] if len(solved.at_change) else np.zeros(len(rows), bool)
-    change = at_change.copy()
+        branch |= (sgn[k] > 0).astype(np.int64) << bit
+    at_change = solved.at_change[k] if len(solved.at_change) else np.zeros(len(rows), bool)
+    change = at_change.astype(np.int8)
     skip = len(t) - len(rows)  # t starts with the chunk before's last sample, if any
     for evs in run.events.values():
         for ev in evs:
             j = int(np.searchsorted(t, ev.time))
             if 0 < j < len(t) and j >= skip:
-                change[j - skip] = True
+                change[j - skip] = 1
+    ill = _error_bound(cond) > ILL_FRACTION * run.rtol
+    ill &= ~at_change
     return {
         "residual": residual,
         "cond": cond,
         "branch": branch,
-        "ill_conditioned": ((_error_bound(cond) > ILL_FRACTION * run.rtol) & ~at_change).astype(np.int8),
-        "change_point": change.astype(np.int8),
+        "ill_conditioned": ill.astype(np.int8),
+        "change_point": change,
     }
 
 
