@@ -467,8 +467,8 @@ class _Cols2:
     inv_det: np.ndarray
 
     def head(self, n: int) -> _Cols2:
-        """The first n rows."""
-        return _Cols2(*(getattr(self, f.name)[:n] for f in dataclasses.fields(self)))
+        """The first n rows (a constant column stays a constant)."""
+        return _Cols2(*(x[:n] if np.ndim(x) else x for x in (getattr(self, f.name) for f in dataclasses.fields(self))))
 
 
 def _columns(p: _Plan, st: _State, k: slice) -> _Cols2:
@@ -477,10 +477,12 @@ def _columns(p: _Plan, st: _State, k: slice) -> _Cols2:
     for v in p.block.unknowns:
         if v in p.unk_ang:
             cols.append(1j * _w(p, st, k, v) * st.E[k, v])
-        else:
-            n = len(st.E[k])
-            cols.append(_rows_of(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]), n))
-    c1r, c1i, c2r, c2i = (np.ascontiguousarray(part) for c in cols for part in (c.real, c.imag))
+        else:  # a slider's direction: a constant along a ground line
+            cols.append(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]))
+    n = len(st.E[k])
+    if all(np.ndim(c) == 0 for c in cols):  # both constant (two sliders along ground lines): one per row all the same
+        cols = [np.full(n, c) for c in cols]
+    c1r, c1i, c2r, c2i = (np.ascontiguousarray(x) if np.ndim(x) else float(x) for c in cols for x in (c.real, c.imag))
     det = c1r * c2i - c1i * c2r
     with np.errstate(divide="ignore"):
         return _Cols2(c1r, c1i, c2r, c2i, det, 1.0 / det)
