@@ -124,8 +124,14 @@ class _Sum:
 
     def _on_lines(self, out: np.ndarray, S: np.ndarray) -> np.ndarray:
         """out (real, interleaved) += the slider vectors along ground lines for slider values (or rates) S."""
-        if len(self.H):
+        if self.H.size > 4:
             out += _columns_of(S, self.scols) @ self.H
+        elif self.H.size:  # one slider into one complex sum: BLAS is slow on such a thin product
+            cols = range(S.shape[1]) if self.scols is None else self.scols
+            for r, c in enumerate(cols):
+                for j in range(self.H.shape[1]):
+                    if self.H[r, j]:
+                        out[:, j] += S[:, c] * self.H[r, j]
         return out.view(complex)
 
     def pos(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
