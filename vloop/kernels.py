@@ -194,6 +194,9 @@ class _Plan:
     # per unknown slider i: its vector's direction U = coef·E[:, ang]
     u_dir: dict[int, tuple[int, complex]]
     known: np.ndarray = None  # type: ignore[assignment]  # the block terms independent of the unknowns
+    # Σ over the block's loops without the rigid vectors turning with an unknown angle: with the unknowns' rates
+    # still zero those add nothing to the velocities' known part (a sum for velocities only)
+    vel_sum: _Sum = None  # type: ignore[assignment]
 
     def known_magnitude(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
         """Σ |r + s| over the known vectors per row: what the known part X is summed from (its round-off
@@ -237,6 +240,8 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
             b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
             _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], -Cb.T[known]), w_const, w_sl, u_dir, known,
         )  # fmt: skip
+        still = ~((sl < 0) & np.isin(ang, unk_ang))
+        plan.vel_sum = _Sum.build(sys, terms[still], Cb.T[still])
         plans.append(plan)
     sys.cache["plans"] = plans
     return plans
@@ -433,7 +438,7 @@ def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols
     The unknowns' own rate columns must still be zero: the sum is then the known part.
     ``J``: the block Jacobians for blocks larger than 2×2 (Cramer's rule otherwise).
     """
-    R = p.total.vel(st, k) if what == "v" else p.total.acc(st, k)  # (rows, m) complex: the known part
+    R = p.vel_sum.vel(st, k) if what == "v" else p.total.acc(st, k)  # (rows, m) complex: the known part
     if J is None:
         c = cols if cols is not None else _columns(p, st, k)
         Rr, Ri = R[:, 0].real, R[:, 0].imag  # c1·x1 + c2·x2 = −R, by Cramer's rule
@@ -611,7 +616,7 @@ class _Solved:
 
 def _rates_by(p: _Plan, st: _State, k: slice, inv: np.ndarray, what: str) -> np.ndarray:
     """Rates of a Newton block from its factored Jacobians (J⁻¹, or the least-squares (JᵀJ)⁻¹Jᵀ)."""
-    R = -(p.total.vel(st, k) if what == "v" else p.total.acc(st, k))
+    R = -(p.vel_sum.vel(st, k) if what == "v" else p.total.acc(st, k))
     rhs = np.concatenate([R.real, R.imag], axis=1)
     return (inv @ rhs[..., None])[..., 0]
 
