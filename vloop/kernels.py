@@ -339,7 +339,7 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
         W1 = _w(p, st, k, p.unk_ang[0])
         XU, WU = X * Uc, W1 * Uc
         y = XU.imag
-        A2 = _rows_of(np.abs(W1) ** 2, len(y))
+        A2 = np.abs(W1) ** 2  # |W1|², per row or one for all
         h = _round_off_zero(A2 - y * y, A2, lambda m: np.abs(y[m]) * p.known_magnitude(st, _sub_rows(k, m)))
         ok = h >= 0
         c = sig * np.sqrt(np.where(ok, h, 0.0))
@@ -376,7 +376,9 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
     return ok, np.full(len(ok), np.inf)
 
 
-def _round_off_zero(h: np.ndarray, size: np.ndarray, carried: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+def _round_off_zero(
+    h: np.ndarray, size: np.ndarray | float, carried: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
     """A discriminant whose magnitude is within round-off of the terms it was computed from is zero: the
     two branches meet (an input exactly at a limit or change point, up to round-off). ``size`` bounds the
     terms; ``carried(mask)`` adds, on the rows of ``mask``, the round-off the known part X brings in (large
@@ -384,7 +386,7 @@ def _round_off_zero(h: np.ndarray, size: np.ndarray, carried: Callable[[np.ndarr
     small = np.abs(h) <= 1e-4 * size
     if not small.any():
         return h
-    bound = 16 * EPS * size[small]
+    bound = 16 * EPS * (size[small] if np.ndim(size) else size)  # (size: per row, or one for all rows)
     bound = bound + 16 * EPS * carried(small)
     out = h.copy()
     out[np.nonzero(small)[0][np.abs(h[small]) <= bound]] = 0.0
@@ -417,7 +419,11 @@ def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
     th = phi
     if len(jumps):  # θ = φ + 2π·n, n the turns counted so far (piecewise constant between jumps)
         n = np.zeros(len(phi))
-        n[jumps[0] :] = np.repeat(-np.cumsum(turns[jumps]), np.diff(np.append(jumps, len(phi))))
+        if len(jumps) <= 8:
+            for j in jumps.tolist():
+                n[j:] -= turns[j]
+        else:
+            n[jumps[0] :] = np.repeat(-np.cumsum(turns[jumps]), np.diff(np.append(jumps, len(phi))))
         th = phi + TWO_PI * n
     st.TH[k, a] = th
 
