@@ -88,3 +88,27 @@ def test_catalog_files_started_late(name):
         except vloop.MotionError:  # the five-bar's second crank is a rocker whose motion ends: both runs must stop
             with pytest.raises(vloop.MotionError):
                 vloop.solve(mech, times=t0 + 0.01 * np.arange(8))
+
+
+@pytest.mark.parametrize("turns", [3, 12])  # up to 8 wraps of an angle are counted one by one, more at once
+def test_unwrapped_angles_of_a_drag_link_against_the_hand_closed_form(turns):
+    """The follower and coupler of a drag link turn with the crank: their unwrapped θ over many turns equals the
+    hand closed form (B from the law of cosines as in drag_link(), atan2, numpy's np.unwrap) to 1e-12 rad."""
+    ground, crank, coupler, follower, omega = 1.0, 3.0, 3.5, 3.0, 2.0
+    mech = vloop.from_dict(drag_link(ground, crank, coupler, follower, 0.3, omega))
+    t = np.linspace(0.0, turns * 2 * math.pi / omega, 100 * turns + 1)
+    res = vloop.solve(mech, times=t)
+    th2 = 0.3 + omega * t
+    ax, ay = crank * np.cos(th2), crank * np.sin(th2)
+    dx, dy = ground - ax, -ay
+    D = np.hypot(dx, dy)
+    k = (coupler**2 - follower**2 + D * D) / (2 * D)
+    h = np.sqrt(coupler**2 - k * k)
+    bx, by = ax + (k * dx - h * dy) / D, ay + (k * dy + h * dx) / D
+    th4 = np.unwrap(np.arctan2(by, bx - ground))
+    th3 = np.unwrap(np.arctan2(by - ay, bx - ax))
+    for name, ref in (("follower", th4), ("coupler", th3)):
+        got = res[f"{name}.theta"]
+        ref = ref + 2 * math.pi * round((got[0] - ref[0]) / (2 * math.pi))  # the file's turn at t = 0
+        assert np.max(np.abs(got - ref)) < 1e-12 * turns * 2 * math.pi, name
+        assert got[-1] - got[0] == pytest.approx(turns * 2 * math.pi, abs=1e-9)  # one turn per crank turn
