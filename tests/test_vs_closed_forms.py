@@ -1,5 +1,5 @@
 """vloop against the hand-derived closed forms (validators/analytic_*.py), within 1e-12 of each quantity's peak
-(plus an absolute floor of 1e-12: vloop.compare), on both paths: closed-form dyads and one Newton block."""
+(and 1e-12 of its group's peak for quantities near zero: vloop.compare), on both paths: closed-form dyads and one Newton block."""
 
 from __future__ import annotations
 
