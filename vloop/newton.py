@@ -82,6 +82,21 @@ class _Block:
         self.D = D.reshape(2 * nt, -1)
         self.colscale = np.where([v < na for v in unk], 1.0 / run.scale, 1.0)
         self.scale = run.scale
+        # per term: the position in x of its unknown angle and of its unknown slider (-1: none)
+        where = {v: u for u, v in enumerate(unk)}
+        self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in p.ang], int)
+        self.t_us = np.array([where.get(int(q) + na, -1) if q >= 0 else -1 for q in p.sl], int)
+        self.dep = np.nonzero((self.t_ua >= 0) | (self.t_us >= 0))[0]  # the terms the unknowns move
+        # J[l, u] = Σ_t C[l, t]·(j·z_t if u is t's angle; e_t if u is t's slider): its nonzero entries as
+        # products G @ [z; e] over the moved terms
+        G = np.zeros((self.m2 // 2, self.nu, 2, len(self.dep)), complex)
+        for k, t in enumerate(self.dep):
+            if self.t_ua[t] >= 0:
+                G[:, self.t_ua[t], 0, k] = 1j * p.C[:, t]
+            if self.t_us[t] >= 0:
+                G[:, self.t_us[t], 1, k] = p.C[:, t]
+        self.jl, self.ju = np.nonzero(np.any(G != 0, axis=(2, 3)))
+        self.G = G[self.jl, self.ju].reshape(len(self.jl), -1)
 
     def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
         x = np.empty((len(rows), self.nu))
@@ -138,6 +153,91 @@ class _Block:
         sign[exact] = _s.det_sign(J[exact])
         last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
         return sign[last]
+
+
+class _Rows:
+    """A square block's loop sums on rows 0..n-1 as functions of its unknowns alone, batch-last (x[u, row]):
+    what the unknowns do not move (the other terms' sum, every moved term's known length and direction) is
+    gathered once, so a Newton iteration costs a few small products over the rows."""
+
+    def __init__(self, blk: _Block, st: _State, n: int) -> None:
+        p, d = blk.p, blk.dep
+        E, S = st.E[:n], st.S[:n]
+        kn = np.setdiff1d(np.arange(len(p.ang)), d)
+        self.F0 = (((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T  # (m, n)
+        ua, us = blk.t_ua[d], blk.t_us[d]
+        # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
+        self.W = (p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T
+        self.L = (p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T
+        self.ta, self.xa = np.nonzero(ua >= 0)[0], ua[ua >= 0]
+        self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]
+        self.Cd = np.ascontiguousarray(p.Ct[d].T)
+        self.blk = blk
+
+    def eval(self, x: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """[Re; Im] of the loop sums at x (2m, n) and, if ``jac``, their Jacobian (2m, nu, n)."""
+        blk = self.blk
+        e, ln = self.W, self.L
+        with np.errstate(invalid="ignore"):
+            if len(self.ta):
+                th = x[self.xa]
+                e = e.copy()
+                e[self.ta] *= np.cos(th) + 1j * np.sin(th)
+            if len(self.ts):
+                ln = ln.copy()
+                ln[self.ts] += x[self.xs]
+            z = ln * e
+            F = self.F0 + self.Cd @ z
+            if not jac:
+                return np.concatenate([F.real, F.imag]), None
+            Jn = blk.G @ np.concatenate([z, e])
+        m = blk.m2 // 2
+        J = np.zeros((blk.m2, blk.nu, x.shape[1]))
+        J[blk.jl, blk.ju] = Jn.real
+        J[blk.jl + m, blk.ju] = Jn.imag
+        return np.concatenate([F.real, F.imag]), J
+
+
+def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """X·F per row of batch-last stacks: X (n, k, rows), F (k, rows)."""
+    return np.einsum("ukn,kn->un", X, F)
+
+
+def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
+    """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): the Frobenius bound on every row,
+    the 2-norm condition number where the bound reaches the flag level."""
+    c2 = colscale * colscale
+    with np.errstate(invalid="ignore", over="ignore"):
+        cond = np.sqrt((c2 @ np.sum(J * J, axis=0)) * ((1.0 / c2) @ np.sum(X * X, axis=1)))
+    cond = np.where(np.isfinite(cond), cond, np.inf)
+    near = np.nonzero(cond > (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3))[0]
+    if len(near):
+        cond[near] = cond_2norm((J[:, :, near] * colscale[:, None]).transpose(2, 0, 1))
+    return cond
+
+
+EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-12 (relative)
+
+
+def cond_2norm(A: np.ndarray) -> np.ndarray:
+    """2-norm condition numbers of a stack of square matrices (rows, n, n), as numpy.linalg.cond's SVD gives
+    them: from the eigenvalues of AᵀA (half an SVD's cost), where λ_min's round-off, ~n·ε·λ_max, stays
+    below 1e-12 of it (cond ≤ EIG_COND); by SVD where larger, non-finite where A is."""
+    out = np.full(len(A), np.inf)
+    ok = np.nonzero(np.all(np.isfinite(A), axis=(1, 2)))[0]
+    if not len(ok):
+        return out
+    A = A[ok]
+    lam = np.linalg.eigvalsh(A.transpose(0, 2, 1) @ A)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.sqrt(lam[:, -1] / lam[:, 0])
+    svd = np.nonzero(~(c <= EIG_COND))[0]
+    if len(svd):
+        sv = np.linalg.svd(A[svd], compute_uv=False)
+        with np.errstate(divide="ignore"):
+            c[svd] = np.where(sv[:, -1] > 0, sv[:, 0] / np.where(sv[:, -1] > 0, sv[:, -1], 1.0), np.inf)
+    out[ok] = c
+    return out
 
 
 def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
@@ -246,8 +346,11 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
         ctx.rates_at(0, J0[0])
     coarse, n_ok, failure = _coarse_pass(ctx)
     coarse = coarse[coarse < n_ok]
-    rows, j, far = _dense_newton(ctx, coarse, n_ok)
-    fac, res, conv = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+    if blk.square and n_ok:
+        rows, j, far, fac, res, conv = _dense_square(ctx, coarse, n_ok)
+    else:
+        rows, j, far = _dense_newton(ctx, coarse, n_ok)
+        fac, res, conv = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
     again = np.nonzero(~conv)[0]
     if len(again):  # one more step where the last one was above tol: its Jacobian is refreshed too
         fac2, res2, conv2 = blk.factor(st, again, run.rtol, run.tol)
@@ -266,8 +369,15 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
             if failure is not None and failure.sample <= hi:
                 break
         if np.any(bad):
-            fac, _, _ = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+            fac, _, _ = _refactor(blk, st, n_ok, run)
     return failure, fac
+
+
+def _refactor(blk: _Block, st: _State, n: int, run: _Run) -> tuple[Factor, np.ndarray, np.ndarray]:
+    """The Factor of rows 0..n-1 as they stand (a last Newton step applied)."""
+    if blk.square and n:
+        return _factor_square(_Rows(blk, st, n), st, blk.read(st, np.arange(n)).T.copy(), run.rtol, run.tol)
+    return blk.factor(st, np.arange(n), run.rtol, run.tol)
 
 
 def _input_travel(ctx: _Ctx) -> np.ndarray:
@@ -497,15 +607,11 @@ def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -
         return ~(c <= JUMP * m)
 
 
-def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Newton on every row between coarse rows at once, from the quintic Hermite interpolant of its
-    neighbours' positions, rates and accelerations (error ~ step⁶), until the steps fall below LOOSE:
-    the step the Factor then takes is the convergence test. Returns (rows, interval of each, far from
-    its prediction)."""
-    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+def _predict(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]:
+    """The rows between coarse rows, the interval of each, and their quintic Hermite predictions from their
+    neighbours' positions, rates and accelerations (error ~ step⁶); also the neighbours' positions."""
+    st, blk, tg = ctx.st, ctx.blk, ctx.tg
     rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
-    if not len(rows):
-        return rows, rows, np.zeros(0, bool)
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
     a, b = coarse[j], coarse[j + 1]
     xa, xb = blk.read(st, a), blk.read(st, b)
@@ -519,6 +625,77 @@ def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
         + H * ((u - 6 * u3 + 8 * u4 - 3 * u5) * ctx.xd[a] + (-4 * u3 + 7 * u4 - 3 * u5) * ctx.xd[b])
         + H * H * ((0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5) * ctx.xdd[a] + (0.5 * u3 - u4 + 0.5 * u5) * ctx.xdd[b])
     )
-    x, _ = newton(blk, st, rows, pred, LOOSE, run.max_iter)
-    far = _far(blk, x - pred, xb - xa, xa)
-    return rows, j, far
+    return rows, j, pred, xa, xb
+
+
+def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Newton on every row between coarse rows at once, from the quintic Hermite interpolant of its
+    neighbours, until the steps fall below LOOSE: the step the Factor then takes is the convergence test.
+    Returns (rows, interval of each, far from its prediction)."""
+    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
+    if not len(rows):
+        return rows, rows, np.zeros(0, bool)
+    rows, j, pred, xa, xb = _predict(ctx, coarse, n_ok)
+    x, _ = newton(ctx.blk, ctx.st, rows, pred, LOOSE, ctx.run.max_iter)
+    return rows, j, _far(ctx.blk, x - pred, xb - xa, xa)
+
+
+CHORD = 3  # chord steps (the inverse at the prediction reused) before a dense row is left to plain Newton
+
+
+def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]:
+    """:func:`_dense_newton` and the Factor of rows 0..n_ok-1 for a square block, batch-last: one Newton step
+    from the predictions, then chord steps with the same inverses (a prediction off by δ converges by a
+    factor ~cond·δ per step), plain Newton for the few rows still above LOOSE after CHORD of them; then the
+    factor. Returns (rows, interval of each, far, Factor, closure, converged and fresh)."""
+    run, st, blk = ctx.run, ctx.st, ctx.blk
+    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
+    ev = _Rows(blk, st, n_ok)
+    x = blk.read(st, np.arange(n_ok)).T.copy()
+    far = np.zeros(0, bool)
+    j = rows
+    if len(rows):
+        rows, j, pred, xa, xb = _predict(ctx, coarse, n_ok)
+        x[:, rows] = pred.T
+        F, J = ev.eval(x, True)
+        X, _ = _s.invert_last(J)
+        for _ in range(CHORD):
+            with np.errstate(invalid="ignore"):
+                dx = -_apply(X, F)
+                x += dx
+                act = ~(_step_size(dx, x) <= LOOSE) & np.all(np.isfinite(x), axis=0)
+            if not act.any():
+                break
+            F, _ = ev.eval(x, False)
+        else:
+            sub = np.nonzero(act)[0]
+            x[:, sub] = newton(blk, st, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
+        far = _far(blk, x[:, rows].T - pred, xb - xa, xa)
+    fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol)
+    return rows, j, far, fac, res, conv
+
+
+def _step_size(dx: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A Newton step relative to its row (batch-last): max |dx| / (1 + max |x|)."""
+    return np.max(np.abs(dx), axis=0, initial=0.0) / (1.0 + np.max(np.abs(x), axis=0, initial=0.0))
+
+
+def _factor_square(
+    ev: _Rows, st: _State, x: np.ndarray, rtol: float, tol: float
+) -> tuple[Factor, np.ndarray, np.ndarray]:
+    """:meth:`_Block.factor` on rows 0..n-1 of a square block at x (batch-last), by :func:`kernels.invert_last`:
+    the Factor, the closure of each row and whether its last step was below tol and FRESH (it is applied)."""
+    blk = ev.blk
+    F, J = ev.eval(x, True)
+    X, sign = _s.invert_last(J)
+    cond = _condition_last(J, X, blk.colscale, rtol)
+    sign[~np.isfinite(cond) & ~np.all(np.isfinite(J), axis=(0, 1))] = np.nan
+    with np.errstate(invalid="ignore"):
+        res = np.max(np.abs(F), axis=0, initial=0.0) / blk.scale
+        dx = -_apply(X, F)
+        x = x + dx
+        step = _step_size(dx, x)
+    finite = np.nonzero(np.all(np.isfinite(x), axis=0))[0]
+    blk.put(st, finite, x[:, finite].T)
+    fac = Factor(J.transpose(2, 0, 1), X.transpose(2, 0, 1), cond, sign)
+    return fac, res, (step <= tol) & (step <= FRESH)
