@@ -87,16 +87,25 @@ class _Block:
         self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in p.ang], int)
         self.t_us = np.array([where.get(int(q) + na, -1) if q >= 0 else -1 for q in p.sl], int)
         self.dep = np.nonzero((self.t_ua >= 0) | (self.t_us >= 0))[0]  # the terms the unknowns move
-        # J[l, u] = Σ_t C[l, t]·(j·z_t if u is t's angle; e_t if u is t's slider): its nonzero entries as
-        # products G @ [z; e] over the moved terms
-        G = np.zeros((self.m2 // 2, self.nu, 2, len(self.dep)), complex)
+        self._jacobian_entries(p)
+
+    def _jacobian_entries(self, p: _Plan) -> None:
+        """J[l, u] = Σ_t C[l, t]·(j·z_t if u is t's angle; e_t if u is t's slider), as sums of signed rows of
+        [Re z; Im z; Re e; Im e] over the moved terms: (flat entry of J, source row, coefficient) triples."""
+        m, nd, nu = self.m2 // 2, len(self.dep), self.nu
+        ent = []
         for k, t in enumerate(self.dep):
-            if self.t_ua[t] >= 0:
-                G[:, self.t_ua[t], 0, k] = 1j * p.C[:, t]
-            if self.t_us[t] >= 0:
-                G[:, self.t_us[t], 1, k] = p.C[:, t]
-        self.jl, self.ju = np.nonzero(np.any(G != 0, axis=(2, 3)))
-        self.G = G[self.jl, self.ju].reshape(len(self.jl), -1)
+            for lp in np.nonzero(p.C[:, t])[0]:
+                c = float(p.C[lp, t])
+                if self.t_ua[t] >= 0:  # j·z = −Im z + j·Re z
+                    ent += [(lp * nu + self.t_ua[t], nd + k, -c), ((lp + m) * nu + self.t_ua[t], k, c)]
+                if self.t_us[t] >= 0:
+                    ent += [(lp * nu + self.t_us[t], 2 * nd + k, c), ((lp + m) * nu + self.t_us[t], 3 * nd + k, c)]
+        ent.sort()
+        dest = np.array([d for d, _, _ in ent], int)
+        self.j_src = np.array([q for _, q, _ in ent], int)
+        self.j_coef = np.array([c for _, _, c in ent])[:, None]
+        self.j_dest, self.j_start = np.unique(dest, return_index=True)
 
     def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
         x = np.empty((len(rows), self.nu))
@@ -104,12 +113,13 @@ class _Block:
         x[:, self.isl] = st.S[rows][:, self.scol]
         return x
 
-    def put(self, st: _State, rows: np.ndarray, x: np.ndarray) -> None:
-        r = rows[:, None]
+    def put(self, st: _State, rows: np.ndarray | slice, x: np.ndarray, cis: np.ndarray | None = None) -> None:
+        """Store x (rows, nu) at the rows; ``cis``: e^{jθ} of its angles if known (rows, angles)."""
+        r = rows if isinstance(rows, slice) else rows[:, None]
         if len(self.ia):
             th = x[:, self.ia]
             st.TH[r, self.acol] = th
-            st.E[r, self.acol] = np.cos(th) + 1j * np.sin(th)
+            st.E[r, self.acol] = np.cos(th) + 1j * np.sin(th) if cis is None else cis
         if len(self.isl):
             st.S[r, self.scol] = x[:, self.isl]
 
@@ -169,10 +179,26 @@ class _Rows:
         # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
         self.W = (p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T
         self.L = (p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T
-        self.ta, self.xa = np.nonzero(ua >= 0)[0], ua[ua >= 0]
+        self.ta = np.nonzero(ua >= 0)[0]
+        self.ta_u = np.searchsorted(blk.ia, ua[self.ta])  # which unknown angle turns each of those terms
         self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]
         self.Cd = np.ascontiguousarray(p.Ct[d].T)
         self.blk = blk
+        self.th: np.ndarray | None = None  # the unknown angles of the last evaluation and e^{jθ} there
+        self.cis: np.ndarray | None = None
+
+    def turn(self, th: np.ndarray) -> np.ndarray:
+        """e^{jθ} of the unknown angles (na, n): from the last one times e^{jδ} by its series where every
+        δ = θ − θ_last is small (Newton's corrections: cos and sin cost ~40 products each), else afresh."""
+        if self.th is not None:
+            d = th - self.th
+            with np.errstate(invalid="ignore"):
+                small = bool(np.all(np.abs(d) <= SERIES))
+            if small:
+                self.th, self.cis = th.copy(), self.cis * _cis_series(d)
+                return self.cis
+        self.th, self.cis = th.copy(), np.cos(th) + 1j * np.sin(th)
+        return self.cis
 
     def eval(self, x: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """[Re; Im] of the loop sums at x (2m, n) and, if ``jac``, their Jacobian (2m, nu, n)."""
@@ -180,9 +206,8 @@ class _Rows:
         e, ln = self.W, self.L
         with np.errstate(invalid="ignore"):
             if len(self.ta):
-                th = x[self.xa]
                 e = e.copy()
-                e[self.ta] *= np.cos(th) + 1j * np.sin(th)
+                e[self.ta] *= self.turn(x[blk.ia])[self.ta_u]
             if len(self.ts):
                 ln = ln.copy()
                 ln[self.ts] += x[self.xs]
@@ -190,12 +215,25 @@ class _Rows:
             F = self.F0 + self.Cd @ z
             if not jac:
                 return np.concatenate([F.real, F.imag]), None
-            Jn = blk.G @ np.concatenate([z, e])
-        m = blk.m2 // 2
-        J = np.zeros((blk.m2, blk.nu, x.shape[1]))
-        J[blk.jl, blk.ju] = Jn.real
-        J[blk.jl + m, blk.ju] = Jn.imag
+            V = np.concatenate([z.real, z.imag, e.real, e.imag])[blk.j_src] * blk.j_coef
+        J = np.zeros((blk.m2 * blk.nu, x.shape[1]))
+        J[blk.j_dest] = V if len(V) == len(blk.j_dest) else np.add.reduceat(V, blk.j_start, axis=0)
+        J = J.reshape(blk.m2, blk.nu, -1)
         return np.concatenate([F.real, F.imag]), J
+
+
+SERIES = 0.05  # angle corrections up to this (rad) update e^{jθ} by the series (its error < 1e-19 there)
+
+
+def _cis_series(d: np.ndarray) -> np.ndarray:
+    """e^{jd} for |d| ≤ SERIES by its Taylor series, to d⁹ (the first term left out, d¹⁰/10!, is < 3e-20),
+    or to d³ where every |d| ≤ 1e-4 (then d⁴/24 < 5e-18)."""
+    d2 = d * d
+    if np.all(np.abs(d) <= 1e-4):
+        return (1.0 - 0.5 * d2) + 1j * (d - d * d2 * (1 / 6))
+    c = 1.0 + d2 * (-1 / 2 + d2 * (1 / 24 + d2 * (-1 / 720 + d2 * (1 / 40320))))
+    s = d * (1.0 + d2 * (-1 / 6 + d2 * (1 / 120 + d2 * (-1 / 5040 + d2 * (1 / 362880)))))
+    return c + 1j * s
 
 
 def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -204,31 +242,50 @@ def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
-    """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): the Frobenius bound on every row,
-    the 2-norm condition number where the bound reaches the flag level."""
+    """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): an upper bound of the 2-norm
+    condition number on every row, the exact one (:func:`cond_2norm`) where the bound reaches the flag level,
+    so flags and refusals follow the 2-norm rule exactly. The bound: ‖J‖_F·‖J⁻¹‖_F (≤ n× the exact one),
+    tightened where it reaches the level to (Σσ⁸)^⅛ of each (≤ n^¼×) by two Gram products."""
     c2 = colscale * colscale
     with np.errstate(invalid="ignore", over="ignore"):
-        cond = np.sqrt((c2 @ np.sum(J * J, axis=0)) * ((1.0 / c2) @ np.sum(X * X, axis=1)))
+        fj, fx = c2 @ np.sum(J * J, axis=0), (1.0 / c2) @ np.sum(X * X, axis=1)
+        cond = np.sqrt(fj * fx)
     cond = np.where(np.isfinite(cond), cond, np.inf)
-    near = np.nonzero(cond > (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3))[0]
-    if len(near):
-        cond[near] = cond_2norm((J[:, :, near] * colscale[:, None]).transpose(2, 0, 1))
+    level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
+    near = np.nonzero(cond > level)[0]
+    if not len(near):
+        return cond
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        # scaled to unit Frobenius norm: σ⁸ neither overflows nor (the largest) underflows
+        Js = (J[:, :, near] * (colscale[:, None] / np.sqrt(fj[near]))).transpose(2, 0, 1)
+        Xs = (X[:, :, near] / (colscale[:, None, None] * np.sqrt(fx[near]))).transpose(2, 0, 1)
+        Gj, Gx = Js.transpose(0, 2, 1) @ Js, Xs.transpose(0, 2, 1) @ Xs
+        tight = cond[near] * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
+    cond[near] = np.where(tight < cond[near], tight, cond[near])
+    exact = np.nonzero(~(cond[near] <= level))[0]
+    if len(exact):
+        cond[near[exact]] = cond_2norm(Js[exact], Gj[exact])
     return cond
 
 
-EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-12 (relative)
+def _frobenius(A: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.sum(A * A, axis=(1, 2)))
 
 
-def cond_2norm(A: np.ndarray) -> np.ndarray:
+EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-11 (relative)
+
+
+def cond_2norm(A: np.ndarray, G: np.ndarray | None = None) -> np.ndarray:
     """2-norm condition numbers of a stack of square matrices (rows, n, n), as numpy.linalg.cond's SVD gives
-    them: from the eigenvalues of AᵀA (half an SVD's cost), where λ_min's round-off, ~n·ε·λ_max, stays
-    below 1e-12 of it (cond ≤ EIG_COND); by SVD where larger, non-finite where A is."""
+    them: from the eigenvalues of the Gram matrix G = AᵀA (half an SVD's cost; given or computed) where
+    λ_min's round-off, ~n·ε·λ_max, stays below ~1e-11 of it (cond ≤ EIG_COND); by SVD where larger;
+    infinite where A is not finite."""
     out = np.full(len(A), np.inf)
     ok = np.nonzero(np.all(np.isfinite(A), axis=(1, 2)))[0]
     if not len(ok):
         return out
     A = A[ok]
-    lam = np.linalg.eigvalsh(A.transpose(0, 2, 1) @ A)
+    lam = np.linalg.eigvalsh(A.transpose(0, 2, 1) @ A if G is None else G[ok])
     with np.errstate(divide="ignore", invalid="ignore"):
         c = np.sqrt(lam[:, -1] / lam[:, 0])
     svd = np.nonzero(~(c <= EIG_COND))[0]
@@ -695,7 +752,14 @@ def _factor_square(
         dx = -_apply(X, F)
         x = x + dx
         step = _step_size(dx, x)
-    finite = np.nonzero(np.all(np.isfinite(x), axis=0))[0]
-    blk.put(st, finite, x[:, finite].T)
+    cis = None
+    if len(blk.ia) and ev.cis is not None and np.all(np.abs(dx[blk.ia]) <= SERIES):
+        cis = (ev.cis * _cis_series(dx[blk.ia])).T  # e^{jθ} carried along, not recomputed
+    finite = np.all(np.isfinite(x), axis=0)
+    if finite.all():
+        blk.put(st, slice(0, x.shape[1]), x.T, cis)
+    else:
+        rows = np.nonzero(finite)[0]
+        blk.put(st, rows, x[:, rows].T, None if cis is None else cis[rows])
     fac = Factor(J.transpose(2, 0, 1), X.transpose(2, 0, 1), cond, sign)
     return fac, res, (step <= tol) & (step <= FRESH)
