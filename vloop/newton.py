@@ -91,21 +91,17 @@ class _Block:
 
     def _jacobian_entries(self, p: _Plan) -> None:
         """J[l, u] = Σ_t C[l, t]·(j·z_t if u is t's angle; e_t if u is t's slider), as sums of signed rows of
-        [Re z; Im z; Re e; Im e] over the moved terms: (flat entry of J, source row, coefficient) triples."""
-        m, nd, nu = self.m2 // 2, len(self.dep), self.nu
+        Re z, Im z, Re e, Im e over the moved terms: (entry of J, part, term, coefficient), by entry."""
+        m, nu = self.m2 // 2, self.nu
         ent = []
         for k, t in enumerate(self.dep):
             for lp in np.nonzero(p.C[:, t])[0]:
                 c = float(p.C[lp, t])
                 if self.t_ua[t] >= 0:  # j·z = −Im z + j·Re z
-                    ent += [(lp * nu + self.t_ua[t], nd + k, -c), ((lp + m) * nu + self.t_ua[t], k, c)]
+                    ent += [(lp * nu + int(self.t_ua[t]), 1, k, -c), ((lp + m) * nu + int(self.t_ua[t]), 0, k, c)]
                 if self.t_us[t] >= 0:
-                    ent += [(lp * nu + self.t_us[t], 2 * nd + k, c), ((lp + m) * nu + self.t_us[t], 3 * nd + k, c)]
-        ent.sort()
-        dest = np.array([d for d, _, _ in ent], int)
-        self.j_src = np.array([q for _, q, _ in ent], int)
-        self.j_coef = np.array([c for _, _, c in ent])[:, None]
-        self.j_dest, self.j_start = np.unique(dest, return_index=True)
+                    ent += [(lp * nu + int(self.t_us[t]), 2, k, c), ((lp + m) * nu + int(self.t_us[t]), 3, k, c)]
+        self.j_entries = sorted(ent)
 
     def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
         x = np.empty((len(rows), self.nu))
@@ -200,14 +196,17 @@ class _Rows:
         self.th, self.cis = th.copy(), np.cos(th) + 1j * np.sin(th)
         return self.cis
 
-    def eval(self, x: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        """[Re; Im] of the loop sums at x (2m, n) and, if ``jac``, their Jacobian (2m, nu, n)."""
+    def eval(self, x: np.ndarray, jac: bool, J: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """[Re; Im] of the loop sums at x (2m, n) and, if ``jac``, their Jacobian (2m, nu, n), written into J
+        if given (one this method wrote before: its structural zeros are not rewritten)."""
         blk = self.blk
         e, ln = self.W, self.L
         with np.errstate(invalid="ignore"):
             if len(self.ta):
                 e = e.copy()
-                e[self.ta] *= self.turn(x[blk.ia])[self.ta_u]
+                cis = self.turn(x[blk.ia])
+                for t, u in zip(self.ta, self.ta_u, strict=True):
+                    e[t] *= cis[u]
             if len(self.ts):
                 ln = ln.copy()
                 ln[self.ts] += x[self.xs]
@@ -215,10 +214,18 @@ class _Rows:
             F = self.F0 + self.Cd @ z
             if not jac:
                 return np.concatenate([F.real, F.imag]), None
-            V = np.concatenate([z.real, z.imag, e.real, e.imag])[blk.j_src] * blk.j_coef
-        J = np.zeros((blk.m2 * blk.nu, x.shape[1]))
-        J[blk.j_dest] = V if len(V) == len(blk.j_dest) else np.add.reduceat(V, blk.j_start, axis=0)
-        J = J.reshape(blk.m2, blk.nu, -1)
+        if J is None:
+            J = np.zeros((blk.m2, blk.nu, x.shape[1]))
+        Jf = J.reshape(blk.m2 * blk.nu, -1)  # entries no term reaches stay 0 (a reused J keeps them)
+        parts = (z.real, z.imag, e.real, e.imag)
+        last = -1
+        with np.errstate(invalid="ignore", over="ignore"):
+            for dest, part, k, c in blk.j_entries:  # row by row: no stack-sized temporaries
+                if dest != last:
+                    np.multiply(parts[part][k], c, out=Jf[dest])
+                else:
+                    Jf[dest] += c * parts[part][k]
+                last = dest
         return np.concatenate([F.real, F.imag]), J
 
 
@@ -248,23 +255,48 @@ def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: fl
     tightened where it reaches the level to (Σσ⁸)^⅛ of each (≤ n^¼×) by two Gram products."""
     c2 = colscale * colscale
     with np.errstate(invalid="ignore", over="ignore"):
-        fj, fx = c2 @ np.sum(J * J, axis=0), (1.0 / c2) @ np.sum(X * X, axis=1)
+        fj, fx = c2 @ np.einsum("lun,lun->un", J, J), (1.0 / c2) @ np.einsum("uln,uln->un", X, X)
         cond = np.sqrt(fj * fx)
     cond = np.where(np.isfinite(cond), cond, np.inf)
     level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
     near = np.nonzero(cond > level)[0]
-    if not len(near):
-        return cond
+    for lo in range(0, len(near), NEAR_CHUNK):  # in chunks: a few small stacks alive at a time
+        rows = near[lo : lo + NEAR_CHUNK]
+        cond[rows] = _condition_near(J[:, :, rows], X[:, :, rows], colscale, fj[rows], fx[rows], cond[rows], level)
+    return cond
+
+
+NEAR_CHUNK = 512  # rows whose condition bound reaches the flag level, refined together
+
+
+def _condition_near(
+    J: np.ndarray, X: np.ndarray, colscale: np.ndarray, fj: np.ndarray, fx: np.ndarray, cond: np.ndarray, level: float
+) -> np.ndarray:
+    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened
+    to (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         # scaled to unit Frobenius norm: σ⁸ neither overflows nor (the largest) underflows
-        Js = (J[:, :, near] * (colscale[:, None] / np.sqrt(fj[near]))).transpose(2, 0, 1)
-        Xs = (X[:, :, near] / (colscale[:, None, None] * np.sqrt(fx[near]))).transpose(2, 0, 1)
-        Gj, Gx = Js.transpose(0, 2, 1) @ Js, Xs.transpose(0, 2, 1) @ Xs
-        tight = cond[near] * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
-    cond[near] = np.where(tight < cond[near], tight, cond[near])
-    exact = np.nonzero(~(cond[near] <= level))[0]
+        # row-major copies (rows, ·, ·): numpy's stacked matmul is fast on those
+        Js = np.multiply(J.transpose(2, 0, 1), colscale / np.sqrt(fj)[:, None, None], order="C")
+        Xs = np.multiply(X.transpose(2, 0, 1), 1.0 / (colscale[:, None] * np.sqrt(fx)[:, None, None]), order="C")
+        Gj = Js.transpose(0, 2, 1) @ Js
+        Gx = Xs @ Xs.transpose(0, 2, 1)  # X·Xᵀ: the singular values of X
+        tight = cond * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
+    cond = np.where(tight < cond, tight, cond)
+    exact = np.nonzero(~(cond <= level))[0]
     if len(exact):
-        cond[near[exact]] = cond_2norm(Js[exact], Gj[exact])
+        cond[exact] = cond_2norm(Js[exact], Gj[exact])
+    return cond
+
+
+def _svd_cond(A: np.ndarray) -> np.ndarray:
+    """2-norm condition numbers of a stack of rectangular matrices by SVD (infinite where not finite)."""
+    cond = np.full(len(A), np.inf)
+    ok = np.all(np.isfinite(A), axis=(1, 2))
+    if ok.any():
+        sv = np.linalg.svd(A[ok], compute_uv=False)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cond[ok] = sv[:, 0] / sv[:, -1]
     return cond
 
 
@@ -366,22 +398,25 @@ class _Ctx:
     def rates_rows(self, rows: np.ndarray, J: np.ndarray) -> None:
         """ẋ and ẍ of the block at these rows (exact linear solves; least squares for a redundant block), kept
         for the Taylor predictor; a row too ill-conditioned to predict from is marked weak."""
-        p, st, na = self.p, self.st, self.na
+        p, st, na, blk = self.p, self.st, self.na, self.blk
+        X = _s.invert_rows(J) if blk.square else None  # one inverse for both right-hand sides
         for what, out in (("v", self.xd), ("a", self.xdd)):
             R = -(p.total.vel(st, rows) if what == "v" else p.total.acc(st, rows))
             rhs = np.concatenate([R.real, R.imag], axis=1)
-            val = _s.least_squares_rows(J, rhs)
+            val = _s.least_squares_rows(J, rhs) if X is None else (X @ rhs[..., None])[..., 0]
             out[rows] = val
             if what == "v":
                 _s._store(p, st, rows, val, "v", na)
-        _s._store(p, st, rows, np.zeros((len(rows), self.blk.nu)), "v", na)
-        Js = J * self.blk.colscale
-        ok = np.all(np.isfinite(Js), axis=(1, 2))
-        cond = np.full(len(rows), np.inf)
-        if ok.any():
-            sv = np.linalg.svd(Js[ok], compute_uv=False)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cond[ok] = sv[:, 0] / sv[:, -1]
+        _s._store(p, st, rows, np.zeros((len(rows), blk.nu)), "v", na)
+        Js = J * blk.colscale
+        if X is None:
+            cond = cond_2norm(Js) if Js.shape[1] == Js.shape[2] else _svd_cond(Js)
+        else:  # the Frobenius bound, the exact 2-norm one where it decides
+            with np.errstate(invalid="ignore", over="ignore"):
+                cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum((X / blk.colscale[:, None]) ** 2, axis=(1, 2)))
+            exact = np.nonzero(~(cond * cond * _s.EPS <= self.run.rtol))[0]
+            if len(exact):
+                cond[exact] = cond_2norm(Js[exact])
         # next to a singular row (a change point) the rates are not accurate enough to predict from
         finite = np.all(np.isfinite(self.xd[rows]), axis=1) & np.all(np.isfinite(self.xdd[rows]), axis=1)
         self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~finite
@@ -672,16 +707,17 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
     a, b = coarse[j], coarse[j + 1]
     xa, xb = blk.read(st, a), blk.read(st, b)
-    H = (tg[b] - tg[a])[:, None]
-    u = ((tg[rows] - tg[a]) / (tg[b] - tg[a]))[:, None]
+    H = tg[b] - tg[a]
+    u = (tg[rows] - tg[a]) / H
     u2, u3 = u * u, u * u * u
     u4, u5 = u3 * u, u3 * u2
-    pred = (
-        (1 - 10 * u3 + 15 * u4 - 6 * u5) * xa
-        + (10 * u3 - 15 * u4 + 6 * u5) * xb
-        + H * ((u - 6 * u3 + 8 * u4 - 3 * u5) * ctx.xd[a] + (-4 * u3 + 7 * u4 - 3 * u5) * ctx.xd[b])
-        + H * H * ((0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5) * ctx.xdd[a] + (0.5 * u3 - u4 + 0.5 * u5) * ctx.xdd[b])
-    )
+    H2 = H * H
+    pred = (1 - 10 * u3 + 15 * u4 - 6 * u5)[:, None] * xa  # the quintic Hermite basis times xa, xb, ẋa, ...
+    pred += (10 * u3 - 15 * u4 + 6 * u5)[:, None] * xb  # accumulated in place: few (rows, nu) temporaries
+    pred += (H * (u - 6 * u3 + 8 * u4 - 3 * u5))[:, None] * ctx.xd[a]
+    pred += (H * (-4 * u3 + 7 * u4 - 3 * u5))[:, None] * ctx.xd[b]
+    pred += (H2 * (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5))[:, None] * ctx.xdd[a]
+    pred += (H2 * (0.5 * u3 - u4 + 0.5 * u5))[:, None] * ctx.xdd[b]
     return rows, j, pred, xa, xb
 
 
@@ -711,11 +747,13 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     x = blk.read(st, np.arange(n_ok)).T.copy()
     far = np.zeros(0, bool)
     j = rows
+    J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
+    X = np.empty((blk.nu, blk.m2, n_ok))
     if len(rows):
         rows, j, pred, xa, xb = _predict(ctx, coarse, n_ok)
         x[:, rows] = pred.T
-        F, J = ev.eval(x, True)
-        X, _ = _s.invert_last(J)
+        F, _ = ev.eval(x, True, J)
+        _s.invert_last(J, out=X)
         for _ in range(CHORD):
             with np.errstate(invalid="ignore"):
                 dx = -_apply(X, F)
@@ -728,7 +766,8 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
             sub = np.nonzero(act)[0]
             x[:, sub] = newton(blk, st, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
         far = _far(blk, x[:, rows].T - pred, xb - xa, xa)
-    fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol)
+        del pred, xa, xb, F  # not kept through the factor
+    fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol, J, X)
     return rows, j, far, fac, res, conv
 
 
@@ -738,13 +777,20 @@ def _step_size(dx: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def _factor_square(
-    ev: _Rows, st: _State, x: np.ndarray, rtol: float, tol: float
+    ev: _Rows,
+    st: _State,
+    x: np.ndarray,
+    rtol: float,
+    tol: float,
+    J: np.ndarray | None = None,
+    X: np.ndarray | None = None,
 ) -> tuple[Factor, np.ndarray, np.ndarray]:
     """:meth:`_Block.factor` on rows 0..n-1 of a square block at x (batch-last), by :func:`kernels.invert_last`:
-    the Factor, the closure of each row and whether its last step was below tol and FRESH (it is applied)."""
+    the Factor, the closure of each row and whether its last step was below tol and FRESH (it is applied).
+    J, X: buffers for the Jacobian (one :meth:`_Rows.eval` wrote) and its inverse."""
     blk = ev.blk
-    F, J = ev.eval(x, True)
-    X, sign = _s.invert_last(J)
+    F, J = ev.eval(x, True, J)
+    X, sign = _s.invert_last(J, out=X)
     cond = _condition_last(J, X, blk.colscale, rtol)
     sign[~np.isfinite(cond) & ~np.all(np.isfinite(J), axis=(0, 1))] = np.nan
     with np.errstate(invalid="ignore"):
