@@ -689,13 +689,16 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     return float(np.linalg.det(J[0])) if ctx.blk.square else 1.0
 
 
-def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
+def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray, axis: int = 1) -> np.ndarray:
     """Rows whose Newton correction exceeds JUMP of the predicted move (largest component, angles in rad,
-    sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch."""
+    sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch.
+    Arrays (rows, nu), or transposed views of batch-last ones with ``axis=0``: (nu, rows).T."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)
+    if axis == 0:
+        correction, move, x, unit = correction.T, move.T, x.T, unit[:, None]
     with np.errstate(invalid="ignore"):
-        c = np.max(np.abs(correction) * unit, axis=1)
-        m = np.max(np.abs(move) * unit, axis=1) + 1e-9 * (1.0 + np.max(np.abs(x) * unit, axis=1))
+        c = np.max(np.abs(correction) * unit, axis=axis)
+        m = np.max(np.abs(move) * unit, axis=axis) + 1e-9 * (1.0 + np.max(np.abs(x) * unit, axis=axis))
         return ~(c <= JUMP * m)
 
 
@@ -719,6 +722,31 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]
     pred += (H2 * (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5))[:, None] * ctx.xdd[a]
     pred += (H2 * (0.5 * u3 - u4 + 0.5 * u5))[:, None] * ctx.xdd[b]
     return rows, j, pred, xa, xb
+
+
+def _predict_last(
+    ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, x: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_predict` batch-last, from x (nu, rows) holding the solved coarse rows: the interval of each
+    row, its prediction and its neighbours' positions (nu, rows); what is gathered per row comes from the
+    few coarse rows."""
+    tg = ctx.tg
+    j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
+    tc = tg[coarse]
+    H = (tc[1:] - tc[:-1])[j]
+    u = (tg[rows] - tc[j]) / H
+    u2, u3 = u * u, u * u * u
+    u4, u5 = u3 * u, u3 * u2
+    H2 = H * H
+    xc, vc, ac = x[:, coarse], ctx.xd[coarse].T, ctx.xdd[coarse].T
+    xa, xb = xc[:, j], xc[:, j + 1]
+    pred = (1 - 10 * u3 + 15 * u4 - 6 * u5) * xa  # the quintic Hermite basis times xa, xb, ẋa, ...
+    pred += (10 * u3 - 15 * u4 + 6 * u5) * xb  # accumulated in place: few (nu, rows) temporaries
+    pred += (H * (u - 6 * u3 + 8 * u4 - 3 * u5)) * vc[:, j]
+    pred += (H * (-4 * u3 + 7 * u4 - 3 * u5)) * vc[:, j + 1]
+    pred += (H2 * (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5)) * ac[:, j]
+    pred += (H2 * (0.5 * u3 - u4 + 0.5 * u5)) * ac[:, j + 1]
+    return j, pred, xa, xb
 
 
 def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -750,8 +778,8 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
     X = np.empty((blk.nu, blk.m2, n_ok))
     if len(rows):
-        rows, j, pred, xa, xb = _predict(ctx, coarse, n_ok)
-        x[:, rows] = pred.T
+        j, pred, xa, xb = _predict_last(ctx, coarse, rows, x)
+        x[:, rows] = pred
         F, _ = ev.eval(x, True, J)
         _s.invert_last(J, out=X)
         for _ in range(CHORD):
@@ -765,7 +793,7 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
         else:
             sub = np.nonzero(act)[0]
             x[:, sub] = newton(blk, st, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
-        far = _far(blk, x[:, rows].T - pred, xb - xa, xa)
+        far = _far(blk, (x[:, rows] - pred).T, (xb - xa).T, xa.T, axis=0)
         del pred, xa, xb, F  # not kept through the factor
     fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol, J, X)
     return rows, j, far, fac, res, conv
