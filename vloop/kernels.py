@@ -750,8 +750,7 @@ def _gauss_jordan(A: np.ndarray) -> np.ndarray:
         for k in range(n):
             p = _pivot_rows(A, k)
             pivots.append(p)
-            for i in range(k + 1, n):
-                _swap_where(A, k, i, p == i)
+            _swap_rows(A, k, p)
             piv = A[k, k].copy()
             neg ^= (p != k) ^ (piv < 0)
             zero |= piv == 0
@@ -765,8 +764,7 @@ def _gauss_jordan(A: np.ndarray) -> np.ndarray:
                 if i != k:
                     A[i] -= f[i] * A[k]
     for k in range(n - 1, -1, -1):  # the row swaps undone as column swaps, in reverse
-        for i in range(k + 1, n):
-            _swap_where(A.swapaxes(0, 1), k, i, pivots[k] == i)
+        _swap_rows(A.swapaxes(0, 1), k, pivots[k])
     return np.where(zero, 0.0, np.where(neg, -1.0, 1.0))
 
 
@@ -780,14 +778,19 @@ def _pivot_rows(A: np.ndarray, k: int) -> np.ndarray:
     return p
 
 
-def _swap_where(A: np.ndarray, k: int, i: int, m: np.ndarray) -> None:
-    """Swap A[k] and A[i] in the matrices where m is set: a plain swap when all are (along a path rows
-    mostly pivot alike), nothing when none is."""
-    if m.all():
-        t = A[k].copy()
-        A[k] = A[i]
-        A[i] = t
-    elif m.any():
-        t = A[k].copy()
-        np.copyto(A[k], A[i], where=m)
-        np.copyto(A[i], t, where=m)
+def _swap_rows(A: np.ndarray, k: int, p: np.ndarray) -> None:
+    """Swap row k with row p[m] of each matrix m (p ≥ k): one plain swap when all pivot alike (along a path
+    they mostly do), masked swaps row by row otherwise."""
+    first = int(p[0])
+    if np.all(p == first):
+        if first != k:
+            t = A[k].copy()
+            A[k] = A[first]
+            A[first] = t
+        return
+    for i in range(k + 1, A.shape[0]):
+        m = p == i
+        if m.any():
+            t = A[k].copy()
+            np.copyto(A[k], A[i], where=m)
+            np.copyto(A[i], t, where=m)

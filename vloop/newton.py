@@ -702,34 +702,12 @@ def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray, a
         return ~(c <= JUMP * m)
 
 
-def _predict(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]:
-    """The rows between coarse rows, the interval of each, and their quintic Hermite predictions from their
-    neighbours' positions, rates and accelerations (error ~ step⁶); also the neighbours' positions."""
-    st, blk, tg = ctx.st, ctx.blk, ctx.tg
-    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
-    j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
-    a, b = coarse[j], coarse[j + 1]
-    xa, xb = blk.read(st, a), blk.read(st, b)
-    H = tg[b] - tg[a]
-    u = (tg[rows] - tg[a]) / H
-    u2, u3 = u * u, u * u * u
-    u4, u5 = u3 * u, u3 * u2
-    H2 = H * H
-    pred = (1 - 10 * u3 + 15 * u4 - 6 * u5)[:, None] * xa  # the quintic Hermite basis times xa, xb, ẋa, ...
-    pred += (10 * u3 - 15 * u4 + 6 * u5)[:, None] * xb  # accumulated in place: few (rows, nu) temporaries
-    pred += (H * (u - 6 * u3 + 8 * u4 - 3 * u5))[:, None] * ctx.xd[a]
-    pred += (H * (-4 * u3 + 7 * u4 - 3 * u5))[:, None] * ctx.xd[b]
-    pred += (H2 * (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5))[:, None] * ctx.xdd[a]
-    pred += (H2 * (0.5 * u3 - u4 + 0.5 * u5))[:, None] * ctx.xdd[b]
-    return rows, j, pred, xa, xb
-
-
 def _predict_last(
     ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, x: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_predict` batch-last, from x (nu, rows) holding the solved coarse rows: the interval of each
-    row, its prediction and its neighbours' positions (nu, rows); what is gathered per row comes from the
-    few coarse rows."""
+    """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]), its prediction by the
+    quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶), and
+    those positions: batch-last (nu, rows), from x (nu, ·) holding the solved coarse rows."""
     tg = ctx.tg
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
     tc = tg[coarse]
@@ -756,9 +734,9 @@ def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
     if not len(rows):
         return rows, rows, np.zeros(0, bool)
-    rows, j, pred, xa, xb = _predict(ctx, coarse, n_ok)
-    x, _ = newton(ctx.blk, ctx.st, rows, pred, LOOSE, ctx.run.max_iter)
-    return rows, j, _far(ctx.blk, x - pred, xb - xa, xa)
+    j, pred, xa, xb = _predict_last(ctx, coarse, rows, ctx.blk.read(ctx.st, np.arange(n_ok)).T)
+    x, _ = newton(ctx.blk, ctx.st, rows, pred.T, LOOSE, ctx.run.max_iter)
+    return rows, j, _far(ctx.blk, x - pred.T, (xb - xa).T, xa.T)
 
 
 CHORD = 3  # chord steps (the inverse at the prediction reused) before a dense row is left to plain Newton
