@@ -9,12 +9,18 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
    converged, closes every equation, keeps the Jacobian's determinant sign (the assembly branch)
    and lands within JUMP of the predicted increment; else the rows in between are continued one
    by one (finer continuation, where the old sample-by-sample rules apply and decide).
-2. **Dense rows, all at once.** Every other row starts from the cubic Hermite interpolant of its
-   coarse neighbours (positions and rates) and takes batched Newton steps (``numpy.linalg.solve``
-   on stacks of small matrices). A row must converge, close, keep the branch's determinant sign
-   and stay near its prediction; an interval with a row that does not is continued one by one.
+2. **Dense rows, all at once.** Every other row starts from the quintic Hermite interpolant of its
+   coarse neighbours (positions, rates, accelerations). A square block takes one Newton step there
+   with the inverse Jacobians of all rows at once (:func:`kernels.invert_last`: Gauss–Jordan with
+   the stack as the last axis, ~3× LAPACK's per-matrix calls at n ≤ 8), then chord steps with the
+   same inverses until the steps fall below LOOSE; the loop sums are evaluated from the rows' known
+   factors gathered once (:class:`_Rows`). A row must converge, close, keep the branch's determinant
+   sign and stay near its prediction; an interval with a row that does not is continued one by one.
 3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
-   condition number, shared by the rates and the health columns.
+   condition number, shared by the rates and the health columns: one more Newton step whose size is
+   the convergence test. The condition number is an upper bound where that decides (Frobenius, then
+   (Σσ⁸)^⅛), the exact 2-norm one (eigenvalues of JᵀJ, SVD past EIG_COND) wherever it reaches the
+   flag level, so flags and refusals follow the 2-norm rule exactly.
 
 Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
 Gauss–Newton steps and least-squares rates; the residual of every equation is checked.
@@ -266,7 +272,7 @@ def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: fl
     return cond
 
 
-NEAR_CHUNK = 512  # rows whose condition bound reaches the flag level, refined together
+NEAR_CHUNK = 4096  # rows whose condition bound reaches the flag level, refined together
 
 
 def _condition_near(
@@ -689,25 +695,20 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     return float(np.linalg.det(J[0])) if ctx.blk.square else 1.0
 
 
-def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray, axis: int = 1) -> np.ndarray:
+def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Rows whose Newton correction exceeds JUMP of the predicted move (largest component, angles in rad,
-    sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch.
-    Arrays (rows, nu), or transposed views of batch-last ones with ``axis=0``: (nu, rows).T."""
+    sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)
-    if axis == 0:
-        correction, move, x, unit = correction.T, move.T, x.T, unit[:, None]
     with np.errstate(invalid="ignore"):
-        c = np.max(np.abs(correction) * unit, axis=axis)
-        m = np.max(np.abs(move) * unit, axis=axis) + 1e-9 * (1.0 + np.max(np.abs(x) * unit, axis=axis))
+        c = np.max(np.abs(correction) * unit, axis=1)
+        m = np.max(np.abs(move) * unit, axis=1) + 1e-9 * (1.0 + np.max(np.abs(x) * unit, axis=1))
         return ~(c <= JUMP * m)
 
 
-def _predict_last(
-    ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, x: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]), its prediction by the
-    quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶), and
-    those positions: batch-last (nu, rows), from x (nu, ·) holding the solved coarse rows."""
+def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]) and its prediction by
+    the quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶):
+    batch-last (nu, rows), from the coarse rows' positions xc (nu, coarse rows)."""
     tg = ctx.tg
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
     tc = tg[coarse]
@@ -716,15 +717,24 @@ def _predict_last(
     u2, u3 = u * u, u * u * u
     u4, u5 = u3 * u, u3 * u2
     H2 = H * H
-    xc, vc, ac = x[:, coarse], ctx.xd[coarse].T, ctx.xdd[coarse].T
-    xa, xb = xc[:, j], xc[:, j + 1]
-    pred = (1 - 10 * u3 + 15 * u4 - 6 * u5) * xa  # the quintic Hermite basis times xa, xb, ẋa, ...
-    pred += (10 * u3 - 15 * u4 + 6 * u5) * xb  # accumulated in place: few (nu, rows) temporaries
+    vc, ac = ctx.xd[coarse].T, ctx.xdd[coarse].T
+    pred = (1 - 10 * u3 + 15 * u4 - 6 * u5) * xc[:, j]  # the quintic Hermite basis times xa, xb, ẋa, ...
+    pred += (10 * u3 - 15 * u4 + 6 * u5) * xc[:, j + 1]  # accumulated in place: few (nu, rows) temporaries
     pred += (H * (u - 6 * u3 + 8 * u4 - 3 * u5)) * vc[:, j]
     pred += (H * (-4 * u3 + 7 * u4 - 3 * u5)) * vc[:, j + 1]
     pred += (H2 * (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5)) * ac[:, j]
     pred += (H2 * (0.5 * u3 - u4 + 0.5 * u5)) * ac[:, j + 1]
-    return j, pred, xa, xb
+    return j, pred
+
+
+def _far_dense(blk: _Block, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """:func:`_far` for rows between coarse rows (batch-last: correction (nu, rows), the coarse rows' x (nu, ·),
+    each row's interval j): the move and the scale of each interval taken once, not per row."""
+    unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
+    with np.errstate(invalid="ignore"):
+        move = np.max(np.abs(np.diff(xc, axis=1)) * unit, axis=0)
+        move += 1e-9 * (1.0 + np.max(np.abs(xc[:, :-1]) * unit, axis=0))
+        return ~(np.max(np.abs(correction) * unit, axis=0) <= JUMP * move[j])
 
 
 def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -734,9 +744,10 @@ def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
     if not len(rows):
         return rows, rows, np.zeros(0, bool)
-    j, pred, xa, xb = _predict_last(ctx, coarse, rows, ctx.blk.read(ctx.st, np.arange(n_ok)).T)
+    xc = ctx.blk.read(ctx.st, coarse).T
+    j, pred = _predict(ctx, coarse, rows, xc)
     x, _ = newton(ctx.blk, ctx.st, rows, pred.T, LOOSE, ctx.run.max_iter)
-    return rows, j, _far(ctx.blk, x - pred.T, (xb - xa).T, xa.T)
+    return rows, j, _far_dense(ctx.blk, x.T - pred, xc, j)
 
 
 CHORD = 3  # chord steps (the inverse at the prediction reused) before a dense row is left to plain Newton
@@ -756,7 +767,8 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
     X = np.empty((blk.nu, blk.m2, n_ok))
     if len(rows):
-        j, pred, xa, xb = _predict_last(ctx, coarse, rows, x)
+        xc = x[:, coarse]
+        j, pred = _predict(ctx, coarse, rows, xc)
         x[:, rows] = pred
         F, _ = ev.eval(x, True, J)
         _s.invert_last(J, out=X)
@@ -771,8 +783,8 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
         else:
             sub = np.nonzero(act)[0]
             x[:, sub] = newton(blk, st, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
-        far = _far(blk, (x[:, rows] - pred).T, (xb - xa).T, xa.T, axis=0)
-        del pred, xa, xb, F  # not kept through the factor
+        far = _far_dense(blk, x[:, rows] - pred, xc, j)
+        del pred, F  # not kept through the factor
     fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol, J, X)
     return rows, j, far, fac, res, conv
 
