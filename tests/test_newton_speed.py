@@ -43,6 +43,12 @@ def test_invert_last_matches_lapack(n):
     err = np.abs(X - ref).max(axis=(1, 2)) / np.abs(ref).max(axis=(1, 2))
     assert np.all(err <= 10 * n * EPS * np.linalg.cond(A))  # LAPACK's own accuracy, ~cond·ε
     assert np.array_equal(sign, np.sign(np.linalg.det(A)))
+    # a Newton step by the inverses (batch-last) against numpy.linalg.solve
+    b = RNG.standard_normal((len(A), n))
+    step = newton._apply(X.transpose(1, 2, 0), b.T).T
+    ref_step = np.linalg.solve(A, b[..., None])[..., 0]
+    scale = np.abs(ref_step).max(axis=1)
+    assert np.all(np.abs(step - ref_step).max(axis=1) <= 10 * n * EPS * np.linalg.cond(A) * scale)
 
 
 def test_invert_last_pivots_per_matrix_and_flags_singular_ones():

@@ -708,22 +708,31 @@ def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -
 def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]) and its prediction by
     the quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶):
-    batch-last (nu, rows), from the coarse rows' positions xc (nu, coarse rows)."""
+    batch-last (nu, rows), from the coarse rows' positions xc (nu, coarse rows). The quintic's coefficients
+    in u (0..1 across an interval) are taken once per interval; each row gathers them and runs Horner."""
     tg = ctx.tg
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
     tc = tg[coarse]
-    H = (tc[1:] - tc[:-1])[j]
-    u = (tg[rows] - tc[j]) / H
-    u2, u3 = u * u, u * u * u
-    u4, u5 = u3 * u, u3 * u2
-    H2 = H * H
-    vc, ac = ctx.xd[coarse].T, ctx.xdd[coarse].T
-    pred = (1 - 10 * u3 + 15 * u4 - 6 * u5) * xc[:, j]  # the quintic Hermite basis times xa, xb, ẋa, ...
-    pred += (10 * u3 - 15 * u4 + 6 * u5) * xc[:, j + 1]  # accumulated in place: few (nu, rows) temporaries
-    pred += (H * (u - 6 * u3 + 8 * u4 - 3 * u5)) * vc[:, j]
-    pred += (H * (-4 * u3 + 7 * u4 - 3 * u5)) * vc[:, j + 1]
-    pred += (H2 * (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5)) * ac[:, j]
-    pred += (H2 * (0.5 * u3 - u4 + 0.5 * u5)) * ac[:, j + 1]
+    H = tc[1:] - tc[:-1]
+    v, acc = ctx.xd[coarse].T, ctx.xdd[coarse].T
+    xa, xb = xc[:, :-1], xc[:, 1:]
+    va, vb = v[:, :-1] * H, v[:, 1:] * H  # rates and accelerations in units of the interval
+    aa, ab = acc[:, :-1] * (H * H), acc[:, 1:] * (H * H)
+    d = xb - xa
+    C = np.stack(
+        [
+            xa,
+            va,
+            0.5 * aa,
+            10 * d - 6 * va - 4 * vb - 1.5 * aa + 0.5 * ab,
+            -15 * d + 8 * va + 7 * vb + 1.5 * aa - ab,
+            6 * d - 3 * va - 3 * vb - 0.5 * aa + 0.5 * ab,
+        ]
+    )[:, :, j]
+    u = (tg[rows] - tc[j]) / H[j]
+    pred = C[5]
+    for p in range(4, -1, -1):
+        pred = pred * u + C[p]
     return j, pred
 
 
