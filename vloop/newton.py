@@ -819,7 +819,7 @@ def _factor_square(
     F, J = ev.eval(x, True, J)
     X, sign = _s.invert_last(J, out=X)
     cond = _condition_last(J, X, blk.colscale, rtol)
-    sign[~np.isfinite(cond) & ~np.all(np.isfinite(J), axis=(0, 1))] = np.nan
+    sign[~np.all(np.isfinite(J), axis=(0, 1))] = np.nan  # as numpy's det gives it
     with np.errstate(invalid="ignore"):
         res = np.max(np.abs(F), axis=0, initial=0.0) / blk.scale
         dx = -_apply(X, F)
