@@ -282,11 +282,11 @@ def _condition_near(
     to (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         # scaled to unit Frobenius norm: σ⁸ neither overflows nor (the largest) underflows
-        # row-major copies (rows, ·, ·): numpy's stacked matmul is fast on those
+        # row-major copies (rows, ·, ·), transposes too: numpy's stacked matmul is ~4× faster on those
         Js = np.multiply(J.transpose(2, 0, 1), colscale / np.sqrt(fj)[:, None, None], order="C")
         Xs = np.multiply(X.transpose(2, 0, 1), 1.0 / (colscale[:, None] * np.sqrt(fx)[:, None, None]), order="C")
-        Gj = Js.transpose(0, 2, 1) @ Js
-        Gx = Xs @ Xs.transpose(0, 2, 1)  # X·Xᵀ: the singular values of X
+        Gj = np.ascontiguousarray(Js.transpose(0, 2, 1)) @ Js
+        Gx = Xs @ np.ascontiguousarray(Xs.transpose(0, 2, 1))  # X·Xᵀ: the singular values of X
         tight = cond * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
     cond = np.where(tight < cond, tight, cond)
     exact = np.nonzero(~(cond <= level))[0]
