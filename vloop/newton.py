@@ -9,12 +9,18 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
    converged, closes every equation, keeps the Jacobian's determinant sign (the assembly branch)
    and lands within JUMP of the predicted increment; else the rows in between are continued one
    by one (finer continuation, where the old sample-by-sample rules apply and decide).
-2. **Dense rows, all at once.** Every other row starts from the cubic Hermite interpolant of its
-   coarse neighbours (positions and rates) and takes batched Newton steps (``numpy.linalg.solve``
-   on stacks of small matrices). A row must converge, close, keep the branch's determinant sign
-   and stay near its prediction; an interval with a row that does not is continued one by one.
+2. **Dense rows, all at once.** Every other row starts from the quintic Hermite interpolant of its
+   coarse neighbours (positions, rates, accelerations). A square block takes one Newton step there
+   with the inverse Jacobians of all rows at once (:func:`kernels.invert_last`: Gauss–Jordan with
+   the stack as the last axis, ~3× LAPACK's per-matrix calls at n ≤ 8), then chord steps with the
+   same inverses until the steps fall below LOOSE; the loop sums are evaluated from the rows' known
+   factors gathered once (:class:`_Rows`). A row must converge, close, keep the branch's determinant
+   sign and stay near its prediction; an interval with a row that does not is continued one by one.
 3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
-   condition number, shared by the rates and the health columns.
+   condition number, shared by the rates and the health columns: one more Newton step whose size is
+   the convergence test. The condition number is an upper bound where that decides (Frobenius, then
+   (Σσ⁸)^⅛), the exact 2-norm one (eigenvalues of JᵀJ, SVD past EIG_COND) wherever it reaches the
+   flag level, so flags and refusals follow the 2-norm rule exactly.
 
 Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
 Gauss–Newton steps and least-squares rates; the residual of every equation is checked.
@@ -82,6 +88,26 @@ class _Block:
         self.D = D.reshape(2 * nt, -1)
         self.colscale = np.where([v < na for v in unk], 1.0 / run.scale, 1.0)
         self.scale = run.scale
+        # per term: the position in x of its unknown angle and of its unknown slider (-1: none)
+        where = {v: u for u, v in enumerate(unk)}
+        self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in p.ang], int)
+        self.t_us = np.array([where.get(int(q) + na, -1) if q >= 0 else -1 for q in p.sl], int)
+        self.dep = np.nonzero((self.t_ua >= 0) | (self.t_us >= 0))[0]  # the terms the unknowns move
+        self._jacobian_entries(p)
+
+    def _jacobian_entries(self, p: _Plan) -> None:
+        """J[l, u] = Σ_t C[l, t]·(j·z_t if u is t's angle; e_t if u is t's slider), as sums of signed rows of
+        Re z, Im z, Re e, Im e over the moved terms: (entry of J, part, term, coefficient), by entry."""
+        m, nu = self.m2 // 2, self.nu
+        ent = []
+        for k, t in enumerate(self.dep):
+            for lp in np.nonzero(p.C[:, t])[0]:
+                c = float(p.C[lp, t])
+                if self.t_ua[t] >= 0:  # j·z = −Im z + j·Re z
+                    ent += [(lp * nu + int(self.t_ua[t]), 1, k, -c), ((lp + m) * nu + int(self.t_ua[t]), 0, k, c)]
+                if self.t_us[t] >= 0:
+                    ent += [(lp * nu + int(self.t_us[t]), 2, k, c), ((lp + m) * nu + int(self.t_us[t]), 3, k, c)]
+        self.j_entries = sorted(ent)
 
     def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
         x = np.empty((len(rows), self.nu))
@@ -89,12 +115,13 @@ class _Block:
         x[:, self.isl] = st.S[rows][:, self.scol]
         return x
 
-    def put(self, st: _State, rows: np.ndarray, x: np.ndarray) -> None:
-        r = rows[:, None]
+    def put(self, st: _State, rows: np.ndarray | slice, x: np.ndarray, cis: np.ndarray | None = None) -> None:
+        """Store x (rows, nu) at the rows; ``cis``: e^{jθ} of its angles if known (rows, angles)."""
+        r = rows if isinstance(rows, slice) else rows[:, None]
         if len(self.ia):
             th = x[:, self.ia]
             st.TH[r, self.acol] = th
-            st.E[r, self.acol] = np.cos(th) + 1j * np.sin(th)
+            st.E[r, self.acol] = np.cos(th) + 1j * np.sin(th) if cis is None else cis
         if len(self.isl):
             st.S[r, self.scol] = x[:, self.isl]
 
@@ -138,6 +165,174 @@ class _Block:
         sign[exact] = _s.det_sign(J[exact])
         last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
         return sign[last]
+
+
+class _Rows:
+    """A square block's loop sums on rows 0..n-1 as functions of its unknowns alone, batch-last (x[u, row]):
+    what the unknowns do not move (the other terms' sum, every moved term's known length and direction) is
+    gathered once, so a Newton iteration costs a few small products over the rows."""
+
+    def __init__(self, blk: _Block, st: _State, n: int) -> None:
+        p, d = blk.p, blk.dep
+        E, S = st.E[:n], st.S[:n]
+        kn = np.setdiff1d(np.arange(len(p.ang)), d)
+        self.F0 = (((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T  # (m, n)
+        ua, us = blk.t_ua[d], blk.t_us[d]
+        # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
+        self.W = (p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T
+        self.L = (p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T
+        self.ta = np.nonzero(ua >= 0)[0]
+        self.ta_u = np.searchsorted(blk.ia, ua[self.ta])  # which unknown angle turns each of those terms
+        self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]
+        self.Cd = np.ascontiguousarray(p.Ct[d].T)
+        self.blk = blk
+        self.th: np.ndarray | None = None  # the unknown angles of the last evaluation and e^{jθ} there
+        self.cis: np.ndarray | None = None
+
+    def turn(self, th: np.ndarray) -> np.ndarray:
+        """e^{jθ} of the unknown angles (na, n): from the last one times e^{jδ} by its series where every
+        δ = θ − θ_last is small (Newton's corrections: cos and sin cost ~40 products each), else afresh."""
+        if self.th is not None:
+            d = th - self.th
+            with np.errstate(invalid="ignore"):
+                small = bool(np.all(np.abs(d) <= SERIES))
+            if small:
+                self.th, self.cis = th.copy(), self.cis * _cis_series(d)
+                return self.cis
+        self.th, self.cis = th.copy(), np.cos(th) + 1j * np.sin(th)
+        return self.cis
+
+    def eval(self, x: np.ndarray, jac: bool, J: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """[Re; Im] of the loop sums at x (2m, n) and, if ``jac``, their Jacobian (2m, nu, n), written into J
+        if given (one this method wrote before: its structural zeros are not rewritten)."""
+        blk = self.blk
+        e, ln = self.W, self.L
+        with np.errstate(invalid="ignore"):
+            if len(self.ta):
+                e = e.copy()
+                cis = self.turn(x[blk.ia])
+                for t, u in zip(self.ta, self.ta_u, strict=True):
+                    e[t] *= cis[u]
+            if len(self.ts):
+                ln = ln.copy()
+                ln[self.ts] += x[self.xs]
+            z = ln * e
+            F = self.F0 + self.Cd @ z
+            if not jac:
+                return np.concatenate([F.real, F.imag]), None
+        if J is None:
+            J = np.zeros((blk.m2, blk.nu, x.shape[1]))
+        Jf = J.reshape(blk.m2 * blk.nu, -1)  # entries no term reaches stay 0 (a reused J keeps them)
+        parts = (z.real, z.imag, e.real, e.imag)
+        last = -1
+        with np.errstate(invalid="ignore", over="ignore"):
+            for dest, part, k, c in blk.j_entries:  # row by row: no stack-sized temporaries
+                if dest != last:
+                    np.multiply(parts[part][k], c, out=Jf[dest])
+                else:
+                    Jf[dest] += c * parts[part][k]
+                last = dest
+        return np.concatenate([F.real, F.imag]), J
+
+
+SERIES = 0.05  # angle corrections up to this (rad) update e^{jθ} by the series (its error < 1e-19 there)
+
+
+def _cis_series(d: np.ndarray) -> np.ndarray:
+    """e^{jd} for |d| ≤ SERIES by its Taylor series, to d⁹ (the first term left out, d¹⁰/10!, is < 3e-20),
+    or to d³ where every |d| ≤ 1e-4 (then d⁴/24 < 5e-18)."""
+    d2 = d * d
+    if np.all(np.abs(d) <= 1e-4):
+        return (1.0 - 0.5 * d2) + 1j * (d - d * d2 * (1 / 6))
+    c = 1.0 + d2 * (-1 / 2 + d2 * (1 / 24 + d2 * (-1 / 720 + d2 * (1 / 40320))))
+    s = d * (1.0 + d2 * (-1 / 6 + d2 * (1 / 120 + d2 * (-1 / 5040 + d2 * (1 / 362880)))))
+    return c + 1j * s
+
+
+def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """X·F per row of batch-last stacks: X (n, k, rows), F (k, rows)."""
+    return np.einsum("ukn,kn->un", X, F)
+
+
+def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
+    """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): an upper bound of the 2-norm
+    condition number on every row, the exact one (:func:`cond_2norm`) where the bound reaches the flag level,
+    so flags and refusals follow the 2-norm rule exactly. The bound: ‖J‖_F·‖J⁻¹‖_F (≤ n× the exact one),
+    tightened where it reaches the level to (Σσ⁸)^⅛ of each (≤ n^¼×) by two Gram products."""
+    c2 = colscale * colscale
+    with np.errstate(invalid="ignore", over="ignore"):
+        fj, fx = c2 @ np.einsum("lun,lun->un", J, J), (1.0 / c2) @ np.einsum("uln,uln->un", X, X)
+        cond = np.sqrt(fj * fx)
+    cond = np.where(np.isfinite(cond), cond, np.inf)
+    level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
+    near = np.nonzero(cond > level)[0]
+    for lo in range(0, len(near), NEAR_CHUNK):  # in chunks: a few small stacks alive at a time
+        rows = near[lo : lo + NEAR_CHUNK]
+        cond[rows] = _condition_near(J[:, :, rows], X[:, :, rows], colscale, fj[rows], fx[rows], cond[rows], level)
+    return cond
+
+
+NEAR_CHUNK = 4096  # rows whose condition bound reaches the flag level, refined together
+
+
+def _condition_near(
+    J: np.ndarray, X: np.ndarray, colscale: np.ndarray, fj: np.ndarray, fx: np.ndarray, cond: np.ndarray, level: float
+) -> np.ndarray:
+    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened
+    to (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        # scaled to unit Frobenius norm: σ⁸ neither overflows nor (the largest) underflows
+        # row-major copies (rows, ·, ·), transposes too: numpy's stacked matmul is ~4× faster on those
+        Js = np.multiply(J.transpose(2, 0, 1), colscale / np.sqrt(fj)[:, None, None], order="C")
+        Xs = np.multiply(X.transpose(2, 0, 1), 1.0 / (colscale[:, None] * np.sqrt(fx)[:, None, None]), order="C")
+        Gj = np.ascontiguousarray(Js.transpose(0, 2, 1)) @ Js
+        Gx = Xs @ np.ascontiguousarray(Xs.transpose(0, 2, 1))  # X·Xᵀ: the singular values of X
+        tight = cond * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
+    cond = np.where(tight < cond, tight, cond)
+    exact = np.nonzero(~(cond <= level))[0]
+    if len(exact):
+        cond[exact] = cond_2norm(Js[exact], Gj[exact])
+    return cond
+
+
+def _svd_cond(A: np.ndarray) -> np.ndarray:
+    """2-norm condition numbers of a stack of rectangular matrices by SVD (infinite where not finite)."""
+    cond = np.full(len(A), np.inf)
+    ok = np.all(np.isfinite(A), axis=(1, 2))
+    if ok.any():
+        sv = np.linalg.svd(A[ok], compute_uv=False)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cond[ok] = sv[:, 0] / sv[:, -1]
+    return cond
+
+
+def _frobenius(A: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.sum(A * A, axis=(1, 2)))
+
+
+EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-11 (relative)
+
+
+def cond_2norm(A: np.ndarray, G: np.ndarray | None = None) -> np.ndarray:
+    """2-norm condition numbers of a stack of square matrices (rows, n, n), as numpy.linalg.cond's SVD gives
+    them: from the eigenvalues of the Gram matrix G = AᵀA (half an SVD's cost; given or computed) where
+    λ_min's round-off, ~n·ε·λ_max, stays below ~1e-11 of it (cond ≤ EIG_COND); by SVD where larger;
+    infinite where A is not finite."""
+    out = np.full(len(A), np.inf)
+    ok = np.nonzero(np.all(np.isfinite(A), axis=(1, 2)))[0]
+    if not len(ok):
+        return out
+    A = A[ok]
+    lam = np.linalg.eigvalsh(A.transpose(0, 2, 1) @ A if G is None else G[ok])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.sqrt(lam[:, -1] / lam[:, 0])
+    svd = np.nonzero(~(c <= EIG_COND))[0]
+    if len(svd):
+        sv = np.linalg.svd(A[svd], compute_uv=False)
+        with np.errstate(divide="ignore"):
+            c[svd] = np.where(sv[:, -1] > 0, sv[:, 0] / np.where(sv[:, -1] > 0, sv[:, -1], 1.0), np.inf)
+    out[ok] = c
+    return out
 
 
 def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
@@ -209,22 +404,25 @@ class _Ctx:
     def rates_rows(self, rows: np.ndarray, J: np.ndarray) -> None:
         """ẋ and ẍ of the block at these rows (exact linear solves; least squares for a redundant block), kept
         for the Taylor predictor; a row too ill-conditioned to predict from is marked weak."""
-        p, st, na = self.p, self.st, self.na
+        p, st, na, blk = self.p, self.st, self.na, self.blk
+        X = _s.invert_rows(J) if blk.square else None  # one inverse for both right-hand sides
         for what, out in (("v", self.xd), ("a", self.xdd)):
             R = -(p.total.vel(st, rows) if what == "v" else p.total.acc(st, rows))
             rhs = np.concatenate([R.real, R.imag], axis=1)
-            val = _s.least_squares_rows(J, rhs)
+            val = _s.least_squares_rows(J, rhs) if X is None else (X @ rhs[..., None])[..., 0]
             out[rows] = val
             if what == "v":
                 _s._store(p, st, rows, val, "v", na)
-        _s._store(p, st, rows, np.zeros((len(rows), self.blk.nu)), "v", na)
-        Js = J * self.blk.colscale
-        ok = np.all(np.isfinite(Js), axis=(1, 2))
-        cond = np.full(len(rows), np.inf)
-        if ok.any():
-            sv = np.linalg.svd(Js[ok], compute_uv=False)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cond[ok] = sv[:, 0] / sv[:, -1]
+        _s._store(p, st, rows, np.zeros((len(rows), blk.nu)), "v", na)
+        Js = J * blk.colscale
+        if X is None:
+            cond = cond_2norm(Js) if Js.shape[1] == Js.shape[2] else _svd_cond(Js)
+        else:  # the Frobenius bound, the exact 2-norm one where it decides
+            with np.errstate(invalid="ignore", over="ignore"):
+                cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum((X / blk.colscale[:, None]) ** 2, axis=(1, 2)))
+            exact = np.nonzero(~(cond * cond * _s.EPS <= self.run.rtol))[0]
+            if len(exact):
+                cond[exact] = cond_2norm(Js[exact])
         # next to a singular row (a change point) the rates are not accurate enough to predict from
         finite = np.all(np.isfinite(self.xd[rows]), axis=1) & np.all(np.isfinite(self.xdd[rows]), axis=1)
         self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~finite
@@ -246,8 +444,11 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
         ctx.rates_at(0, J0[0])
     coarse, n_ok, failure = _coarse_pass(ctx)
     coarse = coarse[coarse < n_ok]
-    rows, j, far = _dense_newton(ctx, coarse, n_ok)
-    fac, res, conv = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+    if blk.square and n_ok:
+        rows, j, far, fac, res, conv = _dense_square(ctx, coarse, n_ok)
+    else:
+        rows, j, far = _dense_newton(ctx, coarse, n_ok)
+        fac, res, conv = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
     again = np.nonzero(~conv)[0]
     if len(again):  # one more step where the last one was above tol: its Jacobian is refreshed too
         fac2, res2, conv2 = blk.factor(st, again, run.rtol, run.tol)
@@ -266,8 +467,15 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
             if failure is not None and failure.sample <= hi:
                 break
         if np.any(bad):
-            fac, _, _ = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+            fac, _, _ = _refactor(blk, st, n_ok, run)
     return failure, fac
+
+
+def _refactor(blk: _Block, st: _State, n: int, run: _Run) -> tuple[Factor, np.ndarray, np.ndarray]:
+    """The Factor of rows 0..n-1 as they stand (a last Newton step applied)."""
+    if blk.square and n:
+        return _factor_square(_Rows(blk, st, n), st, blk.read(st, np.arange(n)).T.copy(), run.rtol, run.tol)
+    return blk.factor(st, np.arange(n), run.rtol, run.tol)
 
 
 def _input_travel(ctx: _Ctx) -> np.ndarray:
@@ -497,28 +705,134 @@ def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -
         return ~(c <= JUMP * m)
 
 
+def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]) and its prediction by
+    the quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶):
+    batch-last (nu, rows), from the coarse rows' positions xc (nu, coarse rows). The quintic's coefficients
+    in u (0..1 across an interval) are taken once per interval; each row gathers them and runs Horner."""
+    tg = ctx.tg
+    j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
+    tc = tg[coarse]
+    H = tc[1:] - tc[:-1]
+    v, acc = ctx.xd[coarse].T, ctx.xdd[coarse].T
+    xa, xb = xc[:, :-1], xc[:, 1:]
+    va, vb = v[:, :-1] * H, v[:, 1:] * H  # rates and accelerations in units of the interval
+    aa, ab = acc[:, :-1] * (H * H), acc[:, 1:] * (H * H)
+    d = xb - xa
+    C = np.stack(
+        [
+            xa,
+            va,
+            0.5 * aa,
+            10 * d - 6 * va - 4 * vb - 1.5 * aa + 0.5 * ab,
+            -15 * d + 8 * va + 7 * vb + 1.5 * aa - ab,
+            6 * d - 3 * va - 3 * vb - 0.5 * aa + 0.5 * ab,
+        ]
+    )[:, :, j]
+    u = (tg[rows] - tc[j]) / H[j]
+    pred = C[5]
+    for p in range(4, -1, -1):
+        pred = pred * u + C[p]
+    return j, pred
+
+
+def _far_dense(blk: _Block, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """:func:`_far` for rows between coarse rows (batch-last: correction (nu, rows), the coarse rows' x (nu, ·),
+    each row's interval j): the move and the scale of each interval taken once, not per row."""
+    unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
+    with np.errstate(invalid="ignore"):
+        move = np.max(np.abs(np.diff(xc, axis=1)) * unit, axis=0)
+        move += 1e-9 * (1.0 + np.max(np.abs(xc[:, :-1]) * unit, axis=0))
+        return ~(np.max(np.abs(correction) * unit, axis=0) <= JUMP * move[j])
+
+
 def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Newton on every row between coarse rows at once, from the quintic Hermite interpolant of its
-    neighbours' positions, rates and accelerations (error ~ step⁶), until the steps fall below LOOSE:
-    the step the Factor then takes is the convergence test. Returns (rows, interval of each, far from
-    its prediction)."""
-    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+    neighbours, until the steps fall below LOOSE: the step the Factor then takes is the convergence test.
+    Returns (rows, interval of each, far from its prediction)."""
     rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
     if not len(rows):
         return rows, rows, np.zeros(0, bool)
-    j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
-    a, b = coarse[j], coarse[j + 1]
-    xa, xb = blk.read(st, a), blk.read(st, b)
-    H = (tg[b] - tg[a])[:, None]
-    u = ((tg[rows] - tg[a]) / (tg[b] - tg[a]))[:, None]
-    u2, u3 = u * u, u * u * u
-    u4, u5 = u3 * u, u3 * u2
-    pred = (
-        (1 - 10 * u3 + 15 * u4 - 6 * u5) * xa
-        + (10 * u3 - 15 * u4 + 6 * u5) * xb
-        + H * ((u - 6 * u3 + 8 * u4 - 3 * u5) * ctx.xd[a] + (-4 * u3 + 7 * u4 - 3 * u5) * ctx.xd[b])
-        + H * H * ((0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5) * ctx.xdd[a] + (0.5 * u3 - u4 + 0.5 * u5) * ctx.xdd[b])
-    )
-    x, _ = newton(blk, st, rows, pred, LOOSE, run.max_iter)
-    far = _far(blk, x - pred, xb - xa, xa)
-    return rows, j, far
+    xc = ctx.blk.read(ctx.st, coarse).T
+    j, pred = _predict(ctx, coarse, rows, xc)
+    x, _ = newton(ctx.blk, ctx.st, rows, pred.T, LOOSE, ctx.run.max_iter)
+    return rows, j, _far_dense(ctx.blk, x.T - pred, xc, j)
+
+
+CHORD = 3  # chord steps (the inverse at the prediction reused) before a dense row is left to plain Newton
+
+
+def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]:
+    """:func:`_dense_newton` and the Factor of rows 0..n_ok-1 for a square block, batch-last: one Newton step
+    from the predictions, then chord steps with the same inverses (a prediction off by δ converges by a
+    factor ~cond·δ per step), plain Newton for the few rows still above LOOSE after CHORD of them; then the
+    factor. Returns (rows, interval of each, far, Factor, closure, converged and fresh)."""
+    run, st, blk = ctx.run, ctx.st, ctx.blk
+    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
+    ev = _Rows(blk, st, n_ok)
+    x = blk.read(st, np.arange(n_ok)).T.copy()
+    far = np.zeros(0, bool)
+    j = rows
+    J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
+    X = np.empty((blk.nu, blk.m2, n_ok))
+    if len(rows):
+        xc = x[:, coarse]
+        j, pred = _predict(ctx, coarse, rows, xc)
+        x[:, rows] = pred
+        F, _ = ev.eval(x, True, J)
+        _s.invert_last(J, out=X)
+        for _ in range(CHORD):
+            with np.errstate(invalid="ignore"):
+                dx = -_apply(X, F)
+                x += dx
+                act = ~(_step_size(dx, x) <= LOOSE) & np.all(np.isfinite(x), axis=0)
+            if not act.any():
+                break
+            F, _ = ev.eval(x, False)
+        else:
+            sub = np.nonzero(act)[0]
+            x[:, sub] = newton(blk, st, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
+        far = _far_dense(blk, x[:, rows] - pred, xc, j)
+        del pred, F  # not kept through the factor
+    fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol, J, X)
+    return rows, j, far, fac, res, conv
+
+
+def _step_size(dx: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A Newton step relative to its row (batch-last): max |dx| / (1 + max |x|)."""
+    return np.max(np.abs(dx), axis=0, initial=0.0) / (1.0 + np.max(np.abs(x), axis=0, initial=0.0))
+
+
+def _factor_square(
+    ev: _Rows,
+    st: _State,
+    x: np.ndarray,
+    rtol: float,
+    tol: float,
+    J: np.ndarray | None = None,
+    X: np.ndarray | None = None,
+) -> tuple[Factor, np.ndarray, np.ndarray]:
+    """:meth:`_Block.factor` on rows 0..n-1 of a square block at x (batch-last), by :func:`kernels.invert_last`:
+    the Factor, the closure of each row and whether its last step was below tol and FRESH (it is applied).
+    J, X: buffers for the Jacobian (one :meth:`_Rows.eval` wrote) and its inverse."""
+    blk = ev.blk
+    F, J = ev.eval(x, True, J)
+    X, sign = _s.invert_last(J, out=X)
+    cond = _condition_last(J, X, blk.colscale, rtol)
+    sign[~np.all(np.isfinite(J), axis=(0, 1))] = np.nan  # as numpy's det gives it
+    with np.errstate(invalid="ignore"):
+        res = np.max(np.abs(F), axis=0, initial=0.0) / blk.scale
+        dx = -_apply(X, F)
+        x = x + dx
+        step = _step_size(dx, x)
+    cis = None
+    if len(blk.ia) and ev.cis is not None and np.all(np.abs(dx[blk.ia]) <= SERIES):
+        cis = (ev.cis * _cis_series(dx[blk.ia])).T  # e^{jθ} carried along, not recomputed
+    finite = np.all(np.isfinite(x), axis=0)
+    if finite.all():
+        blk.put(st, slice(0, x.shape[1]), x.T, cis)
+    else:
+        rows = np.nonzero(finite)[0]
+        blk.put(st, rows, x[:, rows].T, None if cis is None else cis[rows])
+    fac = Factor(J.transpose(2, 0, 1), X.transpose(2, 0, 1), cond, sign)
+    return fac, res, (step <= tol) & (step <= FRESH)
