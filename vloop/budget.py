@@ -222,7 +222,7 @@ _HEAP: list[bool] = []
 def keep_heap() -> bool:
     """Ask glibc's malloc (once per process) to keep freed memory for reuse: numpy's temporaries of a few
     hundred kB are otherwise returned to the OS when freed and page-faulted in again at the next allocation —
-    measured at ~1,000 page faults and ~30 % of the time of a 4,800-sample eight-bar solve. The process then
+    measured at ~960 page faults and ~45 % of the time of a 4,800-sample eight-bar solve. The process then
     keeps up to TRIM_THRESHOLD of freed heap. Skipped where the allocator is not glibc's, where the user set
     glibc's MALLOC_*_ environment variables, or with VLOOP_KEEP_HEAP=0. Returns whether it is in effect."""
     if _HEAP:

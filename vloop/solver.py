@@ -611,8 +611,8 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
     P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
     cols: dict[str, np.ndarray] = {}
 
-    def column(A: np.ndarray, j: int) -> np.ndarray:  # a state column's rows, as an array of its own
-        return A[k, j].copy() if isinstance(k, slice) else A[k, j]
+    def column(state: np.ndarray, j: int) -> np.ndarray:  # a state column's rows, as an array of its own
+        return state[k, j].copy() if isinstance(k, slice) else state[k, j]
 
     for name, a, offset in sys.link_outputs:
         if a >= 0:
@@ -628,7 +628,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
         cols[f"{name}.vx"], cols[f"{name}.vy"] = V[:, i].real, V[:, i].imag
         cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
     for i, name in enumerate(sys.slider_names):
-        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = (column(A, i) for A in (st.S, st.SD, st.SDD))
+        cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = (column(q, i) for q in (st.S, st.SD, st.SDD))
     sources = [P, V, A, *(getattr(st, name)[k] for name in ("TH", "W", "AL", "S", "SD", "SDD"))]
     t = grid.t[rows]
     seen = grid.t[grid.out[: grid.skip + len(rows)]]  # requested times solved in this chunk and the one before
@@ -662,9 +662,8 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
     k = _as_slice(rows)
     residual = np.zeros(len(rows))
     if len(sys.loops):
-        F = loops.pos(st, k).view(float)
+        F = loops.pos(st, k).view(float) * (1.0 / run.scale)  # in sizes first: the squares cannot overflow
         np.sqrt(row_max(F[:, 0::2] * F[:, 0::2] + F[:, 1::2] * F[:, 1::2]), out=residual)
-        residual /= run.scale
     cond = np.ones(len(rows))
     if solved.conds:
         cond = solved.conds[0][k].copy()
