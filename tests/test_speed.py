@@ -306,3 +306,17 @@ def test_freed_temporaries_are_reused_not_page_faulted():
         assert r.returncode == 0, r.stderr
         faults[keep] = float(r.stdout.split()[-1])
     assert faults["1"] < 50 and faults["0"] > 200 + 10 * faults["1"], faults
+
+
+@pytest.mark.parametrize("rtol", [1e-9, 2.0**-30, 1e-12, 3e-7, 1e-15, 0.5])
+def test_a_crank_angle_too_large_to_resolve_is_refused_where_its_spacing_exceeds_rtol(rtol):
+    """The refusal threshold (a power of two, compared without np.spacing) is where np.spacing(θ) first exceeds
+    rtol: the largest angle accepted resolves to rtol, the next float does not."""
+    mech = vloop.load(MECHANISMS / "fourbar_textbook_example.toml")
+    system = vloop.compile(mech)
+    X = np.zeros((3, 1))
+    bound = 2.0 ** (math.floor(math.log2(rtol)) + 53)
+    X[1, 0], X[2, 0] = np.nextafter(bound, 0), bound
+    assert np.spacing(X[1, 0]) <= rtol < np.spacing(X[2, 0])
+    failure = solver._check_inputs(system, X, np.zeros_like(X), np.zeros_like(X), 0, rtol)
+    assert failure is not None and failure.sample == 2 and "too large to resolve" in failure.why

@@ -570,10 +570,12 @@ def _check_inputs(
     resolve to ``rtol`` (its floating-point spacing exceeds rtol radians)."""
     mech = sys.mechanism
     bad = ~np.isfinite(X) | ~np.isfinite(XD) | ~np.isfinite(XDD)
+    # spacing(x) = 2^(e − 52) on [2^e, 2^(e+1)): it exceeds rtol from 2^(⌊log2 rtol⌋ + 53) on
+    too_large = 2.0 ** (math.floor(math.log2(rtol)) + 53) if 0 < rtol < math.inf else math.inf
     for j, d in enumerate(mech.drivers):
         if d.kind == "crank":
-            bad[off:, j] |= np.spacing(np.abs(X[off:, j])) > rtol
-    rows = np.nonzero(bad.any(axis=1))[0]
+            bad[off:, j] |= np.abs(X[off:, j]) >= too_large
+    rows = np.nonzero(row_max(bad) if bad.shape[1] else np.zeros(len(bad), bool))[0]
     if not len(rows):
         return None
     r = int(rows[0])
