@@ -16,10 +16,12 @@ pair. Each is solved over its file's time span with ``steps`` samples:
   for the three mechanisms it can express (its numba compile time is excluded and reported). pylinkage
   turns its crank at a constant rate per step, so it runs the same geometry at the file's initial ω.
 
-Times are the best of ``--repeat`` runs; BLAS is pinned to one thread (threadpoolctl) since the products
-are small and a second thread only waits for the other core. vloop asks glibc to keep freed heap for reuse
-(vloop.budget.keep_heap, at its first solve; the whole process, so every contender here runs with it);
-``VLOOP_KEEP_HEAP=0 python benchmarks/bench_speed.py`` measures without it. Every run is checked: auto against the
+Times are the best of ``--repeat`` rounds in which every contender runs once in turn (a burst of load on a
+shared machine then falls on all of them alike). BLAS and numba run one thread (threadpoolctl,
+NUMBA_NUM_THREADS=1): the products are small, and a second thread only competes for the other core with
+whatever runs next. vloop asks glibc to keep freed heap for reuse (vloop.budget.keep_heap, at its first
+solve; the whole process, so every contender here runs with it); ``VLOOP_KEEP_HEAP=0 python
+benchmarks/bench_speed.py`` measures without it. Every run is checked: auto against the
 closed form (1e-9 of peak) and newton against auto.
 """
 
@@ -36,6 +38,9 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# numba's second thread (pylinkage) otherwise competes with whatever runs next on a 2-core machine: measured
+# 3.8 ms for vloop's eight-bar run between pylinkage runs vs 2.6 ms with one, pylinkage itself 2.7 vs 2.2 ms
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
 
@@ -56,12 +61,20 @@ MECHANISMS = (
 
 
 def best_of(fn: Callable[[], object], repeat: int) -> float:
-    fn()  # warm caches
-    best = math.inf
+    return best_of_each({"": fn}, repeat)[""]
+
+
+def best_of_each(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, float]:
+    """The best time of each function over ``repeat`` rounds, the functions taking turns within a round: a burst
+    of load on a shared machine then falls on all of them alike, not on whichever ran during it."""
+    for fn in fns.values():
+        fn()  # warm caches
+    best = dict.fromkeys(fns, math.inf)
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
+        for label, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            best[label] = min(best[label], time.perf_counter() - t0)
     return best
 
 
@@ -152,33 +165,31 @@ def bench(name: str, steps: list[int], repeat: int, have_pylinkage: bool) -> lis
         res = vloop.solve(system, t)
         newton = vloop.solve(system, t, method="newton")
         gap_newton = worst_relative(newton, res)
-        rows = []
-        t_auto = best_of(lambda t=t: vloop.solve(system, t), repeat)
-        t_newton = best_of(lambda t=t: vloop.solve(system, t, method="newton"), repeat)
-        # a new Mechanism object per call: compiled every time (vloop.solve keeps a Mechanism's system)
-        t_mech = best_of(lambda t=t: vloop.solve(dataclasses.replace(mech), t), repeat)
-        t_kept = best_of(lambda t=t: vloop.solve(mech, t), repeat)
-        per_step[n] = t_auto / n
-        rows += [("auto: solve(system)", t_auto), ("newton: solve(system, method=newton)", t_newton)]
-        rows.append(("auto: solve(mech), compile included", t_mech))
-        rows.append(("auto: solve(mech), compiled once", t_kept))
+        fns: dict[str, Callable[[], object]] = {
+            "auto: solve(system)": lambda t=t: vloop.solve(system, t),
+            "newton: solve(system, method=newton)": lambda t=t: vloop.solve(system, t, method="newton"),
+            # a new Mechanism object per call: compiled every time (vloop.solve keeps a Mechanism's system)
+            "auto: solve(mech), compile included": lambda t=t: vloop.solve(dataclasses.replace(mech), t),
+            "auto: solve(mech), compiled once": lambda t=t: vloop.solve(mech, t),
+        }
         check = f"newton vs auto {gap_newton:.1e}"
         if analytic.available(mech):
             ref = analytic.solve(mech, t)
             check += f"; auto vs closed form {worst_relative(res, ref):.1e}, newton {worst_relative(newton, ref):.1e}"
-            rows.append(("closed form (numpy, by hand)", best_of(lambda t=t: analytic.solve(mech, t), repeat)))
-        t_pl = None
-        if have_pylinkage:
+            fns["closed form (numpy, by hand)"] = lambda t=t: analytic.solve(mech, t)
+        model = pylinkage_model(name, mech, float(t[1] - t[0])) if have_pylinkage else None
+        if model is not None:
             dt = float(t[1] - t[0])
-            model = pylinkage_model(name, mech, dt)
-            if model is not None:
-                t0 = time.perf_counter()
-                pylinkage_run(model, 2)  # numba compiles on the first call
-                jit = time.perf_counter() - t0
-                t_pl = best_of(lambda model=model, n=n: pylinkage_run(model, n), repeat)
-                rows.append(("pylinkage numba P/V/A", t_pl))
-                check += f"; pylinkage P/V/A vs vloop {pylinkage_check(name, mech, n, dt):.1e} of peak"
-                check += f" (pylinkage first call incl. numba compile {jit:.2f} s, excluded)"
+            t0 = time.perf_counter()
+            pylinkage_run(model, 2)  # numba compiles on the first call
+            jit = time.perf_counter() - t0
+            fns["pylinkage numba P/V/A"] = lambda model=model, n=n: pylinkage_run(model, n)
+            check += f"; pylinkage P/V/A vs vloop {pylinkage_check(name, mech, n, dt):.1e} of peak"
+            check += f" (pylinkage first call incl. numba compile {jit:.2f} s, excluded)"
+        times = best_of_each(fns, repeat)
+        t_auto, t_pl = times["auto: solve(system)"], times.get("pylinkage numba P/V/A")
+        per_step[n] = t_auto / n
+        rows = list(times.items())
         lines.append(f"  {n:,} steps — {check}")
         for label, tt in rows:
             vs_pl = f"{tt / t_pl:8.2f}x pylinkage" if t_pl else ""
