@@ -376,9 +376,7 @@ def _closed_form(p: _Plan, st: _State, k: slice, na: int, sig: np.ndarray) -> tu
     return ok, np.full(len(ok), np.inf)
 
 
-def _round_off_zero(
-    h: np.ndarray, size: np.ndarray | float, carried: Callable[[np.ndarray], np.ndarray]
-) -> np.ndarray:
+def _round_off_zero(h: np.ndarray, size: np.ndarray | float, carried: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """A discriminant whose magnitude is within round-off of the terms it was computed from is zero: the
     two branches meet (an input exactly at a limit or change point, up to round-off). ``size`` bounds the
     terms; ``carried(mask)`` adds, on the rows of ``mask``, the round-off the known part X brings in (large
