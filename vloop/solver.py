@@ -475,7 +475,8 @@ def solve_chunks(run: _Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[R
             continue
         t_cut = float(grid.t[grid.out[cut]])
         run.events = {i: [ev for ev in evs if ev.time <= t_cut] for i, evs in run.events.items()}
-        yield res.head(cut + 1 - grid.skip)
+        keep = cut + 1 - grid.skip
+        yield res if keep == len(res) else res.head(keep)
         if run.tail:
             return
         row = int(grid.out[cut])
