@@ -84,6 +84,40 @@ def test_huge_slider_axis_is_normalised_without_overflow():
     assert tiny.sliders["blk"].axis == (1.0, 0.0) or tiny is None  # a subnormal axis is refused or exact
 
 
+def scaled(mech: vloop.Mechanism, factor: float) -> vloop.Mechanism:
+    """The same mechanism with every coordinate and length multiplied by ``factor``."""
+    data = vloop.mechanism.to_dict(mech)
+    data["joints"] = {k: [v[0] * factor, v[1] * factor] for k, v in data["joints"].items()}
+    for link in data["links"].values():
+        if "length" in link:
+            link["length"] *= factor
+    return vloop.from_dict(data, source=mech.source)
+
+
+@pytest.mark.parametrize("factor", [1e-60, 1e-30, 1e30, 1e56])
+def test_a_mechanism_at_any_solvable_size_gives_the_same_motion(factor):
+    """Scaled by 1e-60…1e56 (sizes ~1.6e-58…1.6e58 of its units) the textbook four-bar moves the same: angles to
+    1e-14 rad, positions to 1e-14 of their peak in the new units."""
+    mech = vloop.load(Path(__file__).resolve().parents[1] / "mechanisms" / "fourbar_textbook_example.toml")
+    ref, res = vloop.solve(mech), vloop.solve(scaled(mech, factor))
+    assert np.max(np.abs(res["l3.theta"] - ref["l3.theta"])) < 1e-14
+    assert np.max(np.abs(res["B.ay"] / factor - ref["B.ay"])) < 1e-14 * np.max(np.abs(ref["B.ay"]))
+
+
+@pytest.mark.parametrize("factor", [1e-70, 1e80])
+def test_a_mechanism_too_large_or_too_small_for_double_precision_is_refused(factor, tmp_path, capsys):
+    """Beyond 1e±60 of its units a dyad's discriminant (size⁴) over- or underflows: one line, exit 2, naming the
+    size and what to do (not a wrong 'limit position' at t = 0)."""
+    mech = scaled(vloop.load(Path(__file__).resolve().parents[1] / "mechanisms" / "fourbar_textbook_example.toml"),
+                  factor)  # fmt: skip
+    f = tmp_path / "m.toml"
+    vloop.save(mech, f)
+    assert main(["run", str(f), "--out", str(tmp_path / "o")]) == 2
+    line = one_clean_line(capsys.readouterr().err)
+    assert "[joints] the mechanism spans" in line and ("larger units" if factor > 1 else "smaller units") in line
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
 def test_near_singular_samples_are_refused_by_the_error_they_imply():
     """A triple rocker driven at fine steps up to its limit: the samples whose condition number implies an
     error above rtol are refused (toggle), the kept ones within 1e-3 of rtol are flagged ill-conditioned."""

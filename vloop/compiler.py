@@ -29,6 +29,7 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     "newton" (one Newton block for the whole system); default from the file's [solver] table, else "auto".
     """
     method = method or mech.options.get("method", "auto")
+    _check_size(mech)
     mg = build_graph(mech, mech.bodies())
     loops, C = build_loops(mg, mech, cycle_basis(mg.G))
     system = _unknowns(mech, mg, loops, C)
@@ -38,6 +39,23 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     if mech.options.get("branches"):
         blocks, q0, report = _choose_branches(system, blocks, q0, report)
     return dataclasses.replace(system, blocks=blocks, q0=q0, assembly=report, method=method, cache={})
+
+
+SIZES = (1e-60, 1e60)  # mechanism sizes (in its units) whose lengths can be squared twice in double precision
+
+
+def _check_size(mech: Mechanism) -> None:
+    """Refuse a mechanism too large or too small for the closed forms: a dyad's discriminant is a product of
+    squared lengths (size⁴), which overflows beyond ~1e77 and loses its digits below ~1e-77 (measured: the
+    textbook four-bar solves identically scaled from 1e-68 to 1e72 and fails to assemble at 1e78)."""
+    lo, hi = SIZES
+    if len(mech.joints) > 1 and not lo <= mech.scale <= hi:
+        raise MechanismError(
+            f"{mech.source}: [joints] the mechanism spans {mech.scale:.3g} {mech.units}: only sizes from {lo:g} to "
+            f"{hi:g} of the units can be solved in double precision (lengths are squared twice); state the "
+            f"coordinates in {'larger' if mech.scale > hi else 'smaller'} units",
+            entry="joints",
+        )
 
 
 def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray) -> LoopSystem:
