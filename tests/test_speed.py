@@ -320,3 +320,23 @@ def test_a_crank_angle_too_large_to_resolve_is_refused_where_its_spacing_exceeds
     assert np.spacing(X[1, 0]) <= rtol < np.spacing(X[2, 0])
     failure = solver._check_inputs(system, X, np.zeros_like(X), np.zeros_like(X), 0, rtol)
     assert failure is not None and failure.sample == 2 and "too large to resolve" in failure.why
+
+
+@pytest.mark.parametrize("omega, alpha, steps", [(2.0, 0.0, 4800), (4.0, 1.0, 301), (30.0, -5.0, 40), (0.5, 80.0, 97)])
+def test_one_bound_for_the_whole_grid_gives_the_row_by_row_grid(omega, alpha, steps, monkeypatch):
+    """For drivers without a profile the grid is settled by one bound (max h · max|ẋ| ≤ 10°) where it holds; the
+    internal grid and its inputs are then those of the row-by-row test, with and without a lead-in."""
+    text = (MECHANISMS / "fourbar_textbook_example.toml").read_text().split("[time]")[0]
+    text = text.replace("alpha = 15.0", f"alpha = {alpha}").replace("omega = 25.0", f"omega = {omega}")
+    assert f"alpha = {alpha}" in text and f"omega = {omega}" in text
+    system = vloop.compile(vloop.loads(text + "[time]\nstart = 0.0\nstop = 2.0\nstep = 0.5\n"))
+    run, times = solver._prepare(system, np.linspace(0.0, 2.0, steps), None, None, None, None)
+    for lead in (np.zeros(0), np.array([-0.3, -0.2, -0.1])):
+        fast = solver._grid(run, lead, times)
+        with monkeypatch.context() as m:
+            m.setattr(solver, "_within_one_step", lambda *a: False)
+            slow = solver._grid(run, lead, times)
+        assert np.array_equal(fast.t, slow.t) and np.array_equal(fast.out, slow.out)
+        if fast.inputs is not None:
+            for a, b in zip(fast.inputs, run.inputs(fast.t), strict=True):
+                assert np.array_equal(a, b)

@@ -368,6 +368,22 @@ MAX_INPUT_STEP = math.radians(10)  # per internal row: of a crank (or 1/36 of th
 MAX_INSERTED = 10_000_000
 
 
+def _within_one_step(mech: Any, h: np.ndarray, XD: np.ndarray, units: np.ndarray) -> bool:
+    """Whether no input can move more than MAX_INPUT_STEP between two samples, by one bound: with drivers
+    x = x0 + v0·t + a0·t²/2 (no profile) ẋ is linear, so |Δx| and the rates' trapezoid over a step are at most
+    h·max|ẋ| at its ends ≤ max h · max|ẋ| (profiles can peak between samples: they take the row-by-row test)."""
+    if any(d.profile is not None for d in mech.drivers):
+        return False
+    with np.errstate(invalid="ignore", over="ignore"):
+        bound = float(np.max(h)) * float(np.max(np.max(np.abs(XD), axis=0) / units))
+    return bound <= MAX_INPUT_STEP  # (False where not finite: the row-by-row test then sorts it out)
+
+
+def _joined(lead: np.ndarray, times: np.ndarray) -> _Grid:
+    """The lead-in followed by the requested times, no rows inserted."""
+    return _Grid(np.concatenate([lead, times]), len(lead) + np.arange(len(times)))
+
+
 def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
     """Lead-in + requested times, with rows inserted where an input moves more than MAX_INPUT_STEP."""
     mech = run.sys.mechanism
@@ -377,6 +393,8 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
         X, XD, XDD = run.inputs(times)
         units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
         h = np.diff(times)[:, None]
+        if _within_one_step(mech, h, XD, units):
+            return _Grid(times, np.arange(n), inputs=(X, XD, XDD)) if len(lead) == 0 else _joined(lead, times)
         travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
         need = np.ceil(row_max(travel) / MAX_INPUT_STEP)
         need = np.where(np.isfinite(need) & (need <= MAX_INSERTED), need, 1.0)  # absurd inputs: refused later
