@@ -837,12 +837,10 @@ def column_names(sys: LoopSystem) -> list[str]:
 
 
 @dataclass
-class BatchOut:
-    """What a batch gives for V variants: columns (V, n requested samples), NaN where a variant has no
-    motion; per variant whether it assembled, whether the motion completed, where it stopped and why, the
-    worst condition number, which solver gave it ("batch" or "single"), and its t = 0 joint positions."""
+class Outcomes:
+    """Per variant: whether it assembled, whether the motion completed, where it stopped and why, the worst
+    condition number, which solver gave it ("batch" or "single"), and its t = 0 joint positions and variables."""
 
-    columns: dict[str, np.ndarray]
     assembled: np.ndarray
     completed: np.ndarray
     stopped_at: np.ndarray
@@ -853,6 +851,47 @@ class BatchOut:
     positions: np.ndarray  # (V, n_points) complex, t = 0
     q0: np.ndarray  # (V, n_vars): the assembled variables at t = 0 (NaN where not assembled)
 
+    @classmethod
+    def empty(cls, n: int, n_points: int, n_vars: int) -> Outcomes:
+        return cls(
+            np.zeros(n, bool),
+            np.zeros(n, bool),
+            np.full(n, np.nan),
+            np.full(n, -1, np.int64),
+            [""] * n,
+            np.full(n, np.nan),
+            [""] * n,
+            np.full((n, n_points), np.nan + 0j),
+            np.full((n, n_vars), np.nan),
+        )
+
+    def fill(self, rows: np.ndarray, res: Outcomes) -> None:
+        """Take ``res``'s variants into the rows where ``rows`` (a mask) is set."""
+        idx = np.nonzero(rows)[0]
+        for name in ("assembled", "completed", "stopped_at", "stopped_sample", "max_cond", "positions", "q0"):
+            getattr(self, name)[idx] = getattr(res, name)
+        for k, i in enumerate(idx):
+            self.reason[i], self.solver[i] = res.reason[k], res.solver[k]
+
+    @classmethod
+    def join(cls, parts: list[Outcomes]) -> Outcomes:
+        return cls(
+            *(
+                [x for p in parts for x in getattr(p, f.name)]
+                if f.name in ("reason", "solver")
+                else np.concatenate([getattr(p, f.name) for p in parts])
+                for f in dataclasses.fields(Outcomes)
+            )
+        )
+
+
+@dataclass
+class BatchOut(Outcomes):
+    """What a batch gives for V variants: the Outcomes and the columns (V, n requested samples), NaN where a
+    variant has no motion."""
+
+    columns: dict[str, np.ndarray] = field(default_factory=dict)
+
 
 def solve(model: VariantModel, values: np.ndarray, grid: Grid, names: list[str]) -> BatchOut:
     """Solve the variants whose parameter values are the rows of ``values`` on ``grid``; columns ``names``."""
@@ -861,18 +900,9 @@ def solve(model: VariantModel, values: np.ndarray, grid: Grid, names: list[str])
     V = len(values)
     N = len(grid.out)
     sys = model.system
-    out = BatchOut(
-        {c: np.full((V, N), np.nan) for c in names},
-        np.zeros(V, bool),
-        np.zeros(V, bool),
-        np.full(V, np.nan),
-        np.full(V, -1, np.int64),
-        [""] * V,
-        np.full(V, np.nan),
-        [""] * V,
-        np.full((V, len(sys.point_names)), np.nan + 0j),
-        np.full((V, sys.n_vars), np.nan),
-    )
+    empty = Outcomes.empty(V, len(sys.point_names), sys.n_vars)
+    out = BatchOut(**{f.name: getattr(empty, f.name) for f in dataclasses.fields(Outcomes)})
+    out.columns = {c: np.full((V, N), np.nan) for c in names}
     per = max(1, ROWS // max(len(grid.t), 1))
     for lo in range(0, V, per):
         hi = min(lo + per, V)

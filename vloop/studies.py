@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from . import batch
+from .batch import Outcomes
 from .errors import MechanismError, VloopError
 from .model import Mechanism
 from .result import Result
@@ -268,7 +269,7 @@ def run_chunk(task: _Task) -> dict[str, Any]:
     n = len(task.values)
     ok = np.array([i not in task.invalid for i in range(n)], bool)
     res = batch.solve(model, task.values[ok], task.grid, needed_columns(model, task.outputs))
-    out = _Outcomes.empty(n, len(model.system.point_names), model.system.n_vars)
+    out = Outcomes.empty(n, len(model.system.point_names), model.system.n_vars)
     out.fill(ok, res)
     for i, why in task.invalid.items():
         out.reason[i] = why
@@ -287,53 +288,6 @@ def run_chunk(task: _Task) -> dict[str, Any]:
                 full[name] = np.empty(n, arr.dtype)
             full[name][lo : lo + per] = arr
     return {"status": out, "values": full}
-
-
-@dataclass
-class _Outcomes:
-    """Per design: assembled, completed, where it stopped, why, the worst condition number, the solver, t = 0."""
-
-    assembled: np.ndarray
-    completed: np.ndarray
-    stopped_at: np.ndarray
-    stopped_sample: np.ndarray
-    reason: list[str]
-    max_cond: np.ndarray
-    solver: list[str]
-    positions: np.ndarray
-    q0: np.ndarray
-
-    @classmethod
-    def empty(cls, n: int, n_points: int, n_vars: int) -> _Outcomes:
-        return cls(
-            np.zeros(n, bool),
-            np.zeros(n, bool),
-            np.full(n, np.nan),
-            np.full(n, -1, np.int64),
-            [""] * n,
-            np.full(n, np.nan),
-            [""] * n,
-            np.full((n, n_points), np.nan + 0j),
-            np.full((n, n_vars), np.nan),
-        )
-
-    def fill(self, rows: np.ndarray, res: batch.BatchOut) -> None:
-        idx = np.nonzero(rows)[0]
-        for name in ("assembled", "completed", "stopped_at", "stopped_sample", "max_cond", "positions", "q0"):
-            getattr(self, name)[idx] = getattr(res, name)
-        for k, i in enumerate(idx):
-            self.reason[i], self.solver[i] = res.reason[k], res.solver[k]
-
-    @classmethod
-    def join(cls, parts: list[_Outcomes]) -> _Outcomes:
-        return cls(
-            *(
-                [x for p in parts for x in getattr(p, f.name)]
-                if f.name in ("reason", "solver")
-                else np.concatenate([getattr(p, f.name) for p in parts])
-                for f in dataclasses.fields(cls)
-            )
-        )
 
 
 # ---------------------------------------------------------------- outputs from the columns
@@ -542,7 +496,7 @@ def run(
     failed = [o for o in outcomes if not o.ok]
     if failed:
         raise VloopError(f"{spec.source}: a chunk of the study failed: {failed[0].error}", entry="study")
-    status = _Outcomes.join([o.value["status"] for o in outcomes])
+    status = Outcomes.join([o.value["status"] for o in outcomes])
     values = {k: np.concatenate([o.value["values"][k] for o in outcomes]) for k in outcomes[0].value["values"]}
     return _gather(spec, p, model, status, values, times, time.perf_counter() - t0)
 
@@ -595,7 +549,7 @@ class StudyResult:
     seconds: float
     counts: dict[str, int]
     _model: VariantModel = field(repr=False)
-    _status: _Outcomes = field(repr=False)
+    _status: Outcomes = field(repr=False)
     _values: np.ndarray = field(repr=False)
 
     def __getitem__(self, key: Any) -> Any:
@@ -684,7 +638,7 @@ def _gather(
     spec: StudySpec,
     p: _Plan,
     model: VariantModel,
-    st: _Outcomes,
+    st: Outcomes,
     values: dict[str, np.ndarray],
     t: np.ndarray,
     seconds: float,
@@ -737,7 +691,7 @@ def _series_names(spec: StudySpec) -> list[str]:
     return out
 
 
-def _variants_table(spec: StudySpec, p: _Plan, st: _Outcomes, values: dict[str, np.ndarray], n: int) -> Any:
+def _variants_table(spec: StudySpec, p: _Plan, st: Outcomes, values: dict[str, np.ndarray], n: int) -> Any:
     import pandas as pd
 
     cols: dict[str, Any] = {"variant": np.arange(n)}
@@ -800,7 +754,7 @@ def _lin_sigma(p: _Plan, d: np.ndarray) -> np.ndarray:
 
 
 def _summary(
-    spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: _Outcomes
+    spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: Outcomes
 ) -> Any:
     """Per base design and scalar output of a tolerance study: the nominal, linearized and Monte-Carlo statistics."""
     import pandas as pd
@@ -885,7 +839,7 @@ def _sensitivity_table(spec: StudySpec, p: _Plan, model: VariantModel, sens: dic
 
 
 def _bands(
-    spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: _Outcomes, t: np.ndarray
+    spec: StudySpec, p: _Plan, values: dict[str, np.ndarray], sens: dict[str, np.ndarray], st: Outcomes, t: np.ndarray
 ) -> Any:
     """Series outputs over the motion per base design: nominal, linearized σ, Monte-Carlo mean/σ/percentiles,
     and the derivative with respect to each parameter at every sample."""
