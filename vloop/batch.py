@@ -38,7 +38,16 @@ import numpy as np
 from .changepoints import CHANGE_GAP, DIP, ETA_INPUT, ZOOM_POINTS
 from .drivers import evaluate
 from .errors import MotionError, VloopError
-from .kernels import DEFAULT_RTOL, EPS, block_terms, cross, det_sign, least_squares_rows, pinv_rows, solve_rows
+from .kernels import (
+    DEFAULT_RTOL,
+    EPS,
+    block_terms,
+    cross,
+    det_sign,
+    newton_rows,
+    pinv_rows,
+    solve_rows,
+)
 from .loops import Block, LoopSystem
 from .solver import DEFAULT_MAX_ITER, DEFAULT_TOL, MAX_INPUT_STEP
 from .variants import Designs, VariantModel
@@ -493,22 +502,12 @@ class _Newton:
 
     def newton(self, st: _State, d: Designs, vs: np.ndarray, k: int, x: np.ndarray, tol: float, max_iter: int):
         """Batched Newton at row k of variants ``vs`` from ``x``: (solution, converged)."""
-        x = x.copy()
-        conv = np.zeros(len(vs), bool)
-        act = np.arange(len(vs))
-        for _ in range(max_iter):
-            self.put(st, vs[act], k, x[act])
-            F, J = self.residual_jacobian(st, d.take(vs[act]), vs[act], k)
-            dx = least_squares_rows(J, -F)
-            xa = x[act] + dx
-            x[act] = xa
-            finite = np.all(np.isfinite(xa), axis=1)
-            with np.errstate(invalid="ignore"):
-                done = finite & (np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(xa), axis=1)))
-            conv[act[done]] = True
-            act = act[finite & ~done]
-            if not len(act):
-                break
+
+        def residual(act: np.ndarray, xa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            self.put(st, vs[act], k, xa)
+            return self.residual_jacobian(st, d.take(vs[act]), vs[act], k)
+
+        x, conv = newton_rows(residual, x, tol, max_iter)
         good = np.all(np.isfinite(x), axis=1)
         self.put(st, vs[good], k, x[good])
         return x, conv

@@ -433,40 +433,18 @@ def _set_angle(st: _State, k: slice, a: int, E: np.ndarray) -> None:
     st.TH[k, a] = th
 
 
-def _jacobian(p: _Plan, z: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """Real block Jacobians (rows, 2m, 2m) of [Re; Im] of the block's loops."""
-    cols = []
-    for v, mask in zip(p.block.unknowns, p.masks, strict=True):
-        d = (1j * z if v in p.unk_ang else e) * mask
-        cols.append(d @ p.Ct)  # (rows, m)
-    Jc = np.stack(cols, axis=-1)  # (rows, m, nu)
-    return np.concatenate([Jc.real, Jc.imag], axis=1)
-
-
-def _rates(p: _Plan, st: _State, k: slice, J: np.ndarray | None, what: str, cols: _Cols2 | None = None) -> np.ndarray:
-    """Unknown rates (what="v") or accelerations ("a") of a block for rows ``k``.
+def _rates(p: _Plan, st: _State, k: slice, what: str, cols: _Cols2 | None = None) -> np.ndarray:
+    """Unknown rates (what="v") or accelerations ("a") of a one-loop block for rows ``k``, by Cramer's rule.
 
     The unknowns' own rate columns must still be zero: the sum is then the known part.
-    ``J``: the block Jacobians for blocks larger than 2×2 (Cramer's rule otherwise).
     """
-    R = p.vel_sum.vel(st, k) if what == "v" else p.total.acc(st, k)  # (rows, m) complex: the known part
-    if J is None:
-        c = cols if cols is not None else _columns(p, st, k)
-        Rr, Ri = R[:, 0].real, R[:, 0].imag  # c1·x1 + c2·x2 = −R, by Cramer's rule
-        out = np.empty((len(Rr), 2))
-        np.multiply(Ri * c.c2r - Rr * c.c2i, c.inv_det, out=out[:, 0])
-        np.multiply(Rr * c.c1i - Ri * c.c1r, c.inv_det, out=out[:, 1])
-        return out
-    rhs = np.concatenate([-R.real, -R.imag], axis=1)
-    return _solve_block(J, rhs)
-
-
-def _solve_block(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve J·x = rhs (batched over leading axes); a block with more equations than unknowns (redundant
-    constraints) by least squares with the pseudo-inverse (exact when the equations are consistent)."""
-    if J.shape[-1] == J.shape[-2]:
-        return np.linalg.solve(J, rhs[..., None])[..., 0]
-    return (np.linalg.pinv(J) @ rhs[..., None])[..., 0]
+    R = p.vel_sum.vel(st, k) if what == "v" else p.total.acc(st, k)  # (rows, 1) complex: the known part
+    c = cols if cols is not None else _columns(p, st, k)
+    Rr, Ri = R[:, 0].real, R[:, 0].imag  # c1·x1 + c2·x2 = −R
+    out = np.empty((len(Rr), 2))
+    np.multiply(Ri * c.c2r - Rr * c.c2i, c.inv_det, out=out[:, 0])
+    np.multiply(Rr * c.c1i - Ri * c.c1r, c.inv_det, out=out[:, 1])
+    return out
 
 
 def det_sign(J: np.ndarray) -> np.ndarray:
@@ -521,22 +499,17 @@ def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int)
 def _block_health(
     p: _Plan, st: _State, k: slice, scale: float, cols: _Cols2 | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Condition number (angle columns divided by the mechanism size) and det sign per row."""
-    if len(p.block.unknowns) == 2:
-        c = cols if cols is not None else _columns(p, st, k)
-        s1 = 1.0 / scale if p.block.unknowns[0] in p.unk_ang else 1.0  # angle columns in lengths: per size
-        s2 = 1.0 / scale if p.block.unknowns[1] in p.unk_ang else 1.0
-        f2 = (c.c1r * c.c1r + c.c1i * c.c1i) * (s1 * s1) + (c.c2r * c.c2r + c.c2i * c.c2i) * (s2 * s2)
-        ad = np.abs(c.det) * (s1 * s2)
-        root = np.sqrt(np.maximum(f2 * f2 - 4 * ad * ad, 0.0))  # σ_max² − σ_min² of the scaled 2×2 block
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cond = (f2 + root) / (2 * ad)  # σ_max/σ_min = (σ_max² + ... )/(2·|det|); |det| = 0 gives inf
-        cond[ad == 0] = np.inf
-        return cond, np.sign(c.det)
-    J = _jacobian(p, *st.z(k, p.ang, p.sl, p.r, p.cd))
-    colscale = np.array([1 / scale if v in p.unk_ang else 1.0 for v in p.block.unknowns])
-    Js = J * colscale
-    return np.linalg.cond(Js), det_sign(J)
+    """Condition number (angle columns divided by the mechanism size) and det sign per row of a one-loop block."""
+    c = cols if cols is not None else _columns(p, st, k)
+    s1 = 1.0 / scale if p.block.unknowns[0] in p.unk_ang else 1.0  # angle columns in lengths: per size
+    s2 = 1.0 / scale if p.block.unknowns[1] in p.unk_ang else 1.0
+    f2 = (c.c1r * c.c1r + c.c1i * c.c1i) * (s1 * s1) + (c.c2r * c.c2r + c.c2i * c.c2i) * (s2 * s2)
+    ad = np.abs(c.det) * (s1 * s2)
+    root = np.sqrt(np.maximum(f2 * f2 - 4 * ad * ad, 0.0))  # σ_max² − σ_min² of the scaled 2×2 block
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cond = (f2 + root) / (2 * ad)  # σ_max/σ_min = (σ_max² + ... )/(2·|det|); |det| = 0 gives inf
+    cond[ad == 0] = np.inf
+    return cond, np.sign(c.det)
 
 
 @dataclass
@@ -716,6 +689,33 @@ def least_squares_rows(J: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         Jt = J.transpose(0, 2, 1)
         J, rhs = Jt @ J, (Jt @ rhs[..., None])[..., 0]
     return solve_rows(J, rhs)
+
+
+def newton_rows(
+    residual: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    x: np.ndarray,
+    tol: float,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched Newton–Raphson from ``x`` (rows, nu): ``residual(act, x_act)`` stores x_act on the rows ``act`` and
+    gives their residuals and Jacobians (F, J); a row stops as its step falls below tol·(1 + |x|) (least squares
+    where J has more rows than columns). Returns (solution, converged mask); the caller stores the finite rows."""
+    x = x.copy()
+    conv = np.zeros(len(x), bool)
+    act = np.arange(len(x))
+    for _ in range(max_iter):
+        F, J = residual(act, x[act])
+        dx = least_squares_rows(J, -F)
+        xa = x[act] + dx
+        x[act] = xa
+        finite = np.all(np.isfinite(xa), axis=1)
+        with np.errstate(invalid="ignore"):
+            done = finite & (np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(xa), axis=1)))
+        conv[act[done]] = True
+        act = act[finite & ~done]
+        if not len(act):
+            break
+    return x, conv
 
 
 def pinv_rows(A: np.ndarray) -> np.ndarray:

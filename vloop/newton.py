@@ -357,22 +357,12 @@ def newton(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched Newton from ``x`` on ``rows``: (solution, converged mask); rows stop as their step falls
     below tol·(1 + |x|)."""
-    x = x.copy()
-    conv = np.zeros(len(rows), bool)
-    act = np.arange(len(rows))
-    for _ in range(max_iter):
-        r = rows[act]
-        blk.put(st, r, x[act])
-        F, J = blk.residual_jacobian(st, r)
-        dx = _s.least_squares_rows(J, -F)
-        xa = x[act] + dx
-        x[act] = xa
-        finite = np.all(np.isfinite(xa), axis=1)
-        done = finite & (np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(xa), axis=1)))
-        conv[act[done]] = True
-        act = act[finite & ~done]
-        if not len(act):
-            break
+
+    def residual(act: np.ndarray, xa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        blk.put(st, rows[act], xa)
+        return blk.residual_jacobian(st, rows[act])
+
+    x, conv = _s.newton_rows(residual, x, tol, max_iter)
     good = np.all(np.isfinite(x), axis=1)
     blk.put(st, rows[good], x[good])
     return x, conv
@@ -657,8 +647,9 @@ def _smooth_to(ctx: _Ctx, a: int, k: int) -> np.ndarray | None:
     return x_prev
 
 
-def _solve_at(ctx: _Ctx, a: int, t: float, guess: np.ndarray) -> np.ndarray | None:
-    """The block's unknowns at time t by Newton from ``guess`` (earlier blocks solved there from row a)."""
+def _trial_at(ctx: _Ctx, a: int, t: float) -> _State | None:
+    """A two-row state: row 0 a copy of row a, row 1 at time t with the inputs there and the blocks before this
+    one solved (None if one of them cannot be)."""
     run = ctx.run
     sub_run = dataclasses.replace(run, detect=False, check=False, rates=False)
     trial = _s._State(2, run.sys.n_angles, len(run.sys.slider_names))
@@ -668,23 +659,24 @@ def _solve_at(ctx: _Ctx, a: int, t: float, guess: np.ndarray) -> np.ndarray | No
     _s._impose_drivers(run.sys, trial, *run.inputs(grid))
     if ctx.i > 0 and sub_run.blocks(sub_run, trial, grid, 2, upto=ctx.i - 1).n_ok < 2:
         return None
-    x, conv = newton(ctx.blk, trial, np.array([1]), guess[None], run.tol, run.max_iter)
+    return trial
+
+
+def _solve_at(ctx: _Ctx, a: int, t: float, guess: np.ndarray) -> np.ndarray | None:
+    """The block's unknowns at time t by Newton from ``guess`` (earlier blocks solved there from row a)."""
+    trial = _trial_at(ctx, a, t)
+    if trial is None:
+        return None
+    x, conv = newton(ctx.blk, trial, np.array([1]), guess[None], ctx.run.tol, ctx.run.max_iter)
     return x[0] if conv[0] else None
 
 
 def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     """det J of the block at time t, reached by Newton from row a's Taylor predictor (None: no convergence)."""
     run = ctx.run
-    sub_run = dataclasses.replace(run, detect=False, check=False, rates=False)
-    trial = _s._State(2, run.sys.n_angles, len(run.sys.slider_names))
-    for name in ("E", "TH", "S", "W", "AL", "SD", "SDD"):
-        getattr(trial, name)[0] = getattr(ctx.st, name)[a]
-    grid = np.array([ctx.tg[a], t])
-    _s._impose_drivers(run.sys, trial, *run.inputs(grid))
-    if ctx.i > 0:
-        solved = sub_run.blocks(sub_run, trial, grid, 2, upto=ctx.i - 1)
-        if solved.n_ok < 2:
-            return None
+    trial = _trial_at(ctx, a, t)
+    if trial is None:
+        return None
     h = t - ctx.tg[a]
     x_a = ctx.blk.read(ctx.st, np.array([a]))[0]
     pred = x_a + ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h

@@ -117,8 +117,8 @@ def _run_blocks(run: _Run, st: _State, tg: np.ndarray, n: int, upto: int | None 
         if out.n_ok == 0 or not run.rates:
             continue
         if fac is None:
-            _store(p, st, k, _rates(p, st, k, None, "v", cols), "v", na)
-            _store(p, st, k, _rates(p, st, k, None, "a", cols), "a", na)
+            _store(p, st, k, _rates(p, st, k, "v", cols), "v", na)
+            _store(p, st, k, _rates(p, st, k, "a", cols), "a", na)
         else:
             _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "v"), "v", na)
             _store(p, st, k, _rates_by(p, st, k, fac.inv[k], "a"), "a", na)
@@ -379,8 +379,10 @@ def _within_one_step(mech: Any, h: np.ndarray, XD: np.ndarray, units: np.ndarray
     return bound <= MAX_INPUT_STEP  # (False where not finite: the row-by-row test then sorts it out)
 
 
-def _joined(lead: np.ndarray, times: np.ndarray) -> _Grid:
-    """The lead-in followed by the requested times, no rows inserted."""
+def _as_requested(lead: np.ndarray, times: np.ndarray, inputs: tuple) -> _Grid:
+    """The lead-in followed by the requested times, no rows inserted (the inputs at them kept without a lead-in)."""
+    if not len(lead):
+        return _Grid(times, np.arange(len(times)), inputs=inputs)
     return _Grid(np.concatenate([lead, times]), len(lead) + np.arange(len(times)))
 
 
@@ -394,7 +396,7 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
         units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
         h = np.diff(times)[:, None]
         if _within_one_step(mech, h, XD, units):
-            return _Grid(times, np.arange(n), inputs=(X, XD, XDD)) if len(lead) == 0 else _joined(lead, times)
+            return _as_requested(lead, times, (X, XD, XDD))
         travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
         need = np.ceil(row_max(travel) / MAX_INPUT_STEP)
         need = np.where(np.isfinite(need) & (need <= MAX_INSERTED), need, 1.0)  # absurd inputs: refused later
@@ -406,8 +408,8 @@ def _grid(run: _Run, lead: np.ndarray, times: np.ndarray) -> _Grid:
                 entry="time",
             )
         steps = np.maximum(need, 1).astype(np.int64)
-    if len(lead) == 0 and mech.drivers and n > 1 and int(steps.sum()) == n - 1:  # the requested times, as they are
-        return _Grid(times, np.arange(n), inputs=(X, XD, XDD))
+        if int(steps.sum()) == n - 1:  # no row to insert
+            return _as_requested(lead, times, (X, XD, XDD))
     starts = np.concatenate([[0], np.cumsum(steps)])  # internal index of each requested sample
     k = np.arange(starts[-1])
     seg = np.repeat(np.arange(len(steps)), steps)
