@@ -21,7 +21,7 @@ import vloop
 from tests.conftest import MECHANISMS
 from tests.test_bad_input import ISOSCELES
 from tests.test_change_points import parallelogram
-from validators import analytic_fourbar
+from validators import analytic, analytic_fourbar
 from vloop import solver
 from vloop.budget import MemoryBudgetError, parse_size
 from vloop.cli import main
@@ -75,6 +75,28 @@ def test_chunk_borders_change_nothing(name, method):
     assert_histories_close(many, one, rtol=1e-10 if method == "newton" or name.startswith("six") else 1e-13)
     for k in ("branch", "ill_conditioned", "change_point"):
         assert np.array_equal(one.health[k], many.health[k]), k
+
+
+def test_a_wide_state_is_solved_in_shorter_chunks_written_in_place():
+    """The Jansen pair (13 angle columns: 576 bytes of state a row) at 48,000 samples: solve() takes four chunks
+    of 12,000 written in place into the run's columns — the streamed run's numbers (chunks of 16,384, joined here
+    by hand) to round-off (1e-13 of peak, as for any chunk borders: numpy rounds some operations differently on
+    arrays of other lengths) and the same flags, every quantity within 1e-12 of its peak of the hand closed form
+    (validators.analytic), every column one contiguous array of the run's length."""
+    mech = vloop.load(MECHANISMS / "jansen_pair.toml")
+    system = vloop.compile(mech)
+    assert solver._in_memory_chunk(system, 48_000) == 12_000
+    assert solver._in_memory_chunk(vloop.compile(vloop.load(MECHANISMS / "eightbar.toml")), 48_000) == 48_000
+    t = np.linspace(mech.times[0], mech.times[-1], 48_000)
+    res = vloop.solve(system, t)
+    parts = list(solver.solve_iter(system, t))
+    assert len(parts) == 3
+    for name, col in res.columns.items():
+        assert col.flags.c_contiguous and col.shape == (48_000,) and col.base is None, name
+    assert_histories_close(res, solver.join(parts), rtol=1e-13, min_columns=len(res.columns))
+    for name in ("branch", "ill_conditioned", "change_point"):
+        assert np.array_equal(res.health[name], np.concatenate([p.health[name] for p in parts])), name
+    assert_histories_close(res, analytic.solve(mech, res.t), rtol=1e-12, min_columns=10)
 
 
 def test_change_points_across_chunk_borders():

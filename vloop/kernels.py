@@ -577,6 +577,7 @@ class _Run:
     tail: bool = True  # the rows end the run (not a chunk followed by another)
     t_start: float = 0.0  # the run's first requested time
     memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
+    sink: Any = None  # solve()'s whole-run output columns, filled chunk by chunk (vloop.solver._Sink)
     blocks: Callable[..., Any] | None = None  # the solver's block runner, for probes (set by vloop.solver)
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:

@@ -298,8 +298,9 @@ def solve(
     vloop.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
     """
     run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
-    chunk = IN_MEMORY * CHUNK  # the results are all kept in memory anyway: fewer chunk borders to join
+    chunk = _in_memory_chunk(run.sys, len(times))
     budget.check(run.sys, len(times), False, 2 * chunk, run.memory_budget)
+    run.sink = _Sink(len(times)) if len(times) > chunk else None  # several chunks: written in place, not joined
     with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
         return _solve(run, times, chunk)
 
@@ -425,7 +426,50 @@ CHUNK = 16_384  # requested samples solved together: the state stays in cache, m
 CHUNK_ROWS = 2 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
 
 
-IN_MEMORY = 4  # solve() takes chunks this many times longer than streamed runs
+IN_MEMORY = 4  # solve() takes chunks up to this many times longer than streamed runs
+
+
+WIDE_ROW = 512  # bytes of state per row past which solve() takes shorter chunks (see _in_memory_chunk)
+
+
+STATE_BYTES = 7 << 20  # ... so that one chunk's state stays within this
+
+
+def _in_memory_chunk(sys: LoopSystem, n: int) -> int:
+    """Requested samples per chunk of solve() for ``n`` samples, split evenly: IN_MEMORY·CHUNK (fewer chunks, less
+    per-chunk work), but for a wide state (more than WIDE_ROW bytes a row) few enough that one chunk's state stays
+    within STATE_BYTES: each unknown's column is written with the row's stride, and the time per sample grew with
+    the run (the Jansen pair, 576 bytes a row, 48,000 samples against 4,800: 1.19–1.21× in one chunk, 1.17× in
+    chunks of 24,000, 1.11× of 16,000, 0.99–1.03× of 12,000, 1.05× of 8,000; the eight-bar, 290 bytes a row: 0.81×
+    in one chunk, 0.85× in chunks of 24,000; CPU time, best of 12 in one process)."""
+    na, ns = sys.n_angles, len(sys.slider_names)
+    row = 16 * (na + 1) + 8 * na + 2 * 8 * (na + 1) + 3 * 8 * (ns + 1)  # _State: E, TH, W and AL, S/SD/SDD
+    rows = IN_MEMORY * CHUNK
+    if row > WIDE_ROW:
+        rows = min(rows, max(CHUNK // 4, STATE_BYTES // row))
+    return -(-n // -(-n // rows)) if n else rows  # ⌈n / ⌈n / rows⌉⌉: no short last chunk
+
+
+@dataclass
+class _Sink:
+    """solve()'s output columns over the whole run (``n`` requested samples), each chunk's written in place at
+    its rows: a run of several chunks is then not copied again to be joined."""
+
+    n: int
+    columns: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+
+    def put(self, name: str, row: int, values: np.ndarray) -> np.ndarray:
+        """Copy ``values`` into column ``name`` from ``row`` on; the copy's view."""
+        if name not in self.columns:
+            self.columns[name] = np.empty(self.n)
+        out = self.columns[name][row : row + len(values)]
+        np.copyto(out, values)
+        return out
+
+    def take(self, name: str, n: int) -> np.ndarray:
+        """Column ``name``'s first n rows (the whole array when the run finished: nothing else kept alive)."""
+        col = self.columns[name]
+        return col if n == len(col) else col[:n]
 
 
 def _solve(run: _Run, times: np.ndarray, chunk: int | None = None) -> Result:
@@ -438,19 +482,21 @@ def _solve(run: _Run, times: np.ndarray, chunk: int | None = None) -> Result:
         if exc.partial is not None and parts:
             exc.partial = join([*parts, exc.partial])
         raise
-    return join(parts)
+    return join(parts, run.sink)
 
 
-def join(parts: list[Result]) -> Result:
-    """Results of consecutive chunks as one (meta from the last: it has every change point)."""
+def join(parts: list[Result], sink: _Sink | None = None) -> Result:
+    """Results of consecutive chunks as one (meta from the last: it has every change point); where they were
+    written into ``sink`` in place, its columns' first rows."""
     if len(parts) == 1:
         return parts[0]
     first, last = parts[0], parts[-1]
+    n = sum(len(p.t) for p in parts)
     return Result(
         first.mechanism,
         first.engine,
         np.concatenate([p.t for p in parts]),
-        {k: np.concatenate([p.columns[k] for p in parts]) for k in first.columns},
+        {k: sink.take(k, n) if sink else np.concatenate([p.columns[k] for p in parts]) for k in first.columns},
         {k: np.concatenate([p.health[k] for p in parts]) for k in first.health},
         dict(last.meta),
     )
@@ -635,7 +681,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
     cols: dict[str, np.ndarray] = {}
 
     def column(state: np.ndarray, j: int) -> np.ndarray:  # a state column's rows, as an array of its own
-        return state[k, j].copy() if isinstance(k, slice) else state[k, j]
+        return state[k, j].copy() if isinstance(k, slice) and run.sink is None else state[k, j]
 
     for name, a, offset in sys.link_outputs:
         if a >= 0:
@@ -652,6 +698,8 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
         cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
     for i, name in enumerate(sys.slider_names):
         cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = (column(q, i) for q in (st.S, st.SD, st.SDD))
+    if run.sink is not None:  # (the sink copies each column once: a state column is given as a view)
+        cols = {name: run.sink.put(name, grid.offset + grid.skip, v) for name, v in cols.items()}
     sources = [P, V, A, *(getattr(st, name)[k] for name in ("TH", "W", "AL", "S", "SD", "SDD"))]
     t = grid.t[rows]
     seen = grid.t[grid.out[: grid.skip + len(rows)]]  # requested times solved in this chunk and the one before
