@@ -532,11 +532,11 @@ class _Inputs:
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t = np.asarray(t, float)
         m = len(self.mech.drivers)
+        if m and len(t) and t[0] >= self.t_first:  # (ascending) every time is the file's own: no lead-in path
+            return evaluate_all(self.mech, t)
         X, XD, XDD = np.zeros((len(t), m)), np.zeros((len(t), m)), np.zeros((len(t), m))
         if m == 0:
             return X, XD, XDD
-        if len(t) and t[0] >= self.t_first:  # (ascending) every time is the file's own: no lead-in path
-            return evaluate_all(self.mech, t)
         real = t >= self.t_first
         if real.any():
             X[real], XD[real], XDD[real] = evaluate_all(self.mech, t[real])
