@@ -82,6 +82,23 @@ def test_cond_2norm_matches_svd():
     np.testing.assert_allclose(got[2:], np.linalg.cond(A[2:]), rtol=1e-12)
 
 
+@pytest.mark.parametrize("n", [2, 3, 6, 8])
+def test_sigma_max_brackets_the_largest_eigenvalue(n):
+    """The largest eigenvalue of Gram matrices by repeated squaring: where it claims a bracket, within 1e-12 of
+    LAPACK's eigvalsh; it claims none where the two largest are too close to separate in 32 powers."""
+    gaps = np.concatenate([RNG.uniform(0.0, 1.0, 1500), 1 - 10.0 ** RNG.uniform(-12, -1, 500), [1.0, 0.999]])
+    s = np.sort(RNG.uniform(0.0, 1.0, (len(gaps), n)), axis=1)[:, ::-1]
+    s[:, 1:] *= (gaps / np.where(s[:, 1] > 0, s[:, 1], 1.0))[:, None] * s[:, :1]  # λ₂/λ₁ = gaps
+    U = np.linalg.qr(RNG.standard_normal((len(gaps), n, n)))[0]
+    G = (U * s[:, None, :]) @ U.transpose(0, 2, 1)
+    G /= np.trace(G, axis1=1, axis2=2)[:, None, None]
+    lam, ok = newton._sigma_max(G, G @ G)
+    ref = np.linalg.eigvalsh(G)[:, -1]
+    assert np.all(np.abs(lam[ok] / ref[ok] - 1) <= 1e-12)
+    assert np.all(lam <= ref * (1 + 1e-14))  # a Rayleigh quotient: never above λ₁
+    assert ok[gaps < 0.4].all() and not ok[gaps > 1 - 1e-3].any()
+
+
 @pytest.mark.parametrize("n", [3, 6])
 def test_condition_follows_the_svd_rule(n):
     """Upper bound everywhere, exact (to 1e-10) wherever the exact value reaches the flag level,

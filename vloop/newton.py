@@ -19,8 +19,9 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
 3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
    condition number, shared by the rates and the health columns: one more Newton step whose size is
    the convergence test. The condition number is an upper bound where that decides (Frobenius, then
-   (Σσ⁸)^⅛), the exact 2-norm one (eigenvalues of JᵀJ, SVD past EIG_COND) wherever it reaches the
-   flag level, so flags and refusals follow the 2-norm rule exactly.
+   (Σσ⁸)^⅛), the exact 2-norm one wherever it reaches the flag level (σ_max of J and of J⁻¹ from their
+   Gram matrices' powers, bracketed to 1e-12; eigenvalues or SVD where that fails), so flags and refusals
+   follow the 2-norm rule exactly.
 
 Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
 Gauss–Newton steps and least-squares rates; the residual of every equation is checked.
@@ -256,7 +257,7 @@ def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
     """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): an upper bound of the 2-norm
-    condition number on every row, the exact one (:func:`cond_2norm`) where the bound reaches the flag level,
+    condition number on every row, the exact one (:func:`_condition_near`) where the bound reaches the flag level,
     so flags and refusals follow the 2-norm rule exactly. The bound: ‖J‖_F·‖J⁻¹‖_F (≤ n× the exact one),
     tightened where it reaches the level to (Σσ⁸)^⅛ of each (≤ n^¼×) by two Gram products."""
     c2 = colscale * colscale
@@ -278,21 +279,65 @@ NEAR_CHUNK = 4096  # rows whose condition bound reaches the flag level, refined 
 def _condition_near(
     J: np.ndarray, X: np.ndarray, colscale: np.ndarray, fj: np.ndarray, fx: np.ndarray, cond: np.ndarray, level: float
 ) -> np.ndarray:
-    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened
-    to (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level."""
+    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened to
+    (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level: σ_max of J and of
+    J⁻¹ by :func:`_sigma_max` (the Gram matrices' largest eigenvalues, bracketed to 1e-12), :func:`cond_2norm`
+    on the rows it cannot bracket or where J is within ~POWER_COND of singular."""
+    r = len(fj)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        # scaled to unit Frobenius norm: σ⁸ neither overflows nor (the largest) underflows
-        # row-major copies (rows, ·, ·), transposes too: numpy's stacked matmul is ~4× faster on those
+        # scaled to unit Frobenius norm: the Gram matrices have trace 1, their powers neither overflow nor
+        # (the largest eigenvalue) underflow; row-major (rows, ·, ·): numpy's stacked matmul is ~4× faster on those
         Js = np.multiply(J.transpose(2, 0, 1), colscale / np.sqrt(fj)[:, None, None], order="C")
         Xs = np.multiply(X.transpose(2, 0, 1), 1.0 / (colscale[:, None] * np.sqrt(fx)[:, None, None]), order="C")
-        Gj = np.ascontiguousarray(Js.transpose(0, 2, 1)) @ Js
-        Gx = Xs @ np.ascontiguousarray(Xs.transpose(0, 2, 1))  # X·Xᵀ: the singular values of X
-        tight = cond * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
+        G = np.empty((2 * r, *Js.shape[1:]))
+        np.matmul(np.ascontiguousarray(Js.transpose(0, 2, 1)), Js, out=G[:r])
+        np.matmul(Xs, np.ascontiguousarray(Xs.transpose(0, 2, 1)), out=G[r:])  # X·Xᵀ: the singular values of X
+        G2 = G @ G
+        u2 = np.sqrt(np.sqrt(_sum_squares(G2)))  # (tr G⁴)^¼ ≥ λ_max: (Σσ⁸)^⅛ of J, of J⁻¹
+        tight = cond * np.sqrt(u2[:r] * u2[r:])
+    frobenius = cond
     cond = np.where(tight < cond, tight, cond)
     exact = np.nonzero(~(cond <= level))[0]
-    if len(exact):
-        cond[exact] = cond_2norm(Js[exact], Gj[exact])
+    if not len(exact):
+        return cond
+    both = np.concatenate([exact, exact + r])
+    lam, ok = _sigma_max(G[both], G2[both])
+    m = len(exact)
+    c = frobenius[exact] * np.sqrt(lam[:m] * lam[m:])
+    ok = ok[:m] & ok[m:] & (c <= POWER_COND)
+    cond[exact[ok]] = c[ok]
+    rest = exact[~ok]
+    if len(rest):
+        cond[rest] = cond_2norm(Js[rest], G[rest])
     return cond
+
+
+POWER_COND = 1e6  # past this condition number the exact one is taken by SVD, as numpy.linalg.cond would
+SQUARINGS = 4  # G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: enough for λ₂/λ₁ ≲ 0.45; rows that are not bracketed go to cond_2norm
+BRACKET = 1e-12  # the largest eigenvalue's upper and lower bounds agree to this (relative)
+
+
+def _sigma_max(G: np.ndarray, G2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The largest eigenvalue λ₁ of each symmetric positive semidefinite G (rows, n, n; trace 1) given G², and
+    whether it is bracketed to BRACKET: from below by the Rayleigh quotient of G's dominant column of G¹⁶
+    (G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: the quotient's error ∝ (λ₂/λ₁)³²), from above by (tr G³²)^(1/32) = ‖G¹⁶‖_F^(1/16)
+    (every other term of the trace is ≥ 0). G's powers by repeated squaring: λ₁ ≥ 1/n keeps λ₁¹⁶ far from
+    underflow."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore", under="ignore"):
+        P = G2
+        for _ in range(SQUARINGS - 1):
+            P = P @ P
+        upper = _sum_squares(P) ** (1 / 2 ** (SQUARINGS + 1))
+        d = np.argmax(np.diagonal(P, axis1=1, axis2=2), axis=1)
+        v = P[np.arange(len(P)), :, d]  # the dominant column
+        lower = np.einsum("ri,ri->r", v, np.einsum("rij,rj->ri", G, v)) / np.einsum("ri,ri->r", v, v)
+        ok = (upper - lower <= BRACKET * lower) & (lower > 0)
+    return lower, ok
+
+
+def _sum_squares(A: np.ndarray) -> np.ndarray:
+    """Σ A² over each matrix of a stack (rows, n, n): ‖A‖_F² (numpy's sum over two short axes is ~3× slower)."""
+    return np.einsum("rij,rij->r", A, A)
 
 
 def _svd_cond(A: np.ndarray) -> np.ndarray:
