@@ -177,11 +177,12 @@ class _Rows:
         p, d = blk.p, blk.dep
         E, S = st.E[:n], st.S[:n]
         kn = np.setdiff1d(np.arange(len(p.ang)), d)
-        self.F0 = (((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T  # (m, n)
+        # batch-last and C-contiguous: arithmetic on a transposed view is several times slower
+        self.F0 = np.ascontiguousarray((((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T)
         ua, us = blk.t_ua[d], blk.t_us[d]
         # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
-        self.W = (p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T
-        self.L = (p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T
+        self.W = np.ascontiguousarray((p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T)
+        self.L = np.ascontiguousarray((p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T)
         self.ta = np.nonzero(ua >= 0)[0]
         self.ta_u = np.searchsorted(blk.ia, ua[self.ta])  # which unknown angle turns each of those terms
         self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]
@@ -765,11 +766,16 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) ->
             -15 * d + 8 * va + 7 * vb + 1.5 * aa - ab,
             6 * d - 3 * va - 3 * vb - 0.5 * aa + 0.5 * ab,
         ]
-    )[:, :, j]
+    )
+    # rows sorted: each interval's coefficients repeated over its rows (contiguous, unlike C[:, :, j]: ~5× faster
+    # arithmetic after)
+    C = np.repeat(C, np.bincount(j, minlength=len(H)), axis=2)
     u = (tg[rows] - tc[j]) / H[j]
-    pred = C[5]
-    for p in range(4, -1, -1):
-        pred = pred * u + C[p]
+    pred = C[5] * u
+    for p in range(4, 0, -1):
+        pred += C[p]
+        pred *= u
+    pred += C[0]
     return j, pred
 
 
