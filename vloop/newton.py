@@ -455,7 +455,8 @@ class _Ctx:
             cond = cond_2norm(Js) if Js.shape[1] == Js.shape[2] else _svd_cond(Js)
         else:  # the Frobenius bound, the exact 2-norm one where it decides
             with np.errstate(invalid="ignore", over="ignore"):
-                cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum((X / blk.colscale[:, None]) ** 2, axis=(1, 2)))
+                Xs = X / blk.colscale[:, None]
+                cond = np.sqrt(_sum_squares(Js) * _sum_squares(Xs))
             exact = np.nonzero(~(cond * cond * _s.EPS <= self.run.rtol))[0]
             if len(exact):
                 cond[exact] = cond_2norm(Js[exact])
@@ -532,11 +533,16 @@ def _next_row(ctx: _Ctx, a: int, cum: np.ndarray) -> int:
     """The furthest row after ``a`` that the block's unknowns (by their Taylor series at a) and its inputs
     reach within COARSE_STEP of travel."""
     unit = np.where(ctx.blk.colscale < 1.0, 1.0, TWO_PI / ctx.run.scale)  # angles: rad; sliders: 2π per size
-    v, acc = np.abs(ctx.xd[a]) * unit, np.abs(ctx.xdd[a]) * unit
-    with np.errstate(divide="ignore", invalid="ignore"):
-        h = np.where(acc > 0, (np.sqrt(v * v + 2 * acc * COARSE_STEP) - v) / np.where(acc > 0, acc, 1.0),
-                     COARSE_STEP / np.where(v > 0, v, np.nan))  # fmt: skip
-    h_max = float(np.nanmin(h, initial=math.inf))
+    h_max = math.inf
+    for v, acc in zip((np.abs(ctx.xd[a]) * unit).tolist(), (np.abs(ctx.xdd[a]) * unit).tolist(), strict=True):
+        # a handful of unknowns: Python floats cost less than a dozen numpy calls; NaN never wins
+        if acc > 0:
+            h = (math.sqrt(v * v + 2 * acc * COARSE_STEP) - v) / acc
+        elif v > 0:
+            h = COARSE_STEP / v
+        else:
+            continue
+        h_max = h if h < h_max else h_max
     b = int(np.searchsorted(ctx.tg[: ctx.n], ctx.tg[a] + h_max, side="right")) - 1
     b = min(b, int(np.searchsorted(cum, cum[a] + COARSE_STEP, side="right")) - 1, ctx.n - 1)
     return max(b, a + 1)
