@@ -49,6 +49,7 @@ COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π 
 TWO_PI = 2.0 * math.pi
 WINDOW = 6  # coarse rows predicted from one anchor and solved together
 JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
+WINDOW_ITER = 8  # Newton iterations a window of coarse rows gets: a row needing more is not trusted (halving decides)
 LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is then at round-off
 FRESH = 1e-14  # a last step above this (relative) refreshes the Jacobian the rates are taken from
 CLOSURE = 1e-9  # a solved row closes every equation to this fraction of the mechanism size
@@ -588,7 +589,7 @@ def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
     x_a = blk.read(st, np.array([a]))
     incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
     pred = x_a + incr
-    x, conv = newton(blk, st, rows, pred, run.tol, run.max_iter)
+    x, conv = newton(blk, st, rows, pred, run.tol, min(run.max_iter, WINDOW_ITER))
     F, J = blk.residual_jacobian(st, rows)
     with np.errstate(invalid="ignore"):
         res = np.max(np.abs(F), axis=1) / run.scale
