@@ -576,13 +576,17 @@ def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, _s._Failure | None]:
 
 
 def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
-    """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart, predicted from a's Taylor series and
-    solved together; returns the leading rows that pass every check of a strict step (their rates computed)."""
+    """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart (closer where the inputs pass k·COARSE_STEP
+    of travel sooner), predicted from a's Taylor series and solved together; returns the leading rows that pass
+    every check of a strict step (their rates computed)."""
     run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
     if ctx.weak[a] or b - a < 2:
         return np.zeros(0, int)
-    rows = np.unique(np.minimum(a + (b - a) * np.arange(1, WINDOW + 1), ctx.n - 1))
-    rows = rows[cum[rows] - cum[a] <= COARSE_STEP * np.arange(1, len(rows) + 1)]
+    k = np.arange(1, WINDOW + 1)
+    # the k-th row: k steps of b − a, or less where the inputs travel faster than at a (a driver speeding up)
+    reach = np.searchsorted(cum, cum[a] + COARSE_STEP * k, side="right") - 1
+    rows = np.unique(np.minimum(np.minimum(a + (b - a) * k, reach), ctx.n - 1))
+    rows = rows[rows > a]
     if len(rows) < 2:
         return np.zeros(0, int)
     h = (tg[rows] - tg[a])[:, None]
