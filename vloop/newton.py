@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 
 COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π per mechanism size)
 TWO_PI = 2.0 * math.pi
-WINDOW = 6  # coarse rows predicted from one anchor and solved together
+WINDOW = 8  # coarse rows predicted from one anchor and solved together
 JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
 WINDOW_ITER = 8  # Newton iterations a window of coarse rows gets: a row needing more is not trusted (halving decides)
 LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is then at round-off
