@@ -323,7 +323,7 @@ def _condition_near(
 
 
 POWER_COND = 1e6  # past this condition number the exact one is taken by SVD, as numpy.linalg.cond would
-SQUARINGS = 4  # G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: enough for λ₂/λ₁ ≲ 0.45; rows that are not bracketed go to cond_2norm
+SQUARINGS = 4  # G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: bracketed where λ₂/λ₁ ≲ 0.44 (σ₂/σ₁ ≲ 0.66); others go to cond_2norm
 BRACKET = 1e-12  # the largest eigenvalue's upper and lower bounds agree to this (relative)
 
 
@@ -359,10 +359,6 @@ def _svd_cond(A: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             cond[ok] = sv[:, 0] / sv[:, -1]
     return cond
-
-
-def _frobenius(A: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.sum(A * A, axis=(1, 2)))
 
 
 EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-11 (relative)
