@@ -51,6 +51,22 @@ def test_invert_last_matches_lapack(n):
     assert np.all(np.abs(step - ref_step).max(axis=1) <= 10 * n * EPS * np.linalg.cond(A) * scale)
 
 
+def test_invert_last_on_structurally_sparse_stacks():
+    """Entries zero in every matrix (a loop Jacobian's structure) are skipped: the inverses and signs still match
+    LAPACK's, where every matrix pivots alike and where they pivot differently (the structures merged)."""
+    for n in (4, 6, 8):
+        mask = RNG.random((n, n)) < 0.35
+        mask[np.arange(n), RNG.permutation(n)] = True  # structurally nonsingular
+        A = RNG.standard_normal((600, n, n)) * mask
+        A[:300] *= 10.0 ** RNG.uniform(-3, 3, (300, n, 1))  # rows of very different sizes: the pivots differ
+        X, sign = kernels.invert_last(_last(A))
+        X = X.transpose(2, 0, 1)
+        ref = np.linalg.inv(A)
+        err = np.abs(X - ref).max(axis=(1, 2)) / np.abs(ref).max(axis=(1, 2))
+        assert np.all(err <= 10 * n * EPS * np.linalg.cond(A))
+        assert np.array_equal(sign, np.sign(np.linalg.det(A)))
+
+
 def test_invert_last_pivots_per_matrix_and_flags_singular_ones():
     A = RNG.standard_normal((7, 5, 5))
     A[0] = np.eye(5)[[3, 0, 4, 1, 2]]  # a permutation: odd, det −1
@@ -80,6 +96,23 @@ def test_cond_2norm_matches_svd():
     got = newton.cond_2norm(A)
     assert got[0] > 1e15 and got[1] == np.inf
     np.testing.assert_allclose(got[2:], np.linalg.cond(A[2:]), rtol=1e-12)
+
+
+@pytest.mark.parametrize("n", [2, 3, 6, 8])
+def test_sigma_max_brackets_the_largest_eigenvalue(n):
+    """The largest eigenvalue of Gram matrices by repeated squaring: where it claims a bracket, within 1e-12 of
+    LAPACK's eigvalsh; it claims none where the two largest are too close to separate in 32 powers."""
+    gaps = np.concatenate([RNG.uniform(0.0, 1.0, 1500), 1 - 10.0 ** RNG.uniform(-12, -1, 500), [1.0, 0.999]])
+    s = np.sort(RNG.uniform(0.0, 1.0, (len(gaps), n)), axis=1)[:, ::-1]
+    s[:, 1:] *= (gaps / np.where(s[:, 1] > 0, s[:, 1], 1.0))[:, None] * s[:, :1]  # λ₂/λ₁ = gaps
+    U = np.linalg.qr(RNG.standard_normal((len(gaps), n, n)))[0]
+    G = (U * s[:, None, :]) @ U.transpose(0, 2, 1)
+    G /= np.trace(G, axis1=1, axis2=2)[:, None, None]
+    lam, ok = newton._sigma_max(G, G @ G)
+    ref = np.linalg.eigvalsh(G)[:, -1]
+    assert np.all(np.abs(lam[ok] / ref[ok] - 1) <= 1e-12)
+    assert np.all(lam <= ref * (1 + 1e-14))  # a Rayleigh quotient: never above λ₁
+    assert ok[gaps < 0.4].all() and not ok[gaps > 1 - 1e-3].any()
 
 
 @pytest.mark.parametrize("n", [3, 6])

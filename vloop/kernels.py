@@ -747,8 +747,11 @@ def invert_last(A: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarra
 
 
 def _gauss_jordan(A: np.ndarray) -> np.ndarray:
-    """Invert the batch-last stack A in place; returns the determinant signs."""
+    """Invert the batch-last stack A in place; returns the determinant signs. Entries zero in every matrix of the
+    stack (a block Jacobian's structure: a loop does not see most unknowns) are tracked, and operations on them
+    skipped: they would subtract exact zeros (the eight-bar's 6×6 block has 14 nonzeros of 36)."""
     n, N = A.shape[0], A.shape[-1]
+    nz = [set(np.nonzero(row)[0].tolist()) for row in np.any(A != 0, axis=-1)]  # NaN ≠ 0: kept
     pivots = []
     neg = np.zeros(N, bool)
     zero = np.zeros(N, bool)
@@ -756,22 +759,55 @@ def _gauss_jordan(A: np.ndarray) -> np.ndarray:
         for k in range(n):
             p = _pivot_rows(A, k)
             pivots.append(p)
-            _swap_rows(A, k, p)
+            _swap_pattern(nz, k, *_swap_rows(A, k, p))
             piv = A[k, k].copy()
             neg ^= (p != k) ^ (piv < 0)
             zero |= piv == 0
             rp = 1.0 / piv
             A[k, k] = 1.0
-            A[k] *= rp
-            f = A[:, k].copy()
-            A[:, k] = 0.0
-            A[k, k] = rp
+            nz[k].add(k)
+            cols = sorted(nz[k])
+            _scale_row(A, k, cols, rp)
             for i in range(n):
-                if i != k:
-                    A[i] -= f[i] * A[k]
+                if i != k and k in nz[i]:
+                    f = A[i, k].copy()
+                    A[i, k] = 0.0
+                    _subtract_row(A, i, k, cols, f)
+                    nz[i] |= nz[k]
+            A[k, k] = rp
     for k in range(n - 1, -1, -1):  # the row swaps undone as column swaps, in reverse
         _swap_rows(A.swapaxes(0, 1), k, pivots[k])
     return np.where(zero, 0.0, np.where(neg, -1.0, 1.0))
+
+
+def _scale_row(A: np.ndarray, k: int, cols: list[int], r: np.ndarray) -> None:
+    if len(cols) == A.shape[1]:
+        A[k] *= r
+    else:
+        for c in cols:
+            A[k, c] *= r
+
+
+def _subtract_row(A: np.ndarray, i: int, k: int, cols: list[int], f: np.ndarray) -> None:
+    """A[i] −= f·A[k] on the columns where row k is not structurally zero (one operation on the whole row where
+    it is full: a column at a time costs a call each)."""
+    if len(cols) > A.shape[1] // 2:
+        A[i] -= f * A[k]
+    else:
+        for c in cols:
+            A[i, c] -= f * A[k, c]
+
+
+def _swap_pattern(nz: list[set[int]], k: int, swapped: list[int], alike: bool) -> None:
+    """Row k's structure swapped with that of the rows it was swapped with; where only some matrices swapped,
+    every row involved gets the union."""
+    if alike:
+        for i in swapped:
+            nz[k], nz[i] = nz[i], nz[k]
+    elif swapped:
+        union = set().union(nz[k], *(nz[i] for i in swapped))
+        for i in (k, *swapped):
+            nz[i] = set(union)
 
 
 def _pivot_rows(A: np.ndarray, k: int) -> np.ndarray:
@@ -784,19 +820,24 @@ def _pivot_rows(A: np.ndarray, k: int) -> np.ndarray:
     return p
 
 
-def _swap_rows(A: np.ndarray, k: int, p: np.ndarray) -> None:
+def _swap_rows(A: np.ndarray, k: int, p: np.ndarray) -> tuple[list[int], bool]:
     """Swap row k with row p[m] of each matrix m (p ≥ k): one plain swap when all pivot alike (along a path
-    they mostly do), masked swaps row by row otherwise."""
+    they mostly do), masked swaps row by row otherwise. Returns the rows swapped with k (k left out) and
+    whether every matrix swapped alike."""
     first = int(p[0])
     if np.all(p == first):
         if first != k:
             t = A[k].copy()
             A[k] = A[first]
             A[first] = t
-        return
+            return [first], True
+        return [], True
+    swapped = []
     for i in range(k + 1, A.shape[0]):
         m = p == i
         if m.any():
             t = A[k].copy()
             np.copyto(A[k], A[i], where=m)
             np.copyto(A[i], t, where=m)
+            swapped.append(i)
+    return swapped, False

@@ -19,8 +19,9 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
 3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
    condition number, shared by the rates and the health columns: one more Newton step whose size is
    the convergence test. The condition number is an upper bound where that decides (Frobenius, then
-   (Σσ⁸)^⅛), the exact 2-norm one (eigenvalues of JᵀJ, SVD past EIG_COND) wherever it reaches the
-   flag level, so flags and refusals follow the 2-norm rule exactly.
+   (Σσ⁸)^⅛), the exact 2-norm one wherever it reaches the flag level (σ_max of J and of J⁻¹ from their
+   Gram matrices' powers, bracketed to 1e-12; eigenvalues or SVD where that fails), so flags and refusals
+   follow the 2-norm rule exactly.
 
 Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
 Gauss–Newton steps and least-squares rates; the residual of every equation is checked.
@@ -46,8 +47,9 @@ if TYPE_CHECKING:
 
 COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π per mechanism size)
 TWO_PI = 2.0 * math.pi
-WINDOW = 6  # coarse rows predicted from one anchor and solved together
+WINDOW = 8  # coarse rows predicted from one anchor and solved together
 JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
+WINDOW_ITER = 8  # Newton iterations a window of coarse rows gets: a row needing more is not trusted (halving decides)
 LOOSE = 1e-8  # dense rows iterate to this step; the next (quadratic) one is then at round-off
 FRESH = 1e-14  # a last step above this (relative) refreshes the Jacobian the rates are taken from
 CLOSURE = 1e-9  # a solved row closes every equation to this fraction of the mechanism size
@@ -93,6 +95,7 @@ class _Block:
         self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in p.ang], int)
         self.t_us = np.array([where.get(int(q) + na, -1) if q >= 0 else -1 for q in p.sl], int)
         self.dep = np.nonzero((self.t_ua >= 0) | (self.t_us >= 0))[0]  # the terms the unknowns move
+        self.known = np.setdiff1d(np.arange(nt), self.dep)
         self._jacobian_entries(p)
 
     def _jacobian_entries(self, p: _Plan) -> None:
@@ -113,6 +116,13 @@ class _Block:
         x = np.empty((len(rows), self.nu))
         x[:, self.ia] = st.TH[rows][:, self.acol]
         x[:, self.isl] = st.S[rows][:, self.scol]
+        return x
+
+    def read_last(self, st: _State, n: int) -> np.ndarray:
+        """The unknowns on rows 0..n-1, batch-last (nu, n)."""
+        x = np.empty((self.nu, n))
+        x[self.ia] = st.TH[:n, self.acol].T
+        x[self.isl] = st.S[:n, self.scol].T
         return x
 
     def put(self, st: _State, rows: np.ndarray | slice, x: np.ndarray, cis: np.ndarray | None = None) -> None:
@@ -175,12 +185,13 @@ class _Rows:
     def __init__(self, blk: _Block, st: _State, n: int) -> None:
         p, d = blk.p, blk.dep
         E, S = st.E[:n], st.S[:n]
-        kn = np.setdiff1d(np.arange(len(p.ang)), d)
-        self.F0 = (((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T  # (m, n)
+        kn = blk.known
+        # batch-last and C-contiguous: arithmetic on a transposed view is several times slower
+        self.F0 = np.ascontiguousarray((((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T)
         ua, us = blk.t_ua[d], blk.t_us[d]
         # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
-        self.W = (p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T
-        self.L = (p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T
+        self.W = np.ascontiguousarray((p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T)
+        self.L = np.ascontiguousarray((p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T)
         self.ta = np.nonzero(ua >= 0)[0]
         self.ta_u = np.searchsorted(blk.ia, ua[self.ta])  # which unknown angle turns each of those terms
         self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]
@@ -256,7 +267,7 @@ def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
     """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): an upper bound of the 2-norm
-    condition number on every row, the exact one (:func:`cond_2norm`) where the bound reaches the flag level,
+    condition number on every row, the exact one (:func:`_condition_near`) where the bound reaches the flag level,
     so flags and refusals follow the 2-norm rule exactly. The bound: ‖J‖_F·‖J⁻¹‖_F (≤ n× the exact one),
     tightened where it reaches the level to (Σσ⁸)^⅛ of each (≤ n^¼×) by two Gram products."""
     c2 = colscale * colscale
@@ -278,21 +289,65 @@ NEAR_CHUNK = 4096  # rows whose condition bound reaches the flag level, refined 
 def _condition_near(
     J: np.ndarray, X: np.ndarray, colscale: np.ndarray, fj: np.ndarray, fx: np.ndarray, cond: np.ndarray, level: float
 ) -> np.ndarray:
-    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened
-    to (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level."""
+    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened to
+    (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level: σ_max of J and of
+    J⁻¹ by :func:`_sigma_max` (the Gram matrices' largest eigenvalues, bracketed to 1e-12), :func:`cond_2norm`
+    on the rows it cannot bracket or where J is within ~POWER_COND of singular."""
+    r = len(fj)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        # scaled to unit Frobenius norm: σ⁸ neither overflows nor (the largest) underflows
-        # row-major copies (rows, ·, ·), transposes too: numpy's stacked matmul is ~4× faster on those
+        # scaled to unit Frobenius norm: the Gram matrices have trace 1, their powers neither overflow nor
+        # (the largest eigenvalue) underflow; row-major (rows, ·, ·): numpy's stacked matmul is ~4× faster on those
         Js = np.multiply(J.transpose(2, 0, 1), colscale / np.sqrt(fj)[:, None, None], order="C")
         Xs = np.multiply(X.transpose(2, 0, 1), 1.0 / (colscale[:, None] * np.sqrt(fx)[:, None, None]), order="C")
-        Gj = np.ascontiguousarray(Js.transpose(0, 2, 1)) @ Js
-        Gx = Xs @ np.ascontiguousarray(Xs.transpose(0, 2, 1))  # X·Xᵀ: the singular values of X
-        tight = cond * np.sqrt(np.sqrt(_frobenius(Gj @ Gj) * _frobenius(Gx @ Gx)))
+        G = np.empty((2 * r, *Js.shape[1:]))
+        np.matmul(np.ascontiguousarray(Js.transpose(0, 2, 1)), Js, out=G[:r])
+        np.matmul(Xs, np.ascontiguousarray(Xs.transpose(0, 2, 1)), out=G[r:])  # X·Xᵀ: the singular values of X
+        G2 = G @ G
+        u2 = np.sqrt(np.sqrt(_sum_squares(G2)))  # (tr G⁴)^¼ ≥ λ_max: (Σσ⁸)^⅛ of J, of J⁻¹
+        tight = cond * np.sqrt(u2[:r] * u2[r:])
+    frobenius = cond
     cond = np.where(tight < cond, tight, cond)
     exact = np.nonzero(~(cond <= level))[0]
-    if len(exact):
-        cond[exact] = cond_2norm(Js[exact], Gj[exact])
+    if not len(exact):
+        return cond
+    both = np.concatenate([exact, exact + r])
+    lam, ok = _sigma_max(G[both], G2[both])
+    m = len(exact)
+    c = frobenius[exact] * np.sqrt(lam[:m] * lam[m:])
+    ok = ok[:m] & ok[m:] & (c <= POWER_COND)
+    cond[exact[ok]] = c[ok]
+    rest = exact[~ok]
+    if len(rest):
+        cond[rest] = cond_2norm(Js[rest], G[rest])
     return cond
+
+
+POWER_COND = 1e6  # past this condition number the exact one is taken by SVD, as numpy.linalg.cond would
+SQUARINGS = 4  # G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: bracketed where λ₂/λ₁ ≲ 0.44 (σ₂/σ₁ ≲ 0.66); others go to cond_2norm
+BRACKET = 1e-12  # the largest eigenvalue's upper and lower bounds agree to this (relative)
+
+
+def _sigma_max(G: np.ndarray, G2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The largest eigenvalue λ₁ of each symmetric positive semidefinite G (rows, n, n; trace 1) given G², and
+    whether it is bracketed to BRACKET: from below by the Rayleigh quotient of G's dominant column of G¹⁶
+    (G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: the quotient's error ∝ (λ₂/λ₁)³²), from above by (tr G³²)^(1/32) = ‖G¹⁶‖_F^(1/16)
+    (every other term of the trace is ≥ 0). G's powers by repeated squaring: λ₁ ≥ 1/n keeps λ₁¹⁶ far from
+    underflow."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore", under="ignore"):
+        P = G2
+        for _ in range(SQUARINGS - 1):
+            P = P @ P
+        upper = _sum_squares(P) ** (1 / 2 ** (SQUARINGS + 1))
+        d = np.argmax(np.diagonal(P, axis1=1, axis2=2), axis=1)
+        v = P[np.arange(len(P)), :, d]  # the dominant column
+        lower = np.einsum("ri,ri->r", v, np.einsum("rij,rj->ri", G, v)) / np.einsum("ri,ri->r", v, v)
+        ok = (upper - lower <= BRACKET * lower) & (lower > 0)
+    return lower, ok
+
+
+def _sum_squares(A: np.ndarray) -> np.ndarray:
+    """Σ A² over each matrix of a stack (rows, n, n): ‖A‖_F² (numpy's sum over two short axes is ~3× slower)."""
+    return np.einsum("rij,rij->r", A, A)
 
 
 def _svd_cond(A: np.ndarray) -> np.ndarray:
@@ -304,10 +359,6 @@ def _svd_cond(A: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             cond[ok] = sv[:, 0] / sv[:, -1]
     return cond
-
-
-def _frobenius(A: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.sum(A * A, axis=(1, 2)))
 
 
 EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-11 (relative)
@@ -409,7 +460,8 @@ class _Ctx:
             cond = cond_2norm(Js) if Js.shape[1] == Js.shape[2] else _svd_cond(Js)
         else:  # the Frobenius bound, the exact 2-norm one where it decides
             with np.errstate(invalid="ignore", over="ignore"):
-                cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum((X / blk.colscale[:, None]) ** 2, axis=(1, 2)))
+                Xs = X / blk.colscale[:, None]
+                cond = np.sqrt(_sum_squares(Js) * _sum_squares(Xs))
             exact = np.nonzero(~(cond * cond * _s.EPS <= self.run.rtol))[0]
             if len(exact):
                 cond[exact] = cond_2norm(Js[exact])
@@ -464,7 +516,7 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
 def _refactor(blk: _Block, st: _State, n: int, run: _Run) -> tuple[Factor, np.ndarray, np.ndarray]:
     """The Factor of rows 0..n-1 as they stand (a last Newton step applied)."""
     if blk.square and n:
-        return _factor_square(_Rows(blk, st, n), st, blk.read(st, np.arange(n)).T.copy(), run.rtol, run.tol)
+        return _factor_square(_Rows(blk, st, n), st, blk.read_last(st, n), run.rtol, run.tol)
     return blk.factor(st, np.arange(n), run.rtol, run.tol)
 
 
@@ -486,11 +538,16 @@ def _next_row(ctx: _Ctx, a: int, cum: np.ndarray) -> int:
     """The furthest row after ``a`` that the block's unknowns (by their Taylor series at a) and its inputs
     reach within COARSE_STEP of travel."""
     unit = np.where(ctx.blk.colscale < 1.0, 1.0, TWO_PI / ctx.run.scale)  # angles: rad; sliders: 2π per size
-    v, acc = np.abs(ctx.xd[a]) * unit, np.abs(ctx.xdd[a]) * unit
-    with np.errstate(divide="ignore", invalid="ignore"):
-        h = np.where(acc > 0, (np.sqrt(v * v + 2 * acc * COARSE_STEP) - v) / np.where(acc > 0, acc, 1.0),
-                     COARSE_STEP / np.where(v > 0, v, np.nan))  # fmt: skip
-    h_max = float(np.nanmin(h, initial=math.inf))
+    h_max = math.inf
+    for v, acc in zip((np.abs(ctx.xd[a]) * unit).tolist(), (np.abs(ctx.xdd[a]) * unit).tolist(), strict=True):
+        # a handful of unknowns: Python floats cost less than a dozen numpy calls; NaN never wins
+        if acc > 0:
+            h = (math.sqrt(v * v + 2 * acc * COARSE_STEP) - v) / acc
+        elif v > 0:
+            h = COARSE_STEP / v
+        else:
+            continue
+        h_max = h if h < h_max else h_max
     b = int(np.searchsorted(ctx.tg[: ctx.n], ctx.tg[a] + h_max, side="right")) - 1
     b = min(b, int(np.searchsorted(cum, cum[a] + COARSE_STEP, side="right")) - 1, ctx.n - 1)
     return max(b, a + 1)
@@ -523,20 +580,24 @@ def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, _s._Failure | None]:
 
 
 def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
-    """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart, predicted from a's Taylor series and
-    solved together; returns the leading rows that pass every check of a strict step (their rates computed)."""
+    """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart (closer where the inputs pass k·COARSE_STEP
+    of travel sooner), predicted from a's Taylor series and solved together; returns the leading rows that pass
+    every check of a strict step (their rates computed)."""
     run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
     if ctx.weak[a] or b - a < 2:
         return np.zeros(0, int)
-    rows = np.unique(np.minimum(a + (b - a) * np.arange(1, WINDOW + 1), ctx.n - 1))
-    rows = rows[cum[rows] - cum[a] <= COARSE_STEP * np.arange(1, len(rows) + 1)]
+    k = np.arange(1, WINDOW + 1)
+    # the k-th row: k steps of b − a, or less where the inputs travel faster than at a (a driver speeding up)
+    reach = np.searchsorted(cum, cum[a] + COARSE_STEP * k, side="right") - 1
+    rows = np.unique(np.minimum(np.minimum(a + (b - a) * k, reach), ctx.n - 1))
+    rows = rows[rows > a]
     if len(rows) < 2:
         return np.zeros(0, int)
     h = (tg[rows] - tg[a])[:, None]
     x_a = blk.read(st, np.array([a]))
     incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
     pred = x_a + incr
-    x, conv = newton(blk, st, rows, pred, run.tol, run.max_iter)
+    x, conv = newton(blk, st, rows, pred, run.tol, min(run.max_iter, WINDOW_ITER))
     F, J = blk.residual_jacobian(st, rows)
     with np.errstate(invalid="ignore"):
         res = np.max(np.abs(F), axis=1) / run.scale
@@ -720,11 +781,16 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) ->
             -15 * d + 8 * va + 7 * vb + 1.5 * aa - ab,
             6 * d - 3 * va - 3 * vb - 0.5 * aa + 0.5 * ab,
         ]
-    )[:, :, j]
+    )
+    # rows sorted: each interval's coefficients repeated over its rows (contiguous, unlike C[:, :, j]: ~5× faster
+    # arithmetic after)
+    C = np.repeat(C, np.bincount(j, minlength=len(H)), axis=2)
     u = (tg[rows] - tc[j]) / H[j]
-    pred = C[5]
-    for p in range(4, -1, -1):
-        pred = pred * u + C[p]
+    pred = C[5] * u
+    for p in range(4, 0, -1):
+        pred += C[p]
+        pred *= u
+    pred += C[0]
     return j, pred
 
 
@@ -742,7 +808,7 @@ def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     """Newton on every row between coarse rows at once, from the quintic Hermite interpolant of its
     neighbours, until the steps fall below LOOSE: the step the Factor then takes is the convergence test.
     Returns (rows, interval of each, far from its prediction)."""
-    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
+    rows = _between(coarse, n_ok)
     if not len(rows):
         return rows, rows, np.zeros(0, bool)
     xc = ctx.blk.read(ctx.st, coarse).T
@@ -760,9 +826,9 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     factor ~cond·δ per step), plain Newton for the few rows still above LOOSE after CHORD of them; then the
     factor. Returns (rows, interval of each, far, Factor, closure, converged and fresh)."""
     run, st, blk = ctx.run, ctx.st, ctx.blk
-    rows = np.setdiff1d(np.arange(n_ok), coarse, assume_unique=True)
+    rows = _between(coarse, n_ok)
     ev = _Rows(blk, st, n_ok)
-    x = blk.read(st, np.arange(n_ok)).T.copy()
+    x = blk.read_last(st, n_ok)
     far = np.zeros(0, bool)
     j = rows
     J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
@@ -788,6 +854,13 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
         del pred, F  # not kept through the factor
     fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol, J, X)
     return rows, j, far, fac, res, conv
+
+
+def _between(coarse: np.ndarray, n: int) -> np.ndarray:
+    """The rows 0..n-1 that are not coarse rows (np.setdiff1d sorts: ~5× slower)."""
+    dense = np.ones(n, bool)
+    dense[coarse] = False
+    return np.flatnonzero(dense)
 
 
 def _step_size(dx: np.ndarray, x: np.ndarray) -> np.ndarray:
