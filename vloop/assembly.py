@@ -12,7 +12,7 @@ import numpy as np
 
 from .drivers import evaluate_all
 from .errors import MechanismError
-from .loops import LoopSystem, loop_jacobian, loop_residual, term_values
+from .loops import LoopGroup, LoopSystem, loop_jacobian, loop_residual, term_values
 from .model import mobility_message
 from .structure import Structure
 
@@ -33,7 +33,8 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
     if not sys.loops:
         return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}
     initial = _check_typed_closure(sys, q)
-    iterations = sum(_close(sys, q, list(loops), list(unknowns)) for loops, unknowns in structure.groups)
+    groups = [(LoopGroup(sys, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
+    iterations = sum(_close(g, q, unknowns) for g, unknowns in groups)
     closure = float(np.max(np.abs(loop_residual(sys, q)))) / mech.scale
     if closure > 1e-11:
         raise MechanismError(
@@ -42,8 +43,8 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
             entry="joints",
         )
     report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q)}
-    for loops, unknowns in structure.groups:
-        _check_rank(sys, q, list(loops), list(unknowns))
+    for g, unknowns in groups:
+        _check_rank(sys, g.jacobian(*g.terms(q)), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report
@@ -81,13 +82,13 @@ def _over_note(sys: LoopSystem) -> str:
     )
 
 
-def _close(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]) -> int:
-    """Newton (least squares) on ``loops`` for ``unknowns``, the other variables held; returns the iterations."""
-    if not unknowns:
-        return 0
+def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int]) -> int:
+    """Newton (least squares) on the group's loops for ``unknowns``, the other variables held; returns the
+    iterations."""
     for it in range(1, 51):
-        F = loop_residual(sys, q, loops)
-        J = loop_jacobian(sys, q, loops, unknowns)
+        z, e = g.terms(q)
+        F = g.residual(z)
+        J = g.jacobian(z, e)
         rhs = -np.concatenate([F.real, F.imag])
         try:  # a square group: a plain solve (least squares only for redundant or singular groups)
             step = np.linalg.solve(J, rhs) if J.shape[0] == J.shape[1] else np.linalg.lstsq(J, rhs, rcond=None)[0]
@@ -99,11 +100,10 @@ def _close(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]
     return 50
 
 
-def _check_rank(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]) -> None:
-    """A group's Jacobian must have full column rank at t = 0 (else a dead point or toggle)."""
-    if not unknowns:
-        return
-    sv = np.linalg.svd(loop_jacobian(sys, q, loops, unknowns), compute_uv=False)
+def _check_rank(sys: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:
+    """A group's Jacobian ``J`` (in ``unknowns``) must have full column rank at t = 0 (else a dead point or
+    toggle)."""
+    sv = np.linalg.svd(J, compute_uv=False)
     if sv[-1] < SINGULAR_RCOND * sv[0]:
         mech = sys.mechanism
         raise MechanismError(

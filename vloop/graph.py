@@ -171,13 +171,53 @@ def cycle_basis(G: nx.Graph) -> list[list]:
     greedily by length while independent (GF(2) elimination on edge bitsets), completed by fundamental
     cycles if needed. Short loops are what the block structure needs; on every catalog mechanism this is
     the minimum cycle basis networkx computes (de Pina's algorithm, whose cost grows like the cube of
-    the size: tests/test_graph.py compares them).
+    the size: tests/test_graph.py compares them). The searches run on plain dicts in networkx's order of
+    nodes, neighbours and edges (its traversals cost more than the small graphs they walk).
     """
-    rank = G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
-    order = {n: i for i, n in enumerate(G.nodes)}
-    cycles = [_canonical(c, order) for c in _short_cycle_basis(G, rank)]
+    adj = dict(G.adjacency())
+    edges = _edges(adj)
+    roots = _component_roots(adj)
+    rank = len(edges) - len(adj) + len(roots)
+    order = {n: i for i, n in enumerate(adj)}
+    cycles = [_canonical(c, order) for c in _short_cycle_basis(adj, edges, roots, rank)]
     cycles.sort(key=lambda c: sorted(order[n] for n in c))
     return cycles
+
+
+def _edges(adj: dict) -> list[tuple]:
+    """The edges in networkx's order (``G.edges``): by first node, then neighbour, each once."""
+    seen: set = set()
+    out = []
+    for n, nbrs in adj.items():
+        out += [(n, m) for m in nbrs if m not in seen]
+        seen.add(n)
+    return out
+
+
+def _bfs_edges(adj: dict, root) -> list[tuple]:
+    """Tree edges (parent, child) of a breadth-first search from ``root``, as ``nx.bfs_edges`` gives them."""
+    seen = {root}
+    queue = deque([root])
+    out = []
+    while queue:
+        x = queue.popleft()
+        for y in adj[x]:
+            if y not in seen:
+                seen.add(y)
+                queue.append(y)
+                out.append((x, y))
+    return out
+
+
+def _component_roots(adj: dict) -> list:
+    """The first node (in node order) of each connected component."""
+    roots, seen = [], set()
+    for n in adj:
+        if n not in seen:
+            roots.append(n)
+            seen.add(n)
+            seen.update(y for _, y in _bfs_edges(adj, n))
+    return roots
 
 
 def _walk_cycle(G: nx.Graph, nodes: list) -> list:
@@ -203,18 +243,17 @@ def _canonical(nodes: list, order: dict) -> list:
     return nodes
 
 
-def _short_cycle_basis(G: nx.Graph, rank: int) -> list[list]:
+def _short_cycle_basis(adj: dict, edges: list[tuple], roots: list, rank: int) -> list[list]:
     """The shortest cycle through each non-tree edge of a breadth-first forest, kept greedily by length while
     independent; fundamental cycles complete the basis if some of them coincide."""
-    edge_id = {frozenset(e): i for i, e in enumerate(G.edges)}
-    adjacency = {n: list(G.adj[n]) for n in G.nodes}
-    fundamental = _fundamental_cycles(G)
+    edge_id = {frozenset(e): i for i, e in enumerate(edges)}
+    fundamental = _fundamental_cycles(adj, edges, roots)
     candidates = []
     for cyc in fundamental:  # each closes on one non-tree edge (its last and first nodes)
         if rank > SMALL_RANK and len(cyc) <= SHORT_CYCLE:
             candidates.append(cyc)  # already short: a search would cross the ground's hub (O(size) each)
             continue
-        path = _shortest_path_avoiding(adjacency, cyc[-1], cyc[0])
+        path = _shortest_path_avoiding(adj, cyc[-1], cyc[0])
         candidates.append(path if path is not None else cyc)
     candidates.sort(key=len)
     basis: dict[int, int] = {}  # pivot bit → reduced bitset, for independence tests
@@ -246,19 +285,18 @@ def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
     return None
 
 
-def _fundamental_cycles(G: nx.Graph) -> list[list]:
-    """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space)."""
+def _fundamental_cycles(adj: dict, edges: list[tuple], roots: list) -> list[list]:
+    """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space),
+    component by component, each edge in networkx's order."""
     out = []
-    order = {n: i for i, n in enumerate(G.nodes)}
-    for comp in nx.connected_components(G):
-        root = min(comp, key=order.__getitem__)  # not next(iter(comp)): set order follows the hash seed
+    for root in roots:
         parent = {root: None}
         depth = {root: 0}
-        for a, b in nx.bfs_edges(G, root):
+        for a, b in _bfs_edges(adj, root):
             parent[b], depth[b] = a, depth[a] + 1
         tree = {frozenset((b, a)) for b, a in parent.items() if a is not None}
-        for a, b in G.subgraph(comp).edges:
-            if frozenset((a, b)) in tree:
+        for a, b in edges:
+            if a not in parent or frozenset((a, b)) in tree:
                 continue
             left, right = [a], [b]
             while left[-1] != right[-1]:
@@ -299,8 +337,9 @@ def point_paths(G: nx.Graph, mech: Mechanism, n_terms: int) -> np.ndarray:
     points = mech.tracked_points
     root = (mech.ground, ORIGIN)
     coeff: dict[tuple[str, str], dict[int, float]] = {root: {}}
-    for u, v in nx.bfs_edges(G, root):
-        data = G.edges[u, v]
+    adj = dict(G.adjacency())
+    for u, v in _bfs_edges(adj, root):
+        data = adj[u][v]
         sign = 1.0 if data["start"] == u else -1.0
         c = dict(coeff[u])
         for tid, s in data["terms"]:
@@ -334,10 +373,11 @@ def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tupl
     na = len(mg.angle_links)
     C = np.zeros((len(cycles), len(r)))
     loops = []
+    adj = dict(mg.G.adjacency())
     for li, cyc in enumerate(cycles):
         walk: list[int] = []  # terms in traversal order, as the paper writes a loop
         for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
-            data = mg.G.edges[u, v]
+            data = adj[u][v]
             sign = 1.0 if data["start"] == u else -1.0
             for tid, s in data["terms"]:
                 C[li, tid] += sign * s

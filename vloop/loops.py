@@ -21,6 +21,7 @@ __all__ = [
     "ORIGIN",
     "Block",
     "Loop",
+    "LoopGroup",
     "LoopSystem",
     "branch_name",
     "loop_jacobian",
@@ -106,6 +107,33 @@ def term_values(sys: LoopSystem, q: np.ndarray, terms: np.ndarray | None = None)
 def loop_terms(sys: LoopSystem, loops: list[int]) -> np.ndarray:
     """The terms ``loops`` use (a loop's equations involve only these)."""
     return np.nonzero(np.any(sys.C[loops] != 0, axis=0))[0]
+
+
+class LoopGroup:
+    """The equations of ``loops`` in the variables ``cols``, index data gathered once for repeated evaluation
+    (Newton at t = 0): the same arithmetic as :func:`loop_residual` and :func:`loop_jacobian`, bit for bit."""
+
+    def __init__(self, sys: LoopSystem, loops: list[int], cols: list[int]) -> None:
+        k = loop_terms(sys, loops)
+        self.na = na = sys.n_angles
+        self.r, self.sl, self.ang, self.delta = sys.t_r[k], sys.t_sl[k], sys.t_ang[k], sys.t_delta[k]
+        self.Cg = sys.C[np.ix_(loops, k)]
+        cols_a = np.asarray(cols, int)
+        self.on_angle = self.ang[:, None] == cols_a[None, :]
+        self.on_slider = (self.sl[:, None] == cols_a[None, :] - na) & (cols_a[None, :] >= na)
+
+    def terms(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The group's term vectors z and their directions e = e^{j(φ + δ)} at ``q``."""
+        na = self.na
+        e = np.exp(1j * (np.append(q[:na], 0.0)[self.ang] + self.delta))
+        return (self.r + np.append(q[na:], 0.0)[self.sl]) * e, e
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        return z @ self.Cg.T
+
+    def jacobian(self, z: np.ndarray, e: np.ndarray) -> np.ndarray:
+        J = self.Cg @ ((1j * z)[:, None] * self.on_angle + e[:, None] * self.on_slider)
+        return np.vstack([J.real, J.imag])
 
 
 def loop_jacobian(sys: LoopSystem, q: np.ndarray, loops: list[int], cols: list[int]) -> np.ndarray:
