@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .drivers import evaluate_all
+from .drivers import evaluate
 from .errors import MechanismError
-from .loops import LoopGroup, LoopSystem, loop_jacobian, loop_residual, term_values
-from .model import mobility_message
+from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
+from .model import Mechanism, mobility_message
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size
@@ -29,33 +29,49 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
     mech = sys.mechanism
     q = sys.coords_q.copy()
     if mech.drivers:
-        q[list(sys.drivers)] = evaluate_all(mech, np.zeros(1))[0][0]
+        q[list(sys.drivers)] = _inputs_at_start(mech)
     if not sys.loops:
         return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}
-    initial = _check_typed_closure(sys, q)
+    every = TermIndex(sys)
+    z_typed = every.at(q)[0]
+    typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
+    initial = _check_typed_closure(sys, q, z_typed)
     groups = [(LoopGroup(sys, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
     iterations = sum(_close(g, q, unknowns) for g, unknowns in groups)
-    closure = float(np.max(np.abs(loop_residual(sys, q)))) / mech.scale
+    z = every.at(q)[0]
+    closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
     if closure > 1e-11:
         raise MechanismError(
             f"{mech.source}: [joints] cannot assemble the mechanism at t = 0 from the given coordinates "
             f"(closure {closure:.2g} of its size after {iterations} Newton steps){_over_note(sys)}",
             entry="joints",
         )
-    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q)}
+    z0 = z_typed if typed else every.at(sys.coords_q)[0]
+    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
     for g, unknowns in groups:
-        _check_rank(sys, g.jacobian(*g.terms(q)), unknowns)
+        _check_rank(sys, g.jacobian(*g.at(q)), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report
 
 
-def _check_typed_closure(sys: LoopSystem, q: np.ndarray) -> float:
-    """The typed coordinates' closure (fraction of the size); refused beyond ``assembly_tolerance``."""
+def _inputs_at_start(mech: Mechanism) -> list[float]:
+    """The drivers' inputs at t = 0: x0 + v0·t + a0·t²/2 by drivers.evaluate's operations in the same order (the
+    same bits, without its arrays), a profile by drivers.evaluate itself."""
+    t = 0.0
+    return [
+        d.x0 + d.v0 * t + 0.5 * d.a0 * t * t if d.profile is None else float(evaluate(d, np.zeros(1))[0][0])
+        for d in mech.drivers
+    ]
+
+
+def _check_typed_closure(sys: LoopSystem, q: np.ndarray, z: np.ndarray) -> float:
+    """The typed coordinates' closure (fraction of the size); refused beyond ``assembly_tolerance``. ``z``: the
+    term vectors at ``q``."""
     mech = sys.mechanism
     tol = mech.options.get("assembly_tolerance", DEFAULT_ASSEMBLY_TOL)
-    res0 = np.abs(loop_residual(sys, q))
-    worst = int(np.argmax(res0))
+    res0 = np.abs(z @ sys.C.T)
+    worst = int(res0.argmax())
     if res0[worst] > tol * mech.scale:
         lp = sys.loops[worst]
         why = ""
@@ -86,16 +102,16 @@ def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int]) -> int:
     """Newton (least squares) on the group's loops for ``unknowns``, the other variables held; returns the
     iterations."""
     for it in range(1, 51):
-        z, e = g.terms(q)
+        z, e = g.at(q)
         F = g.residual(z)
         J = g.jacobian(z, e)
-        rhs = -np.concatenate([F.real, F.imag])
+        rhs = -np.concatenate((F.real, F.imag))
         try:  # a square group: a plain solve (least squares only for redundant or singular groups)
             step = np.linalg.solve(J, rhs) if J.shape[0] == J.shape[1] else np.linalg.lstsq(J, rhs, rcond=None)[0]
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(J, rhs, rcond=None)[0]
         q[unknowns] += step
-        if np.max(np.abs(step), initial=0.0) <= 1e-14 * (1 + np.max(np.abs(q[unknowns]), initial=0.0)):
+        if np.abs(step).max() <= 1e-14 * (1 + np.abs(q[unknowns]).max()):  # a group has unknowns
             return it
     return 50
 
@@ -162,10 +178,11 @@ def redundancy_text(info: dict, sys: LoopSystem) -> str:
     )
 
 
-def moved(sys: LoopSystem, q: np.ndarray) -> dict:
-    """How far the assembly at ``q`` moved each point from the typed coordinates."""
-    z0 = term_values(sys, sys.coords_q)
-    z1 = term_values(sys, q)
+def moved(sys: LoopSystem, q: np.ndarray, z0: np.ndarray | None = None, z1: np.ndarray | None = None) -> dict:
+    """How far the assembly at ``q`` moved each point from the typed coordinates (``z0``, ``z1``: the term vectors
+    at the typed coordinates and at ``q``, where known)."""
+    z0 = term_values(sys, sys.coords_q) if z0 is None else z0
+    z1 = term_values(sys, q) if z1 is None else z1
     dist = np.abs((z1 - z0) @ sys.path) if len(sys.point_names) else np.zeros(0)
     return {
         "moved": float(dist.max(initial=0.0)),

@@ -23,6 +23,7 @@ __all__ = [
     "Loop",
     "LoopGroup",
     "LoopSystem",
+    "TermIndex",
     "branch_name",
     "loop_jacobian",
     "loop_polygon",
@@ -109,31 +110,48 @@ def loop_terms(sys: LoopSystem, loops: list[int]) -> np.ndarray:
     return np.nonzero(np.any(sys.C[loops] != 0, axis=0))[0]
 
 
-class LoopGroup:
+class TermIndex:
+    """Term vectors at one configuration, for the terms ``k`` (all by default), the index data gathered once:
+    :func:`term_values`' arithmetic, bit for bit (the variables extended by a zero stand for "none")."""
+
+    def __init__(self, sys: LoopSystem, k: np.ndarray | None = None) -> None:
+        k = np.arange(len(sys.t_r)) if k is None else k
+        n, na = sys.n_vars, sys.n_angles
+        self.r, self.delta = sys.t_r[k], sys.t_delta[k]
+        ang, sl = sys.t_ang[k], sys.t_sl[k]
+        self.ang, self.sl = ang, sl
+        self.at_ang = np.where(ang < 0, n, ang)
+        self.at_sl = np.where(sl < 0, n, na + sl)
+
+    def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The term vectors z and their directions e = e^{j(φ + δ)} at ``q`` (one configuration)."""
+        qx = np.concatenate((q, _ZERO))
+        e = np.exp(1j * (qx[self.at_ang] + self.delta))
+        return (self.r + qx[self.at_sl]) * e, e
+
+
+_ZERO = np.zeros(1)
+
+
+class LoopGroup(TermIndex):
     """The equations of ``loops`` in the variables ``cols``, index data gathered once for repeated evaluation
     (Newton at t = 0): the same arithmetic as :func:`loop_residual` and :func:`loop_jacobian`, bit for bit."""
 
     def __init__(self, sys: LoopSystem, loops: list[int], cols: list[int]) -> None:
-        k = loop_terms(sys, loops)
-        self.na = na = sys.n_angles
-        self.r, self.sl, self.ang, self.delta = sys.t_r[k], sys.t_sl[k], sys.t_ang[k], sys.t_delta[k]
-        self.Cg = sys.C[np.ix_(loops, k)]
-        cols_a = np.asarray(cols, int)
-        self.on_angle = self.ang[:, None] == cols_a[None, :]
-        self.on_slider = (self.sl[:, None] == cols_a[None, :] - na) & (cols_a[None, :] >= na)
-
-    def terms(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The group's term vectors z and their directions e = e^{j(φ + δ)} at ``q``."""
-        na = self.na
-        e = np.exp(1j * (np.append(q[:na], 0.0)[self.ang] + self.delta))
-        return (self.r + np.append(q[na:], 0.0)[self.sl]) * e, e
+        Cl = sys.C[loops]
+        k = (Cl != 0).any(axis=0).nonzero()[0]
+        super().__init__(sys, k)
+        self.Cg = Cl[:, k]
+        cols_a = np.array(cols, int)
+        self.on_angle = self.ang[:, None] == cols_a
+        self.on_slider = (self.sl[:, None] == cols_a - sys.n_angles) & (cols_a >= sys.n_angles)
 
     def residual(self, z: np.ndarray) -> np.ndarray:
         return z @ self.Cg.T
 
     def jacobian(self, z: np.ndarray, e: np.ndarray) -> np.ndarray:
         J = self.Cg @ ((1j * z)[:, None] * self.on_angle + e[:, None] * self.on_slider)
-        return np.vstack([J.real, J.imag])
+        return np.concatenate((J.real, J.imag))
 
 
 def loop_jacobian(sys: LoopSystem, q: np.ndarray, loops: list[int], cols: list[int]) -> np.ndarray:

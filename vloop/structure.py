@@ -186,18 +186,22 @@ def block_structure(sys: LoopSystem, structure: Structure, q0: np.ndarray, metho
         return ()
     if method == "newton" or structure.over_determined:
         return (Block(tuple(range(len(sys.loops))), tuple(sys.unknowns), "newton"),)
-    return tuple(classify(sys, q0, loops, unknowns) for loops, unknowns in structure.groups)
+    z = term_values(sys, q0)
+    return tuple(classify(sys, q0, loops, unknowns, z) for loops, unknowns in structure.groups)
 
 
-def classify(sys: LoopSystem, q0: np.ndarray, loops: tuple[int, ...], unknowns: tuple[int, ...]) -> Block:
-    """Closed-form kind and assembly branch (at the t = 0 assembly) of a one-loop block; "newton" otherwise."""
+def classify(
+    sys: LoopSystem, q0: np.ndarray, loops: tuple[int, ...], unknowns: tuple[int, ...], z: np.ndarray | None = None
+) -> Block:
+    """Closed-form kind and assembly branch (at the t = 0 assembly) of a one-loop block; "newton" otherwise.
+    ``z``: the term vectors at ``q0``, where known."""
     na = sys.n_angles
     if len(loops) != 1 or len(unknowns) != 2:
         return Block(loops, unknowns, "newton")
     lp = sys.loops[loops[0]]
     angs = [v for v in unknowns if v < na]
     sls = [v - na for v in unknowns if v >= na]
-    z = term_values(sys, q0)
+    z = term_values(sys, q0) if z is None else z
     phi = np.append(q0[:na], 0.0)
     terms = list(zip(lp.terms, lp.signs, strict=True))
 
