@@ -47,14 +47,15 @@ def row_max(A: np.ndarray) -> np.ndarray:
     return out
 
 
-def _real_rep(G: np.ndarray) -> np.ndarray:
-    """The real (2a, 2K) matrix R with ``Z.view(float) @ R == (Z @ G).view(float)`` for complex Z (n, a): one real
-    BLAS product on the interleaved [Re, Im] view instead of a complex one (half the work, no temporaries)."""
-    a, K = G.shape
-    R = np.empty((2 * a, 2 * K))
-    R[0::2, 0::2], R[0::2, 1::2] = G.real, G.imag
-    R[1::2, 0::2], R[1::2, 1::2] = -G.imag, G.real
-    return R
+def _real_rep(G: list[list[complex]], K: int) -> np.ndarray:
+    """The real (2a, 2K) matrix R with ``Z.view(float) @ R == (Z @ G).view(float)`` for complex Z (n, a) and G
+    (a rows of K): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
+    work, no temporaries)."""
+    R = []
+    for g in G:
+        R.append([x for z in g for x in (z.real, z.imag)])
+        R.append([x for z in g for x in (-z.imag, z.real)])
+    return np.array(R, float).reshape(2 * len(G), 2 * K)
 
 
 def _columns_of(A: np.ndarray, cols: np.ndarray | None) -> np.ndarray:
@@ -62,10 +63,17 @@ def _columns_of(A: np.ndarray, cols: np.ndarray | None) -> np.ndarray:
     return A if cols is None else A.take(cols, axis=1)
 
 
-def _used(idx: np.ndarray, width: int) -> np.ndarray | None:
+def _used(cols: set[int], width: int) -> np.ndarray | None:
     """The state columns a sum reads (None: most of them, read whole rows rather than gather)."""
-    cols = np.array(sorted(set(idx.tolist())), int)  # (np.unique costs ~30 µs on a handful of numbers)
-    return None if 2 * len(cols) > width else cols
+    return None if 2 * len(cols) > width else np.array(sorted(cols), int)
+
+
+def _term_lists(sys: LoopSystem) -> tuple[list[int], list[int], list[float], list[complex]]:
+    """Every term's angle variable, slider, magnitude and e^{jδ}, as Python numbers (cached)."""
+    if "term_lists" not in sys.cache:
+        cd = np.exp(1j * sys.t_delta)
+        sys.cache["term_lists"] = (sys.t_ang.tolist(), sys.t_sl.tolist(), sys.t_r.tolist(), cd.tolist())
+    return sys.cache["term_lists"]
 
 
 @dataclass
@@ -92,26 +100,41 @@ class _Sum:
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
         na, ns = sys.n_angles, len(sys.slider_names)
-        ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
-        cd = np.exp(1j * sys.t_delta[terms])
+        t_ang, t_sl, t_r, t_cd = _term_lists(sys)
         M = M.astype(complex).reshape(len(terms), -1)
         K = M.shape[1]
-        col = np.where(ang < 0, na, ang)  # the padding column stands for the ground
-        ground = (sl < 0) | (ang < 0)  # rigid, or a slider along a ground line: r (and s) times a constant
-        G = np.zeros((na + 1, K), complex)
-        np.add.at(G, col[ground], (r * cd)[ground][:, None] * M[ground])
-        on_line = (sl >= 0) & (ang < 0)
-        H = np.zeros((ns + 1, K), complex)
-        np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
-        acols, scols = _used(ang[ground & (ang >= 0)], na + 1), _used(sl[on_line], ns + 1)
+        # the sums in Python numbers, term by term in order (np.add.at's operations on a handful of terms)
+        G = [[0j] * K for _ in range(na + 1)]  # the padding row na stands for the ground
+        H = [[0j] * K for _ in range(ns + 1)]
+        acols, scols, mv = set(), set(), []
+        for row, (n, t) in zip(M.tolist(), enumerate(terms.tolist()), strict=True):
+            a, i = t_ang[t], t_sl[t]
+            if i >= 0 and a >= 0:  # a slider vector on a moving guide
+                mv.append(n)
+                continue
+            rc, g = t_r[t] * t_cd[t], G[na if a < 0 else a]  # rigid, or a slider along a ground line
+            for k, m in enumerate(row):
+                g[k] += rc * m
+            if i < 0:
+                acols.add(a)
+                continue
+            h, cd = H[i], t_cd[t]
+            for k, m in enumerate(row):
+                h[k] += cd * m
+            scols.add(i)
+        acols.discard(-1)
+        acol, scol = _used(acols, na + 1), _used(scols, ns + 1)
         c0 = np.zeros(2 * K)
-        if acols is not None:  # gathered: the ground vectors are a constant, the padding column is not read
-            c0 = np.ascontiguousarray(G[na]).view(float).copy()
-            G = G[acols]
-        H = H if scols is None else H[scols]
-        H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * K)
-        mv = (sl >= 0) & (ang >= 0)
-        return cls(acols, _real_rep(G), _real_rep(1j * G), c0, scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
+        if acol is not None:  # gathered: the ground vectors are a constant, the padding column is not read
+            c0 = np.array(G[na], complex).view(float)
+            G = [G[a] for a in acol.tolist()]
+        H = H if scol is None else [H[i] for i in scol.tolist()]
+        H = np.array(H, complex).view(float).reshape(len(H), 2 * K)
+        ang, sl = sys.t_ang[terms[mv]], sys.t_sl[terms[mv]]
+        return cls(
+            acol, _real_rep(G, K), _real_rep([[1j * x for x in g] for g in G], K), c0, scol, H, ang, sl,
+            sys.t_r[terms[mv]], np.array([t_cd[t] for t in terms[mv].tolist()], complex), M[mv],
+        )  # fmt: skip
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
