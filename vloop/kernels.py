@@ -47,15 +47,24 @@ def row_max(A: np.ndarray) -> np.ndarray:
     return out
 
 
-def _real_rep(G: list[list[complex]], K: int) -> np.ndarray:
-    """The real (2a, 2K) matrix R with ``Z.view(float) @ R == (Z @ G).view(float)`` for complex Z (n, a) and G
-    (a rows of K): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
+def _real_reps(G: list[list[complex]], K: int) -> tuple[np.ndarray, np.ndarray]:
+    """The real (2a, 2K) matrices R of G and of j·G (a rows of K) with ``Z.view(float) @ R == (Z @ G).view(float)``
+    for complex Z (n, a): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
     work, no temporaries)."""
-    R = []
-    for g in G:
-        R.append([x for z in g for x in (z.real, z.imag)])
-        R.append([x for z in g for x in (-z.imag, z.real)])
-    return np.array(R, float).reshape(2 * len(G), 2 * K)
+    a = len(G)
+    B = np.empty((2, a, K), complex)
+    B[0] = np.array(G, complex).reshape(a, K)
+    np.multiply(1j, B[0], out=B[1])
+    F = B.view(float).reshape(2, a, K, 2)  # [Re, Im] of each entry
+    R = np.empty((2, a, 2, K, 2))
+    R[:, :, 0] = F  # rows 2i: Re, Im of row i interleaved
+    np.negative(F[..., 1], out=R[:, :, 1, :, 0])  # rows 2i + 1: −Im, Re
+    R[:, :, 1, :, 1] = F[..., 0]
+    R = R.reshape(2, 2 * a, 2 * K)
+    return R[0], R[1]
+
+
+_NO_INT, _NO_FLOAT, _NO_COMPLEX = np.zeros(0, int), np.zeros(0), np.zeros(0, complex)
 
 
 def _columns_of(A: np.ndarray, cols: np.ndarray | None) -> np.ndarray:
@@ -68,11 +77,12 @@ def _used(cols: set[int], width: int) -> np.ndarray | None:
     return None if 2 * len(cols) > width else np.array(sorted(cols), int)
 
 
-def _term_lists(sys: LoopSystem) -> tuple[list[int], list[int], list[float], list[complex]]:
-    """Every term's angle variable, slider, magnitude and e^{jδ}, as Python numbers (cached)."""
+def _term_lists(sys: LoopSystem) -> tuple[list[int], list[int], list[float], list[complex], np.ndarray]:
+    """Every term's angle variable, slider, magnitude and e^{jδ} as Python numbers, and e^{jδ} as an array
+    (cached)."""
     if "term_lists" not in sys.cache:
         cd = np.exp(1j * sys.t_delta)
-        sys.cache["term_lists"] = (sys.t_ang.tolist(), sys.t_sl.tolist(), sys.t_r.tolist(), cd.tolist())
+        sys.cache["term_lists"] = (sys.t_ang.tolist(), sys.t_sl.tolist(), sys.t_r.tolist(), cd.tolist(), cd)
     return sys.cache["term_lists"]
 
 
@@ -100,14 +110,14 @@ class _Sum:
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
         na, ns = sys.n_angles, len(sys.slider_names)
-        t_ang, t_sl, t_r, t_cd = _term_lists(sys)
-        M = M.astype(complex).reshape(len(terms), -1)
+        t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
+        M = M.reshape(len(terms), -1)
         K = M.shape[1]
-        # the sums in Python numbers, term by term in order (np.add.at's operations on a handful of terms)
+        # the sums in Python numbers, term by term in order: np.add.at's operations on complex M (the same bits)
         G = [[0j] * K for _ in range(na + 1)]  # the padding row na stands for the ground
         H = [[0j] * K for _ in range(ns + 1)]
         acols, scols, mv = set(), set(), []
-        for row, (n, t) in zip(M.tolist(), enumerate(terms.tolist()), strict=True):
+        for n, (t, row) in enumerate(zip(terms.tolist(), M.tolist(), strict=True)):
             a, i = t_ang[t], t_sl[t]
             if i >= 0 and a >= 0:  # a slider vector on a moving guide
                 mv.append(n)
@@ -130,10 +140,13 @@ class _Sum:
             G = [G[a] for a in acol.tolist()]
         H = H if scol is None else [H[i] for i in scol.tolist()]
         H = np.array(H, complex).view(float).reshape(len(H), 2 * K)
-        ang, sl = sys.t_ang[terms[mv]], sys.t_sl[terms[mv]]
+        R, Rj = _real_reps(G, K)
+        if not mv:
+            return cls(acol, R, Rj, c0, scol, H, _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, np.zeros((0, K), complex))
+        moving = terms[mv]
         return cls(
-            acol, _real_rep(G, K), _real_rep([[1j * x for x in g] for g in G], K), c0, scol, H, ang, sl,
-            sys.t_r[terms[mv]], np.array([t_cd[t] for t in terms[mv].tolist()], complex), M[mv],
+            acol, R, Rj, c0, scol, H, sys.t_ang[moving], sys.t_sl[moving], sys.t_r[moving],
+            np.array([t_cd[t] for t in moving.tolist()], complex), M[mv].astype(complex),
         )  # fmt: skip
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
@@ -232,7 +245,7 @@ def block_terms(sys: LoopSystem, b: Block) -> tuple:
     """A block's terms (those in its loops, as global term ids), their signs in its loops (m, n_terms),
     their angle variables and sliders, the unknown angles and sliders, and which terms depend on none."""
     Cb = sys.C[list(b.loops)]
-    terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
+    terms = (Cb != 0).any(axis=0).nonzero()[0]
     Cb = Cb[:, terms]
     ang, sl = sys.t_ang[terms], sys.t_sl[terms]
     unk_ang = [v for v in b.unknowns if v < sys.n_angles]
@@ -251,30 +264,35 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
     plans = sys.cache.get("plans")
     if plans is not None:
         return plans
-    na = sys.n_angles
-    cd_all = np.exp(1j * sys.t_delta)
-    plans = []
-    for b in sys.blocks:
-        terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
-        masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
-        g = Cb[0]
-        w_const, w_sl, u_dir = {}, {}, {}
-        for a in unk_ang:
-            on = np.nonzero(ang == a)[0]
-            w_const[a] = complex(sum(g[t] * sys.t_r[terms[t]] * cd_all[terms[t]] for t in on))
-            w_sl[a] = [(int(sl[t]), complex(g[t] * cd_all[terms[t]])) for t in on if sl[t] >= 0]
-        for i in unk_sl:
-            t = int(np.nonzero(sl == i)[0][0])
-            u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
-        plan = _Plan(
-            b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
-            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], -Cb.T[known]), w_const, w_sl, u_dir, known,
-        )  # fmt: skip
-        still = ~((sl < 0) & _member(ang, unk_ang))
-        plan.vel_sum = _Sum.build(sys, terms[still], Cb.T[still])
-        plans.append(plan)
+    plans = [_plan(sys, b) for b in sys.blocks]
     sys.cache["plans"] = plans
     return plans
+
+
+def _plan(sys: LoopSystem, b: Block) -> _Plan:
+    """One block's plan: its terms, sums and the closed forms' constants (in Python numbers: numpy's scalar
+    operations, the same bits)."""
+    na = sys.n_angles
+    _, _, t_r, t_cd, cd_all = _term_lists(sys)
+    terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
+    masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
+    g, tl, al, sll = Cb[0].tolist(), terms.tolist(), ang.tolist(), sl.tolist()
+    w_const, w_sl, u_dir = {}, {}, {}
+    for a in unk_ang:
+        on = [n for n, x in enumerate(al) if x == a]
+        w_const[a] = complex(sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
+        w_sl[a] = [(sll[n], complex(g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
+    for i in unk_sl:
+        n = sll.index(i)
+        u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
+    CbT = Cb.T
+    plan = _Plan(
+        b, Cb, CbT.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
+        _Sum.build(sys, terms, CbT), _Sum.build(sys, terms[known], -CbT[known]), w_const, w_sl, u_dir, known,
+    )  # fmt: skip
+    still = ~((sl < 0) & _member(ang, unk_ang))
+    plan.vel_sum = _Sum.build(sys, terms[still], CbT[still])
+    return plan
 
 
 def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
