@@ -71,15 +71,16 @@ def build_graph(mech: Mechanism, bodies: dict[str, Body]) -> MechanismGraph:
     angle_links = tuple(n for n, lk in mech.links.items() if not lk.ground)
     avar = {n: i for i, n in enumerate(angle_links)}
     owner = {name: _owner(bodies, avar, name) for name in mech.body_names}
-    G = nx.Graph()
     terms = Terms()
-    ref = _reference_nodes(mech, bodies, G)
-    _add_body_stars(mech, bodies, G, terms, ref, owner)
+    nodes, ref = _reference_nodes(mech, bodies)
+    edges = _body_stars(mech, bodies, terms, ref, owner)
     for j in mech.joints:
         at = mech.bodies_at(j)
-        for other in at[1:]:
-            G.add_edge((at[0], j), (other, j), terms=(), start=(at[0], j), kind="pin")
-    coords_s = _add_slider_edges(mech, bodies, G, terms, ref, owner)
+        edges += [((at[0], j), (other, j), {"terms": (), "start": (at[0], j), "kind": "pin"}) for other in at[1:]]
+    coords_s = _add_slider_edges(mech, bodies, edges, terms, ref, owner)
+    G = nx.Graph()
+    G.add_nodes_from(nodes)  # in bulk: the same order of nodes, neighbours and edges as one by one
+    G.add_edges_from(edges)
     return MechanismGraph(G, terms, angle_links, tuple(mech.sliders), coords_s, owner)
 
 
@@ -94,27 +95,28 @@ def _owner(bodies: dict[str, Body], avar: dict[str, int], body: str) -> tuple[in
     return (-1 if g.kind == "ground" else avar[g.name]), b.theta0 - g.theta0
 
 
-def _reference_nodes(mech: Mechanism, bodies: dict[str, Body], G: nx.Graph) -> dict[str, tuple[str, str]]:
+def _reference_nodes(mech: Mechanism, bodies: dict[str, Body]) -> tuple[list, dict[str, tuple[str, str]]]:
+    """Every node (the world origin first, then each body's joints and points) and each body's reference node."""
     ground = mech.ground
     ref: dict[str, tuple[str, str]] = {}
-    G.add_node((ground, ORIGIN))
+    nodes = [(ground, ORIGIN)]
     for bname in mech.body_names:
         b = bodies[bname]
         ref[bname] = (bname, ORIGIN) if b.kind == "ground" else (bname, next(iter(b.local)))
-        for m in b.local:
-            G.add_node((bname, m))
-    return ref
+        nodes += [(bname, m) for m in b.local]
+    return nodes, ref
 
 
-def _add_body_stars(
+def _body_stars(
     mech: Mechanism,
     bodies: dict[str, Body],
-    G: nx.Graph,
     terms: Terms,
     ref: dict[str, tuple[str, str]],
     owner: dict[str, tuple[int, float]],
-) -> None:
+) -> list[tuple]:
+    """Each body's edges from its reference node to its other nodes, with their terms."""
     origin = origin_name(mech)
+    edges = []
     for bname in mech.body_names:
         ang, off = owner[bname]
         for m, (lx, ly) in bodies[bname].local.items():
@@ -123,18 +125,20 @@ def _add_body_stars(
                 continue
             start = origin if ref[bname][1] == ORIGIN else ref[bname][1]
             tid = terms.add(ang, -1, math.hypot(lx, ly), math.atan2(ly, lx) + off, f"{start}→{m} ({bname})")
-            G.add_edge(ref[bname], node, terms=((tid, 1.0),), start=ref[bname], kind="link")
+            edges.append((ref[bname], node, {"terms": ((tid, 1.0),), "start": ref[bname], "kind": "link"}))
+    return edges
 
 
 def _add_slider_edges(
     mech: Mechanism,
     bodies: dict[str, Body],
-    G: nx.Graph,
+    edges: list[tuple],
     terms: Terms,
     ref: dict[str, tuple[str, str]],
     owner: dict[str, tuple[int, float]],
 ) -> list[float]:
-    """Guide → block edges: s along the axis plus the sliding line's constant offset. Returns each s at t = 0."""
+    """Guide → block edges (added to ``edges``): s along the axis plus the sliding line's constant offset.
+    Returns each s at t = 0."""
     coords_s = []
     for i, sl in enumerate(mech.sliders.values()):
         g = bodies[sl.guide]
@@ -150,7 +154,7 @@ def _add_slider_edges(
         edge = [(terms.add(ang, i, 0.0, alpha, f"s_{sl.name}"), 1.0)]
         if abs(e) > 1e-15 * mech.scale:
             edge.append((terms.add(ang, -1, e, alpha + math.pi / 2, f"offset of {sl.name}"), 1.0))
-        G.add_edge(ref[sl.guide], (sl.name, sl.joint), terms=tuple(edge), start=ref[sl.guide], kind="slider")
+        edges.append((ref[sl.guide], (sl.name, sl.joint), {"terms": tuple(edge), "start": ref[sl.guide], "kind": "slider"}))
     return coords_s
 
 
@@ -176,10 +180,10 @@ def cycle_basis(G: nx.Graph) -> list[list]:
     """
     adj = dict(G.adjacency())
     edges = _edges(adj)
-    roots = _component_roots(adj)
-    rank = len(edges) - len(adj) + len(roots)
+    forest = _forest(adj)
+    rank = len(edges) - len(adj) + len(forest)
     order = {n: i for i, n in enumerate(adj)}
-    cycles = [_canonical(c, order) for c in _short_cycle_basis(adj, edges, roots, rank)]
+    cycles = [_canonical(c, order) for c in _short_cycle_basis(adj, edges, forest, rank)]
     cycles.sort(key=lambda c: sorted(order[n] for n in c))
     return cycles
 
@@ -209,15 +213,16 @@ def _bfs_edges(adj: dict, root) -> list[tuple]:
     return out
 
 
-def _component_roots(adj: dict) -> list:
-    """The first node (in node order) of each connected component."""
-    roots, seen = [], set()
+def _forest(adj: dict) -> list[list[tuple]]:
+    """A breadth-first tree of each connected component, from its first node in node order (as networkx's
+    components and ``bfs_edges`` give them): each as its edges (parent, child), the root first."""
+    trees, seen = [], set()
     for n in adj:
         if n not in seen:
-            roots.append(n)
-            seen.add(n)
-            seen.update(y for _, y in _bfs_edges(adj, n))
-    return roots
+            tree = [(None, n), *_bfs_edges(adj, n)]
+            seen.update(y for _, y in tree)
+            trees.append(tree)
+    return trees
 
 
 def _walk_cycle(G: nx.Graph, nodes: list) -> list:
@@ -243,11 +248,11 @@ def _canonical(nodes: list, order: dict) -> list:
     return nodes
 
 
-def _short_cycle_basis(adj: dict, edges: list[tuple], roots: list, rank: int) -> list[list]:
+def _short_cycle_basis(adj: dict, edges: list[tuple], forest: list[list[tuple]], rank: int) -> list[list]:
     """The shortest cycle through each non-tree edge of a breadth-first forest, kept greedily by length while
     independent; fundamental cycles complete the basis if some of them coincide."""
     edge_id = {frozenset(e): i for i, e in enumerate(edges)}
-    fundamental = _fundamental_cycles(adj, edges, roots)
+    fundamental = _fundamental_cycles(edges, forest)
     candidates = []
     for cyc in fundamental:  # each closes on one non-tree edge (its last and first nodes)
         if rank > SMALL_RANK and len(cyc) <= SHORT_CYCLE:
@@ -285,18 +290,18 @@ def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
     return None
 
 
-def _fundamental_cycles(adj: dict, edges: list[tuple], roots: list) -> list[list]:
+def _fundamental_cycles(edges: list[tuple], forest: list[list[tuple]]) -> list[list]:
     """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space),
     component by component, each edge in networkx's order."""
     out = []
-    for root in roots:
-        parent = {root: None}
-        depth = {root: 0}
-        for a, b in _bfs_edges(adj, root):
-            parent[b], depth[b] = a, depth[a] + 1
-        tree = {frozenset((b, a)) for b, a in parent.items() if a is not None}
+    for tree in forest:
+        parent = dict((b, a) for a, b in tree)
+        depth = {tree[0][1]: 0}
+        for a, b in tree[1:]:
+            depth[b] = depth[a] + 1
+        in_tree = {frozenset((b, a)) for b, a in parent.items() if a is not None}
         for a, b in edges:
-            if a not in parent or frozenset((a, b)) in tree:
+            if a not in parent or frozenset((a, b)) in in_tree:
                 continue
             left, right = [a], [b]
             while left[-1] != right[-1]:
@@ -369,37 +374,40 @@ class Loop:
 
 def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tuple[tuple[Loop, ...], np.ndarray]:
     """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal)."""
-    ang, sl, r, _ = mg.terms.arrays()
+    ang, sl, r = mg.terms.ang, mg.terms.sl, mg.terms.r
     na = len(mg.angle_links)
-    C = np.zeros((len(cycles), len(r)))
-    loops = []
+    rows, loops = [], []
     adj = dict(mg.G.adjacency())
+    origin = origin_name(mech)
     for li, cyc in enumerate(cycles):
+        row = [0.0] * len(r)
         walk: list[int] = []  # terms in traversal order, as the paper writes a loop
         for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
             data = adj[u][v]
             sign = 1.0 if data["start"] == u else -1.0
             for tid, s in data["terms"]:
-                C[li, tid] += sign * s
+                row[tid] += sign * s
                 walk.append(tid)
-        C[li, (r == 0) & (sl < 0)] = 0.0  # zero-length vectors (coincident pins) add nothing
-        used = np.array([t for t in dict.fromkeys(walk) if C[li, t] != 0], int)
+        for t in walk:
+            if r[t] == 0 and sl[t] < 0:
+                row[t] = 0.0  # zero-length vectors (coincident pins) add nothing
+        used = [t for t in dict.fromkeys(walk) if row[t] != 0]
         variables: set[int] = set()
         for tid in used:
             if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0):
-                variables.add(int(ang[tid]))
+                variables.add(ang[tid])
             if sl[tid] >= 0:
-                variables.add(na + int(sl[tid]))
-        label = loop_label(cyc, mech)
-        loops.append(
-            Loop(li, label, tuple(cyc), tuple(int(t) for t in used), tuple(C[li, used]), tuple(sorted(variables)))
-        )
-    return tuple(loops), C
+                variables.add(na + sl[tid])
+        label = loop_label(cyc, mech, origin)
+        rows.append(row)
+        loops.append(Loop(li, label, tuple(cyc), tuple(used), tuple(row[t] for t in used), tuple(sorted(variables))))
+    return tuple(loops), np.array(rows, float).reshape(len(cycles), len(r))
 
 
-def loop_label(cyc: list, mech: Mechanism) -> str:
-    """Joint names along the loop; the world origin takes the name of a ground joint placed there."""
-    origin = origin_name(mech)
+def loop_label(cyc: list, mech: Mechanism, origin: str | None = None) -> str:
+    """Joint names along the loop; the world origin takes the name of a ground joint placed there (``origin``,
+    where known)."""
+    origin = origin_name(mech) if origin is None else origin
     names: list[str] = []
     for _, j in cyc:
         n = origin if j == ORIGIN else j
