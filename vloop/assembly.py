@@ -33,12 +33,16 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
     if not sys.loops:
         return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}
     every = TermIndex(sys)
-    z_typed = every.at(q)[0]
+    ze = every.at(q)  # term vectors and directions at the current q
     typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
+    z_typed = ze[0]
     initial = _check_typed_closure(sys, q, z_typed)
-    groups = [(LoopGroup(sys, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
-    iterations = sum(_close(g, q, unknowns) for g, unknowns in groups)
-    z = every.at(q)[0]
+    groups = [(LoopGroup(sys, every, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
+    iterations = 0
+    for g, unknowns in groups:
+        it, ze = _close(g, every, q, unknowns, ze)
+        iterations += it
+    z = ze[0]
     closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
     if closure > 1e-11:
         raise MechanismError(
@@ -49,7 +53,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
     z0 = z_typed if typed else every.at(sys.coords_q)[0]
     report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
     for g, unknowns in groups:
-        _check_rank(sys, g.jacobian(*g.at(q)), unknowns)
+        _check_rank(sys, g.jacobian(*ze), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report
@@ -98,27 +102,31 @@ def _over_note(sys: LoopSystem) -> str:
     )
 
 
-def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int]) -> int:
-    """Newton (least squares) on the group's loops for ``unknowns``, the other variables held; returns the
-    iterations."""
+def _close(
+    g: LoopGroup, every: TermIndex, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarray, np.ndarray]
+) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
+    """Newton (least squares) on the group's loops for ``unknowns``, the other variables held. ``ze``: the term
+    vectors and directions at ``q``. Returns the iterations and the term vectors and directions at the new q."""
     for it in range(1, 51):
-        z, e = g.at(q)
-        F = g.residual(z)
-        J = g.jacobian(z, e)
+        F = g.residual(ze[0])
+        J = g.jacobian(*ze)
         rhs = -np.concatenate((F.real, F.imag))
         try:  # a square group: a plain solve (least squares only for redundant or singular groups)
             step = np.linalg.solve(J, rhs) if J.shape[0] == J.shape[1] else np.linalg.lstsq(J, rhs, rcond=None)[0]
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(J, rhs, rcond=None)[0]
         q[unknowns] += step
+        ze = every.at(q)
         if np.abs(step).max() <= 1e-14 * (1 + np.abs(q[unknowns]).max()):  # a group has unknowns
-            return it
-    return 50
+            return it, ze
+    return 50, ze
 
 
 def _check_rank(sys: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:
     """A group's Jacobian ``J`` (in ``unknowns``) must have full column rank at t = 0 (else a dead point or
-    toggle)."""
+    toggle): its singular values' ratio at least SINGULAR_RCOND."""
+    if J.shape == (2, 2) and _clearly_regular(J):
+        return
     sv = np.linalg.svd(J, compute_uv=False)
     if sv[-1] < SINGULAR_RCOND * sv[0]:
         mech = sys.mechanism
@@ -129,6 +137,20 @@ def _check_rank(sys: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:
             f"M = {mech.gruebler()[2]} does not see this",
             entry="joints",
         )
+
+
+EPS = float(np.finfo(float).eps)
+
+
+def _clearly_regular(J: np.ndarray) -> bool:
+    """Whether a 2×2 matrix's singular values σ₂ ≤ σ₁ certainly have σ₂/σ₁ > 100·SINGULAR_RCOND, so that the SVD's
+    rank test passes (its computed values are within a few ε·σ₁): σ₁σ₂ = |det| and σ₁² ≤ ‖J‖²_F give
+    σ₂/σ₁ ≥ |det|/‖J‖²_F, with det's and the norm's rounding bounded. Overflow, underflow or nan: False (the SVD
+    decides)."""
+    (a, b), (c, d) = J.tolist()
+    ad, bc = a * d, b * c
+    det_low = abs(ad - bc) - 4 * EPS * (abs(ad) + abs(bc))
+    return det_low > 100 * SINGULAR_RCOND * (1 + 8 * EPS) * (a * a + b * b + c * c + d * d)
 
 
 def redundancy(sys: LoopSystem, q: np.ndarray) -> dict:

@@ -119,7 +119,7 @@ class TermIndex:
         n, na = sys.n_vars, sys.n_angles
         self.r, self.delta = sys.t_r[k], sys.t_delta[k]
         ang, sl = sys.t_ang[k], sys.t_sl[k]
-        self.ang, self.sl = ang, sl
+        self.ang_list, self.sl_list = ang.tolist(), sl.tolist()
         self.at_ang = np.where(ang < 0, n, ang)
         self.at_sl = np.where(sl < 0, n, na + sl)
 
@@ -133,24 +133,28 @@ class TermIndex:
 _ZERO = np.zeros(1)
 
 
-class LoopGroup(TermIndex):
+class LoopGroup:
     """The equations of ``loops`` in the variables ``cols``, index data gathered once for repeated evaluation
-    (Newton at t = 0): the same arithmetic as :func:`loop_residual` and :func:`loop_jacobian`, bit for bit."""
+    (Newton at t = 0) from the term vectors of the whole system (:class:`TermIndex`): the same arithmetic as
+    :func:`loop_residual` and :func:`loop_jacobian`, bit for bit."""
 
-    def __init__(self, sys: LoopSystem, loops: list[int], cols: list[int]) -> None:
+    def __init__(self, sys: LoopSystem, every: TermIndex, loops: list[int], cols: list[int]) -> None:
         Cl = sys.C[loops]
-        k = (Cl != 0).any(axis=0).nonzero()[0]
-        super().__init__(sys, k)
-        self.Cg = Cl[:, k]
-        cols_a = np.array(cols, int)
-        self.on_angle = self.ang[:, None] == cols_a
-        self.on_slider = (self.sl[:, None] == cols_a - sys.n_angles) & (cols_a >= sys.n_angles)
+        self.k = (Cl != 0).any(axis=0).nonzero()[0]
+        self.Cg = Cl[:, self.k]
+        na, ks = sys.n_angles, self.k.tolist()
+        ang, sl = every.ang_list, every.sl_list
+        shape = (len(ks), len(cols))
+        self.on_angle = np.array([[ang[t] == c for c in cols] for t in ks], bool).reshape(shape)
+        self.on_slider = np.array([[c >= na and sl[t] == c - na for c in cols] for t in ks], bool).reshape(shape)
 
     def residual(self, z: np.ndarray) -> np.ndarray:
-        return z @ self.Cg.T
+        """The group's loops' closure at the whole system's term vectors ``z``."""
+        return z[self.k] @ self.Cg.T
 
     def jacobian(self, z: np.ndarray, e: np.ndarray) -> np.ndarray:
-        J = self.Cg @ ((1j * z)[:, None] * self.on_angle + e[:, None] * self.on_slider)
+        """[Re; Im] of the loops' Jacobian in ``cols`` at the whole system's term vectors and directions."""
+        J = self.Cg @ ((1j * z[self.k])[:, None] * self.on_angle + e[self.k][:, None] * self.on_slider)
         return np.concatenate((J.real, J.imag))
 
 
