@@ -50,8 +50,15 @@ def row_max(A: np.ndarray) -> np.ndarray:
 def _real_reps(G: list[list[complex]], K: int) -> tuple[np.ndarray, np.ndarray]:
     """The real (2a, 2K) matrices R of G and of j·G (a rows of K) with ``Z.view(float) @ R == (Z @ G).view(float)``
     for complex Z (n, a): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
-    work, no temporaries)."""
+    work, no temporaries). A few entries in Python numbers, more by numpy (the same operations: the same bits)."""
     a = len(G)
+    if a * K <= 8:
+        rows = []
+        for H in (G, [[1j * z for z in g] for g in G]):
+            for g in H:
+                rows += [[x for z in g for x in (z.real, z.imag)], [x for z in g for x in (-z.imag, z.real)]]
+        R = np.array(rows, float).reshape(2, 2 * a, 2 * K)
+        return R[0], R[1]
     B = np.empty((2, a, K), complex)
     B[0] = np.array(G, complex).reshape(a, K)
     np.multiply(1j, B[0], out=B[1])
@@ -109,15 +116,20 @@ class _Sum:
 
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
+        """Σ_t M[t, :]·z_t over ``terms`` (M: one row per term, K columns)."""
+        M = M.reshape(len(terms), -1)
+        return cls.from_rows(sys, terms.tolist(), M.tolist(), M.shape[1])
+
+    @classmethod
+    def from_rows(cls, sys: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> _Sum:
+        """As :meth:`build`, from Python numbers: ``rows`` holds M's rows."""
         na, ns = sys.n_angles, len(sys.slider_names)
         t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
-        M = M.reshape(len(terms), -1)
-        K = M.shape[1]
         # the sums in Python numbers, term by term in order: np.add.at's operations on complex M (the same bits)
         G = [[0j] * K for _ in range(na + 1)]  # the padding row na stands for the ground
         H = [[0j] * K for _ in range(ns + 1)]
         acols, scols, mv = set(), set(), []
-        for n, (t, row) in enumerate(zip(terms.tolist(), M.tolist(), strict=True)):
+        for n, (t, row) in enumerate(zip(terms, rows, strict=True)):
             a, i = t_ang[t], t_sl[t]
             if i >= 0 and a >= 0:  # a slider vector on a moving guide
                 mv.append(n)
@@ -143,10 +155,11 @@ class _Sum:
         R, Rj = _real_reps(G, K)
         if not mv:
             return cls(acol, R, Rj, c0, scol, H, _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, np.zeros((0, K), complex))
-        moving = terms[mv]
+        moving = [terms[n] for n in mv]
         return cls(
-            acol, R, Rj, c0, scol, H, sys.t_ang[moving], sys.t_sl[moving], sys.t_r[moving],
-            np.array([t_cd[t] for t in moving.tolist()], complex), M[mv].astype(complex),
+            acol, R, Rj, c0, scol, H, np.array([t_ang[t] for t in moving], int), np.array([t_sl[t] for t in moving], int),
+            np.array([t_r[t] for t in moving], float), np.array([t_cd[t] for t in moving], complex),
+            np.array([rows[n] for n in mv], complex).reshape(len(mv), K),
         )  # fmt: skip
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
@@ -286,13 +299,22 @@ def _plan(sys: LoopSystem, b: Block) -> _Plan:
         n = sll.index(i)
         u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
     CbT = Cb.T
+    m, rows = len(Cb), CbT.tolist()
+    still = ~((sl < 0) & _member(ang, unk_ang))
     plan = _Plan(
         b, Cb, CbT.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
-        _Sum.build(sys, terms, CbT), _Sum.build(sys, terms[known], -CbT[known]), w_const, w_sl, u_dir, known,
+        _Sum.from_rows(sys, tl, rows, m),
+        _Sum.from_rows(sys, *_rows_where(known, tl, [[-x for x in row] for row in rows]), m),
+        w_const, w_sl, u_dir, known,
     )  # fmt: skip
-    still = ~((sl < 0) & _member(ang, unk_ang))
-    plan.vel_sum = _Sum.build(sys, terms[still], CbT[still])
+    plan.vel_sum = _Sum.from_rows(sys, *_rows_where(still, tl, rows), m)
     return plan
+
+
+def _rows_where(mask: np.ndarray, terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:
+    """The terms and rows where ``mask`` holds."""
+    keep = mask.tolist()
+    return [t for t, k in zip(terms, keep, strict=True) if k], [r for r, k in zip(rows, keep, strict=True) if k]
 
 
 def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
