@@ -8,6 +8,8 @@ reported; beyond it the file is refused, naming the loop and the closure error.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .drivers import evaluate
@@ -53,7 +55,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
     z0 = z_typed if typed else every.at(sys.coords_q)[0]
     report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
     for g, unknowns in groups:
-        _check_rank(sys, g.jacobian(*ze), unknowns)
+        _check_rank(sys, g.jacobian(ze[0][g.k], ze[1][g.k]), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report
@@ -108,18 +110,27 @@ def _close(
     """Newton (least squares) on the group's loops for ``unknowns``, the other variables held. ``ze``: the term
     vectors and directions at ``q``. Returns the iterations and the term vectors and directions at the new q."""
     for it in range(1, 51):
-        F = g.residual(ze[0])
-        J = g.jacobian(*ze)
+        zk, ek = ze[0][g.k], ze[1][g.k]
+        F = g.residual(zk)
+        J = g.jacobian(zk, ek)
         rhs = -np.concatenate((F.real, F.imag))
         try:  # a square group: a plain solve (least squares only for redundant or singular groups)
             step = np.linalg.solve(J, rhs) if J.shape[0] == J.shape[1] else np.linalg.lstsq(J, rhs, rcond=None)[0]
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(J, rhs, rcond=None)[0]
-        q[unknowns] += step
+        dq = step.tolist()
+        for v, d in zip(unknowns, dq, strict=True):
+            q[v] += d
         ze = every.at(q)
-        if np.abs(step).max() <= 1e-14 * (1 + np.abs(q[unknowns]).max()):  # a group has unknowns
+        if _max_abs(dq) <= 1e-14 * (1 + _max_abs(q[unknowns].tolist())):
             return it, ze
     return 50, ze
+
+
+def _max_abs(xs: list[float]) -> float:
+    """max |x| (nan if any x is nan, as numpy's max), for the few numbers of a group."""
+    m = max(map(abs, xs))
+    return m if all(x == x for x in xs) else math.nan
 
 
 def _check_rank(sys: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:

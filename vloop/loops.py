@@ -144,17 +144,17 @@ class LoopGroup:
         self.Cg = Cl[:, self.k]
         na, ks = sys.n_angles, self.k.tolist()
         ang, sl = every.ang_list, every.sl_list
-        shape = (len(ks), len(cols))
-        self.on_angle = np.array([[ang[t] == c for c in cols] for t in ks], bool).reshape(shape)
-        self.on_slider = np.array([[c >= na and sl[t] == c - na for c in cols] for t in ks], bool).reshape(shape)
+        shape = (len(ks), len(cols))  # d z_t / d col: j·z_t where col turns t, e_t where col is t's slider
+        self.on_angle = np.array([[ang[t] == c for c in cols] for t in ks], complex).reshape(shape)
+        self.on_slider = np.array([[c >= na and sl[t] == c - na for c in cols] for t in ks], complex).reshape(shape)
 
-    def residual(self, z: np.ndarray) -> np.ndarray:
-        """The group's loops' closure at the whole system's term vectors ``z``."""
-        return z[self.k] @ self.Cg.T
+    def residual(self, zk: np.ndarray) -> np.ndarray:
+        """The group's loops' closure at its term vectors ``zk`` (the whole system's at ``k``)."""
+        return zk @ self.Cg.T
 
-    def jacobian(self, z: np.ndarray, e: np.ndarray) -> np.ndarray:
-        """[Re; Im] of the loops' Jacobian in ``cols`` at the whole system's term vectors and directions."""
-        J = self.Cg @ ((1j * z[self.k])[:, None] * self.on_angle + e[self.k][:, None] * self.on_slider)
+    def jacobian(self, zk: np.ndarray, ek: np.ndarray) -> np.ndarray:
+        """[Re; Im] of the loops' Jacobian in ``cols`` at its term vectors and directions (the system's at ``k``)."""
+        J = self.Cg @ ((1j * zk)[:, None] * self.on_angle + ek[:, None] * self.on_slider)
         return np.concatenate((J.real, J.imag))
 
 
