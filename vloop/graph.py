@@ -154,7 +154,8 @@ def _add_slider_edges(
         edge = [(terms.add(ang, i, 0.0, alpha, f"s_{sl.name}"), 1.0)]
         if abs(e) > 1e-15 * mech.scale:
             edge.append((terms.add(ang, -1, e, alpha + math.pi / 2, f"offset of {sl.name}"), 1.0))
-        edges.append((ref[sl.guide], (sl.name, sl.joint), {"terms": tuple(edge), "start": ref[sl.guide], "kind": "slider"}))
+        data = {"terms": tuple(edge), "start": ref[sl.guide], "kind": "slider"}
+        edges.append((ref[sl.guide], (sl.name, sl.joint), data))
     return coords_s
 
 

@@ -156,11 +156,9 @@ class _Sum:
         if not mv:
             return cls(acol, R, Rj, c0, scol, H, _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, np.zeros((0, K), complex))
         moving = [terms[n] for n in mv]
-        return cls(
-            acol, R, Rj, c0, scol, H, np.array([t_ang[t] for t in moving], int), np.array([t_sl[t] for t in moving], int),
-            np.array([t_r[t] for t in moving], float), np.array([t_cd[t] for t in moving], complex),
-            np.array([rows[n] for n in mv], complex).reshape(len(mv), K),
-        )  # fmt: skip
+        s_ang, s_sl = np.array([t_ang[t] for t in moving], int), np.array([t_sl[t] for t in moving], int)
+        s_r, s_cd = np.array([t_r[t] for t in moving], float), np.array([t_cd[t] for t in moving], complex)
+        return cls(acol, R, Rj, c0, scol, H, s_ang, s_sl, s_r, s_cd, np.array([rows[n] for n in mv], complex))
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
