@@ -22,18 +22,19 @@ DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the
 SINGULAR_RCOND = 1e-10  # smallest/largest singular value below this: singular Jacobian
 
 
-def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
+def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, np.ndarray | None]:
     """Close the loops at t = 0, group by group in solving order; check the rank (mobility) there.
 
-    Returns the assembled variables and a report: Newton iterations, closure, how far the typed
-    joints moved, and for a redundant linkage what is redundant (``report["redundancy"]``).
+    Returns the assembled variables, a report: Newton iterations, closure, how far the typed
+    joints moved, and for a redundant linkage what is redundant (``report["redundancy"]``), and the
+    term vectors there (None without loops).
     """
     mech = sys.mechanism
     q = sys.coords_q.copy()
     if mech.drivers:
         q[list(sys.drivers)] = _inputs_at_start(mech)
     if not sys.loops:
-        return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}
+        return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}, None
     every = TermIndex(sys)
     ze = every.at(q)  # term vectors and directions at the current q
     typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
@@ -58,7 +59,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
         _check_rank(sys, g.jacobian(ze[0][g.k], ze[1][g.k]), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
-    return q, report
+    return q, report, z
 
 
 def _inputs_at_start(mech: Mechanism) -> list[float]:

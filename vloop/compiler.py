@@ -35,8 +35,8 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     loops, C = build_loops(mg, mech, cycle_basis(mg.G))
     system = _unknowns(mech, mg, loops, C, bodies)
     structure = analyse(system)
-    q0, report = assemble(system, structure)
-    blocks = block_structure(system, structure, q0, method)
+    q0, report, z0 = assemble(system, structure)
+    blocks = block_structure(system, structure, q0, method, z0)
     if mech.options.get("branches"):
         blocks, q0, report = _choose_branches(system, blocks, q0, report)
     return dataclasses.replace(system, blocks=blocks, q0=q0, assembly=report, method=method, cache={})

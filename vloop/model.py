@@ -180,11 +180,11 @@ class Mechanism:
     loads: tuple[Load, ...] = ()
 
     # ----- derived views (pure functions of the description) -----
-    @property
+    @cached_property
     def ground(self) -> str:
         return next(n for n, lk in self.links.items() if lk.ground)
 
-    @property
+    @cached_property
     def body_names(self) -> tuple[str, ...]:
         """Ground first, then links in file order, then slider blocks."""
         return (self.ground, *(n for n, lk in self.links.items() if not lk.ground), *self.sliders)
@@ -236,11 +236,16 @@ class Mechanism:
     @cached_property
     def scale(self) -> float:
         """A length scale: the diagonal of the bounding box of all joints/points at t = 0."""
-        pts = np.array([*self.joints.values(), *(p.at for p in self.points.values())], float)
+        pts = [*self.joints.values(), *(p.at for p in self.points.values())]
         if len(pts) < 2:
             return 1.0
-        span = np.ptp(pts, axis=0)
+        span = [_ptp([float(x) for x in axis]) for axis in zip(*pts, strict=True)]  # np.ptp's, in Python numbers
         return float(max(math.hypot(*span), 1e-300))
+
+
+def _ptp(xs: list[float]) -> float:
+    """max − min (nan if any x is nan, as numpy's)."""
+    return max(xs) - min(xs) if all(x == x for x in xs) else math.nan
 
 
 # ---------------------------------------------------------------- bodies

@@ -179,19 +179,26 @@ def _matching(sys: LoopSystem, unk: list[int]) -> tuple[dict, list]:
     return match, [r for r in rows if r not in match]
 
 
-def block_structure(sys: LoopSystem, structure: Structure, q0: np.ndarray, method: str) -> tuple[Block, ...]:
+def block_structure(
+    sys: LoopSystem, structure: Structure, q0: np.ndarray, method: str, z: np.ndarray | None = None
+) -> tuple[Block, ...]:
     """The blocks to solve, in order: each group classified (closed-form dyad kind and branch σ at the
-    t = 0 assembly) under method "auto"; one Newton block over everything under "newton"."""
+    t = 0 assembly) under method "auto"; one Newton block over everything under "newton". ``z``: the term
+    vectors at ``q0``, where known."""
     if not sys.unknowns:
         return ()
     if method == "newton" or structure.over_determined:
         return (Block(tuple(range(len(sys.loops))), tuple(sys.unknowns), "newton"),)
-    z = term_values(sys, q0)
-    return tuple(classify(sys, q0, loops, unknowns, z) for loops, unknowns in structure.groups)
+    zs = (term_values(sys, q0) if z is None else z).tolist()  # Python numbers: numpy's scalar operations
+    return tuple(classify(sys, q0, loops, unknowns, zs) for loops, unknowns in structure.groups)
 
 
 def classify(
-    sys: LoopSystem, q0: np.ndarray, loops: tuple[int, ...], unknowns: tuple[int, ...], z: np.ndarray | None = None
+    sys: LoopSystem,
+    q0: np.ndarray,
+    loops: tuple[int, ...],
+    unknowns: tuple[int, ...],
+    z: np.ndarray | list[complex] | None = None,
 ) -> Block:
     """Closed-form kind and assembly branch (at the t = 0 assembly) of a one-loop block; "newton" otherwise.
     ``z``: the term vectors at ``q0``, where known."""
