@@ -50,15 +50,8 @@ def row_max(A: np.ndarray) -> np.ndarray:
 def _real_reps(G: list[list[complex]], K: int) -> tuple[np.ndarray, np.ndarray]:
     """The real (2a, 2K) matrices R of G and of j·G (a rows of K) with ``Z.view(float) @ R == (Z @ G).view(float)``
     for complex Z (n, a): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
-    work, no temporaries). A few entries in Python numbers, more by numpy (the same operations: the same bits)."""
+    work, no temporaries)."""
     a = len(G)
-    if a * K <= 8:
-        rows = []
-        for H in (G, [[1j * z for z in g] for g in G]):
-            for g in H:
-                rows += [[x for z in g for x in (z.real, z.imag)], [x for z in g for x in (-z.imag, z.real)]]
-        R = np.array(rows, float).reshape(2, 2 * a, 2 * K)
-        return R[0], R[1]
     B = np.empty((2, a, K), complex)
     B[0] = np.array(G, complex).reshape(a, K)
     np.multiply(1j, B[0], out=B[1])
@@ -118,47 +111,7 @@ class _Sum:
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
         """Σ_t M[t, :]·z_t over ``terms`` (M: one row per term, K columns)."""
         M = M.reshape(len(terms), -1)
-        return cls.from_rows(sys, terms.tolist(), M.tolist(), M.shape[1])
-
-    @classmethod
-    def from_rows(cls, sys: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> _Sum:
-        """As :meth:`build`, from Python numbers: ``rows`` holds M's rows."""
-        na, ns = sys.n_angles, len(sys.slider_names)
-        t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
-        # the sums in Python numbers, term by term in order: np.add.at's operations on complex M (the same bits)
-        G = [[0j] * K for _ in range(na + 1)]  # the padding row na stands for the ground
-        H = [[0j] * K for _ in range(ns + 1)]
-        acols, scols, mv = set(), set(), []
-        for n, (t, row) in enumerate(zip(terms, rows, strict=True)):
-            a, i = t_ang[t], t_sl[t]
-            if i >= 0 and a >= 0:  # a slider vector on a moving guide
-                mv.append(n)
-                continue
-            rc, g = t_r[t] * t_cd[t], G[na if a < 0 else a]  # rigid, or a slider along a ground line
-            for k, m in enumerate(row):
-                g[k] += rc * m
-            if i < 0:
-                acols.add(a)
-                continue
-            h, cd = H[i], t_cd[t]
-            for k, m in enumerate(row):
-                h[k] += cd * m
-            scols.add(i)
-        acols.discard(-1)
-        acol, scol = _used(acols, na + 1), _used(scols, ns + 1)
-        c0 = np.zeros(2 * K)
-        if acol is not None:  # gathered: the ground vectors are a constant, the padding column is not read
-            c0 = np.array(G[na], complex).view(float)
-            G = [G[a] for a in acol.tolist()]
-        H = H if scol is None else [H[i] for i in scol.tolist()]
-        H = np.array(H, complex).view(float).reshape(len(H), 2 * K)
-        R, Rj = _real_reps(G, K)
-        if not mv:
-            return cls(acol, R, Rj, c0, scol, H, _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, np.zeros((0, K), complex))
-        moving = [terms[n] for n in mv]
-        s_ang, s_sl = np.array([t_ang[t] for t in moving], int), np.array([t_sl[t] for t in moving], int)
-        s_r, s_cd = np.array([t_r[t] for t in moving], float), np.array([t_cd[t] for t in moving], complex)
-        return cls(acol, R, Rj, c0, scol, H, s_ang, s_sl, s_r, s_cd, np.array([rows[n] for n in mv], complex))
+        return _sums(sys, [(terms.tolist(), M.tolist())], M.shape[1])[0]
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
@@ -220,6 +173,65 @@ class _Sum:
         return out
 
 
+def _sum_parts(sys: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> tuple:
+    """A sum's constants in Python numbers, term by term in order (np.add.at's operations on complex M: the same
+    bits): the angle and slider columns read, the ground vectors, G's and H's rows, the sliders on moving guides."""
+    na, ns = sys.n_angles, len(sys.slider_names)
+    t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
+    G = [[0j] * K for _ in range(na + 1)]  # the padding row na stands for the ground
+    H = [[0j] * K for _ in range(ns + 1)]
+    acols, scols, mv = set(), set(), []
+    for n, (t, row) in enumerate(zip(terms, rows, strict=True)):
+        a, i = t_ang[t], t_sl[t]
+        if i >= 0 and a >= 0:  # a slider vector on a moving guide
+            mv.append(n)
+            continue
+        rc, g = t_r[t] * t_cd[t], G[na if a < 0 else a]  # rigid, or a slider along a ground line
+        for k, m in enumerate(row):
+            g[k] += rc * m
+        if i < 0:
+            acols.add(a)
+            continue
+        h, cd = H[i], t_cd[t]
+        for k, m in enumerate(row):
+            h[k] += cd * m
+        scols.add(i)
+    acols.discard(-1)
+    acol, scol = _used(acols, na + 1), _used(scols, ns + 1)
+    c0 = None
+    if acol is not None:  # gathered: the ground vectors are a constant, the padding column is not read
+        c0 = G[na]
+        G = [G[a] for a in acol.tolist()]
+    H = H if scol is None else [H[i] for i in scol.tolist()]
+    moving = [(terms[n], rows[n]) for n in mv]
+    return acol, scol, c0, G, H, moving
+
+
+def _sums(sys: LoopSystem, specs: list[tuple[list[int], list[list[float]]]], K: int) -> list[_Sum]:
+    """The sums Σ_t M[t, :]·z_t of several (terms, M's rows) with K columns each, their arrays made together
+    (the same values as one by one, in fewer numpy calls)."""
+    t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
+    parts = [_sum_parts(sys, terms, rows, K) for terms, rows in specs]
+    R, Rj = _real_reps([g for p in parts for g in p[3]], K)
+    H_rows = [h for p in parts for h in p[4]]
+    H = np.array(H_rows, complex).view(float).reshape(len(H_rows), 2 * K)
+    c0s = np.array([p[2] if p[2] is not None else [0j] * K for p in parts], complex)
+    c0s = c0s.view(float).reshape(len(parts), 2 * K)
+    no_Ms = np.zeros((0, K), complex)
+    out, g_at, h_at = [], 0, 0
+    for n, (acol, scol, c0, G, Hp, moving) in enumerate(parts):
+        rows = slice(2 * g_at, 2 * (g_at + len(G)))
+        s_ang, s_sl, s_r, s_cd, Ms = _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, no_Ms
+        if moving:
+            s_ang, s_sl = np.array([t_ang[t] for t, _ in moving], int), np.array([t_sl[t] for t, _ in moving], int)
+            s_r, s_cd = np.array([t_r[t] for t, _ in moving], float), np.array([t_cd[t] for t, _ in moving], complex)
+            Ms = np.array([row for _, row in moving], complex).reshape(len(moving), K)
+        H_n = H[h_at : h_at + len(Hp)]
+        out.append(_Sum(acol, R[rows], Rj[rows], c0s[n], scol, H_n, s_ang, s_sl, s_r, s_cd, Ms))
+        g_at, h_at = g_at + len(G), h_at + len(Hp)
+    return out
+
+
 @dataclass
 class _Plan:
     """Index data of one block (precomputed once per LoopSystem)."""
@@ -272,17 +284,37 @@ def _member(values: np.ndarray, among: list[int]) -> np.ndarray:
 
 
 def _plans(sys: LoopSystem) -> list[_Plan]:
+    """Every block's plan (cached), and the system's sums (:func:`_system_sums`) with them: the sums of equal
+    width are made together."""
     plans = sys.cache.get("plans")
     if plans is not None:
         return plans
-    plans = [_plan(sys, b) for b in sys.blocks]
+    data = [_plan_data(sys, b) for b in sys.blocks]
+    specs: dict[int, list] = {}  # sums by width K: (owner, terms, M's rows)
+    for n, (_, block_specs, m) in enumerate(data):
+        specs.setdefault(m, []).extend((n, *spec) for spec in block_specs)
+    if "sums" not in sys.cache:
+        everything = list(range(len(sys.t_r)))
+        for owner, M in (("points", sys.path), ("loops", sys.C.T)):
+            specs.setdefault(M.shape[1], []).append((owner, everything, M.tolist()))
+    made: dict = {}
+    for K, group in specs.items():
+        for (owner, _, _), s in zip(group, _sums(sys, [(t, rows) for _, t, rows in group], K), strict=True):
+            made.setdefault(owner, []).append(s)
+    if "sums" not in sys.cache:
+        sys.cache["sums"] = (made["points"][0], made["loops"][0])
+    plans = []
+    for n, (args, _, _) in enumerate(data):
+        total, known_sum, vel_sum = made[n]
+        plans.append(_Plan(*args[:10], total, known_sum, *args[10:], vel_sum=vel_sum))  # type: ignore[misc]
     sys.cache["plans"] = plans
     return plans
 
 
-def _plan(sys: LoopSystem, b: Block) -> _Plan:
-    """One block's plan: its terms, sums and the closed forms' constants (in Python numbers: numpy's scalar
-    operations, the same bits)."""
+def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
+    """One block's plan but its sums: its terms and the closed forms' constants (in Python numbers: numpy's scalar
+    operations, the same bits), and its three sums' terms and rows (all terms, the known ones negated, those
+    still at zero rates) with their width."""
     na = sys.n_angles
     _, _, t_r, t_cd, cd_all = _term_lists(sys)
     terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
@@ -297,16 +329,14 @@ def _plan(sys: LoopSystem, b: Block) -> _Plan:
         n = sll.index(i)
         u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
     CbT = Cb.T
-    m, rows = len(Cb), CbT.tolist()
+    rows = CbT.tolist()
     still = ~((sl < 0) & _member(ang, unk_ang))
-    plan = _Plan(
-        b, Cb, CbT.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
-        _Sum.from_rows(sys, tl, rows, m),
-        _Sum.from_rows(sys, *_rows_where(known, tl, [[-x for x in row] for row in rows]), m),
-        w_const, w_sl, u_dir, known,
+    specs = [(tl, rows), _rows_where(known, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
+    args = (
+        b, Cb, CbT.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks, w_const, w_sl,
+        u_dir, known,
     )  # fmt: skip
-    plan.vel_sum = _Sum.from_rows(sys, *_rows_where(still, tl, rows), m)
-    return plan
+    return args, specs, len(Cb)
 
 
 def _rows_where(mask: np.ndarray, terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:
@@ -318,8 +348,9 @@ def _rows_where(mask: np.ndarray, terms: list[int], rows: list[list[float]]) -> 
 def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
     """Sums giving every point's position (and rates) and every loop's closure residual (cached)."""
     if "sums" not in sys.cache:
-        terms = np.arange(len(sys.t_r))
-        sys.cache["sums"] = (_Sum.build(sys, terms, sys.path), _Sum.build(sys, terms, sys.C.T))
+        everything = list(range(len(sys.t_r)))
+        points, loops = (_sums(sys, [(everything, M.tolist())], M.shape[1])[0] for M in (sys.path, sys.C.T))
+        sys.cache["sums"] = (points, loops)
     return sys.cache["sums"]
 
 
