@@ -219,7 +219,7 @@ def _sums(sys: LoopSystem, specs: list[tuple[list[int], list[list[float]]]], K: 
     c0s = c0s.view(float).reshape(len(parts), 2 * K)
     no_Ms = np.zeros((0, K), complex)
     out, g_at, h_at = [], 0, 0
-    for n, (acol, scol, c0, G, Hp, moving) in enumerate(parts):
+    for n, (acol, scol, _, G, Hp, moving) in enumerate(parts):
         rows = slice(2 * g_at, 2 * (g_at + len(G)))
         s_ang, s_sl, s_r, s_cd, Ms = _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, no_Ms
         if moving:
