@@ -139,10 +139,11 @@ class LoopGroup:
     :func:`loop_residual` and :func:`loop_jacobian`, bit for bit."""
 
     def __init__(self, sys: LoopSystem, every: TermIndex, loops: list[int], cols: list[int]) -> None:
-        Cl = sys.C[loops]
-        self.k = (Cl != 0).any(axis=0).nonzero()[0]
-        self.Cg = Cl[:, self.k]
-        na, ks = sys.n_angles, self.k.tolist()
+        rows = sys.C[loops].tolist()
+        ks = [t for t, column in enumerate(zip(*rows)) if any(column)]  # the terms the loops use
+        self.k = np.array(ks, int)
+        self.Cg = np.array([[row[t] for t in ks] for row in rows], float).reshape(len(rows), len(ks))
+        na = sys.n_angles
         ang, sl = every.ang_list, every.sl_list
         shape = (len(ks), len(cols))  # d z_t / d col: j·z_t where col turns t, e_t where col is t's slider
         self.on_angle = np.array([[ang[t] == c for c in cols] for t in ks], complex).reshape(shape)

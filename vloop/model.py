@@ -261,11 +261,15 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
     for s in m.sliders.values():
         guided.setdefault(s.guide, []).append(s)
 
+    carried: dict[str, tuple[str, ...]] = {}  # the points on each body
+    for p in m.points.values():
+        carried[p.link] = (*carried.get(p.link, ()), p.name)
+
     def pos(name: str) -> tuple[float, float]:
         return m.points[name].at if name in m.points else m.joints[name]
 
     def on_body(body: str, joints: tuple[str, ...]) -> tuple[str, ...]:
-        return joints + tuple(p.name for p in m.points.values() if p.link == body)
+        return joints + carried.get(body, ())
 
     for name, lk in m.links.items():
         members = on_body(name, lk.joints)
@@ -281,7 +285,8 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
         c, s = math.cos(th), math.sin(th)
         local = {}
         for j in members:
-            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            x, y = pos(j)
+            dx, dy = x - o[0], y - o[1]
             local[j] = (c * dx + s * dy, -s * dx + c * dy)
         if len(lk.joints) >= 2:  # the x axis points at the second joint by definition
             local[lk.joints[1]] = (lk.length if lk.length is not None else math.dist(o, pos(lk.joints[1])), 0.0)
@@ -292,7 +297,8 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
         c, s = math.cos(th), math.sin(th)
         local = {}
         for j in on_body(name, (sl.joint,)):
-            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            x, y = pos(j)
+            dx, dy = x - o[0], y - o[1]
             local[j] = (c * dx + s * dy, -s * dx + c * dy)
         out[name] = Body(name, "block", (sl.joint,), o, th, local, guide=sl.guide)
     return out
