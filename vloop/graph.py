@@ -14,11 +14,15 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 
 from .model import Body, Mechanism
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 ORIGIN = "@O"  # the world origin node on the ground
 SMALL_RANK = 64  # up to this many loops every candidate cycle is shortened by a search
@@ -56,14 +60,47 @@ class Terms:
 
 @dataclass
 class MechanismGraph:
-    """The graph with its terms, the angle variable of each rotating link and the sliders' t = 0 s."""
+    """The graph with its terms, the angle variable of each rotating link and the sliders' t = 0 s.
 
-    G: nx.Graph
+    The graph is its nodes and edges (u, v, data) in the order they were added, and its adjacency in networkx's
+    layout; ``G`` builds the networkx graph from them on first use (the compiler walks the adjacency)."""
+
+    parts: tuple[list, list[tuple]]  # nodes, edges
     terms: Terms
     angle_links: tuple[str, ...]
     slider_names: tuple[str, ...]
     coords_s: list[float]
     owner: dict[str, tuple[int, float]]  # body → (angle variable turning it or -1, constant frame offset)
+
+    @cached_property
+    def adj(self) -> dict:
+        return adjacency(*self.parts)
+
+    @cached_property
+    def G(self) -> nx.Graph:
+        return networkx_graph(*self.parts)
+
+
+def adjacency(nodes: list, edges: list[tuple]) -> dict:
+    """node → {neighbour: edge data}, as ``nx.Graph`` holds it after ``add_nodes_from(nodes)`` and
+    ``add_edges_from(edges)``: the same orders, one data dict per edge (a repeated edge's data merged)."""
+    adj: dict = {n: {} for n in nodes}
+    for u, v, data in edges:
+        nu, nv = adj.setdefault(u, {}), adj.setdefault(v, {})
+        merged = nu.get(v, {})
+        merged.update(data)
+        nu[v] = nv[u] = merged
+    return adj
+
+
+def networkx_graph(nodes: list, edges: list[tuple]) -> nx.Graph:
+    """The networkx graph of ``nodes`` and ``edges`` (u, v, data), added in that order."""
+    import networkx as nx
+
+    G = nx.Graph()
+    G.add_nodes_from(nodes)
+    G.add_edges_from(edges)
+    return G
 
 
 def build_graph(mech: Mechanism, bodies: dict[str, Body]) -> MechanismGraph:
@@ -78,10 +115,7 @@ def build_graph(mech: Mechanism, bodies: dict[str, Body]) -> MechanismGraph:
         at = mech.bodies_at(j)
         edges += [((at[0], j), (other, j), {"terms": (), "start": (at[0], j), "kind": "pin"}) for other in at[1:]]
     coords_s = _add_slider_edges(mech, bodies, edges, terms, ref, owner)
-    G = nx.Graph()
-    G.add_nodes_from(nodes)  # in bulk: the same order of nodes, neighbours and edges as one by one
-    G.add_edges_from(edges)
-    return MechanismGraph(G, terms, angle_links, tuple(mech.sliders), coords_s, owner)
+    return MechanismGraph((nodes, edges), terms, angle_links, tuple(mech.sliders), coords_s, owner)
 
 
 def _owner(bodies: dict[str, Body], avar: dict[str, int], body: str) -> tuple[int, float]:
@@ -168,7 +202,7 @@ def origin_name(mech: Mechanism) -> str:
 # ------------------------------------------------------------------ cycles
 
 
-def cycle_basis(G: nx.Graph) -> list[list]:
+def cycle_basis(G: nx.Graph | dict) -> list[list]:
     """Step 2: independent cycles (J − L + 1 of them), each as nodes in traversal order, in a canonical order.
 
     The shortest cycle through each non-tree edge of a breadth-first spanning forest (a breadth-first
@@ -177,9 +211,10 @@ def cycle_basis(G: nx.Graph) -> list[list]:
     cycles if needed. Short loops are what the block structure needs; on every catalog mechanism this is
     the minimum cycle basis networkx computes (de Pina's algorithm, whose cost grows like the cube of
     the size: tests/test_graph.py compares them). The searches run on plain dicts in networkx's order of
-    nodes, neighbours and edges (its traversals cost more than the small graphs they walk).
+    nodes, neighbours and edges (its traversals cost more than the small graphs they walk). ``G``: a
+    networkx graph or its adjacency (:func:`adjacency`).
     """
-    adj = dict(G.adjacency())
+    adj = G if isinstance(G, dict) else dict(G.adjacency())
     edges = _edges(adj)
     forest = _forest(adj)
     rank = len(edges) - len(adj) + len(forest)
@@ -335,7 +370,7 @@ def _insert(basis: dict[int, int], bits: int) -> bool:
 # ------------------------------------------------------------------ paths
 
 
-def point_paths(G: nx.Graph, mech: Mechanism, n_terms: int) -> np.ndarray:
+def point_paths(G: nx.Graph | dict, mech: Mechanism, n_terms: int) -> np.ndarray:
     """Step 4: every joint/point's position as a sum of terms along a breadth-first tree from the origin.
 
     Returns (n_terms, n_points) coefficients (±1, 0): position = z @ path.
@@ -343,7 +378,7 @@ def point_paths(G: nx.Graph, mech: Mechanism, n_terms: int) -> np.ndarray:
     points = mech.tracked_points
     root = (mech.ground, ORIGIN)
     coeff: dict[tuple[str, str], dict[int, float]] = {root: {}}
-    adj = dict(G.adjacency())
+    adj = G if isinstance(G, dict) else dict(G.adjacency())
     for u, v in _bfs_edges(adj, root):
         data = adj[u][v]
         sign = 1.0 if data["start"] == u else -1.0
@@ -378,7 +413,7 @@ def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tupl
     ang, sl, r = mg.terms.ang, mg.terms.sl, mg.terms.r
     na = len(mg.angle_links)
     rows, loops = [], []
-    adj = dict(mg.G.adjacency())
+    adj = mg.adj
     origin = origin_name(mech)
     for li, cyc in enumerate(cycles):
         row = [0.0] * len(r)

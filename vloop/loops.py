@@ -10,11 +10,15 @@ It is built by :func:`vloop.compiler.compile_system`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 
-from .graph import ORIGIN, Loop
+from .graph import ORIGIN, Loop, networkx_graph
+
+if TYPE_CHECKING:
+    import networkx as nx
 from .model import Mechanism
 
 __all__ = [
@@ -71,10 +75,15 @@ class LoopSystem:
     blocks: tuple[Block, ...]
     q0: np.ndarray  # assembled variables at t = 0
     coords_q: np.ndarray  # variables read from the file's coordinates
-    graph: nx.Graph = field(repr=False)
+    graph_parts: tuple = field(repr=False)  # the graph's nodes and edges (u, v, data): see the ``graph`` property
     assembly: dict = field(default_factory=dict)
     method: str = "auto"
     cache: dict = field(default_factory=dict, repr=False, compare=False)  # solver plans
+
+    @cached_property
+    def graph(self) -> nx.Graph:
+        """The paper's graph (:mod:`vloop.graph`) as a networkx graph, built on first use."""
+        return networkx_graph(*self.graph_parts)
 
     @property
     def n_angles(self) -> int:
@@ -140,7 +149,7 @@ class LoopGroup:
 
     def __init__(self, sys: LoopSystem, every: TermIndex, loops: list[int], cols: list[int]) -> None:
         rows = sys.C[loops].tolist()
-        ks = [t for t, column in enumerate(zip(*rows)) if any(column)]  # the terms the loops use
+        ks = [t for t, column in enumerate(zip(*rows, strict=True)) if any(column)]  # the terms the loops use
         self.k = np.array(ks, int)
         self.Cg = np.array([[row[t] for t in ks] for row in rows], float).reshape(len(rows), len(ks))
         na = sys.n_angles

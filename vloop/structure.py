@@ -15,7 +15,6 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-import networkx as nx
 import numpy as np
 
 from .errors import MechanismError
@@ -158,6 +157,8 @@ def _strong_components(nodes: list[int], succ: dict[int, list[int]]) -> list[lis
 
 def _matching(sys: LoopSystem, unk: list[int]) -> tuple[dict, list]:
     """Hopcroft–Karp matching of loop rows (Re, Im) to unknowns; raises if an unknown is fixed by no loop."""
+    import networkx as nx
+
     unk_set = set(unk)
     B = nx.Graph()
     rows = [("row", lp.index, part) for lp in sys.loops for part in (0, 1)]
