@@ -32,7 +32,7 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     _check_size(mech)
     bodies = mech.bodies()
     mg = build_graph(mech, bodies)
-    loops, C = build_loops(mg, mech, cycle_basis(mg.adj))
+    loops, C = build_loops(mg, mech, cycle_basis(mg.adj, mg.forest))
     system = _unknowns(mech, mg, loops, C, bodies)
     structure = analyse(system)
     q0, report, z0 = assemble(system, structure)
@@ -73,7 +73,7 @@ def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray, 
     link_outputs = tuple((name, *mg.owner[name]) for name in mech.moving_links)
     return LoopSystem(
         mech, mg.angle_links, mg.slider_names, ang, sl, r, delta, tuple(mg.terms.label), loops, C,
-        mech.tracked_points, point_paths(mg.adj, mech, len(r)), link_outputs, driven, unknowns, (), coords_q,
+        mech.tracked_points, point_paths(mg.adj, mech, len(r), mg.forest), link_outputs, driven, unknowns, (), coords_q,
         coords_q, mg.parts,
     )  # fmt: skip
 

@@ -77,6 +77,11 @@ class MechanismGraph:
         return adjacency(*self.parts)
 
     @cached_property
+    def forest(self) -> list[list[tuple]]:
+        """A breadth-first tree per component (:func:`_forest`), shared by the cycle basis and the point paths."""
+        return _forest(self.adj)
+
+    @cached_property
     def G(self) -> nx.Graph:
         return networkx_graph(*self.parts)
 
@@ -202,7 +207,7 @@ def origin_name(mech: Mechanism) -> str:
 # ------------------------------------------------------------------ cycles
 
 
-def cycle_basis(G: nx.Graph | dict) -> list[list]:
+def cycle_basis(G: nx.Graph | dict, forest: list[list[tuple]] | None = None) -> list[list]:
     """Step 2: independent cycles (J − L + 1 of them), each as nodes in traversal order, in a canonical order.
 
     The shortest cycle through each non-tree edge of a breadth-first spanning forest (a breadth-first
@@ -212,11 +217,11 @@ def cycle_basis(G: nx.Graph | dict) -> list[list]:
     the minimum cycle basis networkx computes (de Pina's algorithm, whose cost grows like the cube of
     the size: tests/test_graph.py compares them). The searches run on plain dicts in networkx's order of
     nodes, neighbours and edges (its traversals cost more than the small graphs they walk). ``G``: a
-    networkx graph or its adjacency (:func:`adjacency`).
+    networkx graph or its adjacency (:func:`adjacency`); ``forest``: its breadth-first trees, where known.
     """
     adj = G if isinstance(G, dict) else dict(G.adjacency())
     edges = _edges(adj)
-    forest = _forest(adj)
+    forest = _forest(adj) if forest is None else forest
     rank = len(edges) - len(adj) + len(forest)
     order = {n: i for i, n in enumerate(adj)}
     cycles = [_canonical(c, order) for c in _short_cycle_basis(adj, edges, forest, rank)]
@@ -370,16 +375,20 @@ def _insert(basis: dict[int, int], bits: int) -> bool:
 # ------------------------------------------------------------------ paths
 
 
-def point_paths(G: nx.Graph | dict, mech: Mechanism, n_terms: int) -> np.ndarray:
+def point_paths(
+    G: nx.Graph | dict, mech: Mechanism, n_terms: int, forest: list[list[tuple]] | None = None
+) -> np.ndarray:
     """Step 4: every joint/point's position as a sum of terms along a breadth-first tree from the origin.
 
-    Returns (n_terms, n_points) coefficients (±1, 0): position = z @ path.
+    Returns (n_terms, n_points) coefficients (±1, 0): position = z @ path. ``forest``: the graph's
+    breadth-first trees (:func:`_forest`), whose first starts at the origin, where known.
     """
     points = mech.tracked_points
     root = (mech.ground, ORIGIN)
     coeff: dict[tuple[str, str], dict[int, float]] = {root: {}}
     adj = G if isinstance(G, dict) else dict(G.adjacency())
-    for u, v in _bfs_edges(adj, root):
+    tree = forest[0][1:] if forest and forest[0][0][1] == root else _bfs_edges(adj, root)
+    for u, v in tree:
         data = adj[u][v]
         sign = 1.0 if data["start"] == u else -1.0
         c = dict(coeff[u])
