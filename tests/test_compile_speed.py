@@ -33,9 +33,10 @@ def systems() -> list:
 
 
 def same(a: np.ndarray, b: np.ndarray) -> bool:
-    """Bit for bit: dtype, shape and bytes."""
+    """Bit for bit: dtype, shape, bytes and memory layout."""
     a, b = np.asarray(a), np.asarray(b)
-    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    layout = a.strides == b.strides if a.size else True
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes() and layout
 
 
 # ------------------------------------------------------------------ graph traversals
@@ -282,11 +283,29 @@ def test_sums_are_np_add_at_ones(systems):
                 assert value is None or same(mine, value), name
 
 
+def reference_block_terms(sys, b) -> tuple:
+    """block_terms by numpy indexing."""
+    Cb = sys.C[list(b.loops)]
+    terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
+    Cb = Cb[:, terms]
+    ang, sl = sys.t_ang[terms], sys.t_sl[terms]
+    unk_ang = [v for v in b.unknowns if v < sys.n_angles]
+    unk_sl = [v - sys.n_angles for v in b.unknowns if v >= sys.n_angles]
+    return terms, Cb, ang, sl, unk_ang, unk_sl, ~(np.isin(ang, unk_ang) | np.isin(sl, unk_sl))
+
+
 def test_plan_constants_are_numpy_scalar_ones(systems):
     for sys in systems:
         cd = np.exp(1j * sys.t_delta)
         for p in kernels._plans(sys):
-            terms, Cb, ang, sl, unk_ang, unk_sl, _ = kernels.block_terms(sys, p.block)
+            ref = reference_block_terms(sys, p.block)
+            for mine, theirs in zip(kernels.block_terms(sys, p.block), ref, strict=True):
+                assert mine == theirs if isinstance(mine, list) else same(mine, theirs)
+            terms, Cb, ang, sl, unk_ang, unk_sl, known = ref
+            assert same(p.C, Cb) and same(p.Ct, Cb.T.astype(complex)) and same(p.known, known)
+            assert same(p.r, sys.t_r[terms]) and same(p.cd, cd[terms])
+            masks = [(ang == v) if v < sys.n_angles else (sl == v - sys.n_angles) for v in p.block.unknowns]
+            assert all(same(a, b) for a, b in zip(p.masks, masks, strict=True))
             g = Cb[0]
             for a in unk_ang:
                 on = np.nonzero(ang == a)[0]

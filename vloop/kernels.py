@@ -267,20 +267,24 @@ class _Plan:
 def block_terms(sys: LoopSystem, b: Block) -> tuple:
     """A block's terms (those in its loops, as global term ids), their signs in its loops (m, n_terms),
     their angle variables and sliders, the unknown angles and sliders, and which terms depend on none."""
-    Cb = sys.C[list(b.loops)]
-    terms = (Cb != 0).any(axis=0).nonzero()[0]
-    Cb = Cb[:, terms]
-    ang, sl = sys.t_ang[terms], sys.t_sl[terms]
+    return _block_terms(sys, b)[0]
+
+
+def _block_terms(sys: LoopSystem, b: Block) -> tuple[tuple, tuple]:
+    """:func:`block_terms` as arrays, and as Python numbers: the terms, the signs' rows, angles, sliders and
+    the known terms (built from Python numbers: numpy's indexing on a handful of terms costs more)."""
+    t_ang, t_sl, _, _, _ = _term_lists(sys)
+    rows = sys.C[list(b.loops)].tolist()
+    tl = [t for t, column in enumerate(zip(*rows, strict=True)) if any(column)]
+    C_rows = [[row[t] for t in tl] for row in rows]
+    al, sll = [t_ang[t] for t in tl], [t_sl[t] for t in tl]
     unk_ang = [v for v in b.unknowns if v < sys.n_angles]
     unk_sl = [v - sys.n_angles for v in b.unknowns if v >= sys.n_angles]
-    known = ~(_member(ang, unk_ang) | _member(sl, unk_sl))
-    return terms, Cb, ang, sl, unk_ang, unk_sl, known
-
-
-def _member(values: np.ndarray, among: list[int]) -> np.ndarray:
-    """np.isin for the few values of a block (a set lookup: np.isin costs ~50 µs on such small arrays)."""
-    pool = set(among)
-    return np.fromiter((v in pool for v in values.tolist()), bool, len(values))
+    ua, us = set(unk_ang), set(unk_sl)
+    kl = [a not in ua and i not in us for a, i in zip(al, sll, strict=True)]
+    Cb = np.array(C_rows, float, order="F").reshape(len(rows), len(tl), order="F")  # numpy's Cb[:, terms] layout
+    arrays = (np.array(tl, int), Cb, np.array(al, int), np.array(sll, int), unk_ang, unk_sl, np.array(kl, bool))
+    return arrays, (tl, C_rows, al, sll, kl)
 
 
 def _plans(sys: LoopSystem) -> list[_Plan]:
@@ -316,10 +320,10 @@ def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     operations, the same bits), and its three sums' terms and rows (all terms, the known ones negated, those
     still at zero rates) with their width."""
     na = sys.n_angles
-    _, _, t_r, t_cd, cd_all = _term_lists(sys)
-    terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
-    masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
-    g, tl, al, sll = Cb[0].tolist(), terms.tolist(), ang.tolist(), sl.tolist()
+    _, _, t_r, t_cd, _ = _term_lists(sys)
+    (_, Cb, ang, sl, unk_ang, unk_sl, known), (tl, C_rows, al, sll, kl) = _block_terms(sys, b)
+    masks = [np.array([x == v for x in al] if v < na else [x == v - na for x in sll], bool) for v in b.unknowns]
+    g = C_rows[0]
     w_const, w_sl, u_dir = {}, {}, {}
     for a in unk_ang:
         on = [n for n, x in enumerate(al) if x == a]
@@ -328,20 +332,18 @@ def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     for i in unk_sl:
         n = sll.index(i)
         u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
-    CbT = Cb.T
-    rows = CbT.tolist()
-    still = ~((sl < 0) & _member(ang, unk_ang))
-    specs = [(tl, rows), _rows_where(known, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
-    args = (
-        b, Cb, CbT.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks, w_const, w_sl,
-        u_dir, known,
-    )  # fmt: skip
+    rows = [list(r) for r in zip(*C_rows, strict=True)]  # M = Cb.T: a row per term
+    ua = set(unk_ang)
+    still = [not (i < 0 and a in ua) for a, i in zip(al, sll, strict=True)]
+    specs = [(tl, rows), _rows_where(kl, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
+    r = np.array([t_r[t] for t in tl], float)
+    cd = np.array([t_cd[t] for t in tl], complex)
+    args = (b, Cb, Cb.T.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
     return args, specs, len(Cb)
 
 
-def _rows_where(mask: np.ndarray, terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:
-    """The terms and rows where ``mask`` holds."""
-    keep = mask.tolist()
+def _rows_where(keep: list[bool], terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:
+    """The terms and rows where ``keep`` holds."""
     return [t for t, k in zip(terms, keep, strict=True) if k], [r for r, k in zip(rows, keep, strict=True) if k]
 
 
