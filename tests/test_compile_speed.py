@@ -6,6 +6,7 @@ The t = 0 checks still refuse what they refused, with the same messages."""
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import math
 from types import SimpleNamespace
 
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 import vloop
-from tests.conftest import mechanism_files
+from tests.conftest import ROOT, mechanism_files
 from vloop import assembly, corpus, graph, kernels, structure
 from vloop.drivers import evaluate_all
 from vloop.errors import MechanismError
@@ -23,13 +24,21 @@ from vloop.loops import LoopGroup, TermIndex, loop_jacobian, loop_residual, term
 N_GENERATED = 120
 
 
+def dyad_chain(n: int) -> vloop.Mechanism:
+    """benchmarks/bench_compile.py's chain of ``n`` dyads: sums and blocks past SMALL_SUM (built by numpy)."""
+    spec = importlib.util.spec_from_file_location("bench_compile", ROOT / "benchmarks" / "bench_compile.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench.dyad_chain(n)
+
+
 @pytest.fixture(scope="module")
 def systems() -> list:
-    """Every catalog mechanism (both methods) and generated ones, compiled."""
-    mechs = [vloop.load(p) for p in mechanism_files()]
+    """Every catalog mechanism (both methods), generated ones and a long chain (both methods), compiled."""
+    mechs = [vloop.load(p) for p in mechanism_files()] + [dyad_chain(40)]
     mechs += [item.mechanism for item in corpus.generate(N_GENERATED, 2026)[0]]
     out = [vloop.compile(m) for m in mechs]
-    return out + [vloop.compile(m, "newton") for m in mechs[: len(mechanism_files())]]
+    return out + [vloop.compile(m, "newton") for m in mechs[: len(mechanism_files()) + 1]]
 
 
 def same(a: np.ndarray, b: np.ndarray) -> bool:
@@ -187,9 +196,11 @@ def test_loop_group_is_loop_residual_and_jacobian(systems):
             for loops, unknowns in structure.analyse(sys).groups:
                 if not unknowns:
                     continue
-                g = LoopGroup(sys, every, list(loops), list(unknowns))
-                assert same(g.residual(z[g.k]), loop_residual(sys, q, list(loops)))
-                assert same(g.jacobian(z[g.k], e[g.k]), loop_jacobian(sys, q, list(loops), list(unknowns)))
+                g = LoopGroup(sys, list(loops), list(unknowns))
+                zk, ek = g.at(q)
+                assert same(zk, z[g.k]) and same(ek, e[g.k])
+                assert same(g.residual(zk), loop_residual(sys, q, list(loops)))
+                assert same(g.jacobian(zk, ek), loop_jacobian(sys, q, list(loops), list(unknowns)))
 
 
 def test_inputs_at_start_are_evaluate_alls():
@@ -264,10 +275,15 @@ def reference_sum(sys, terms: np.ndarray, M: np.ndarray) -> dict:
     )  # fmt: skip
 
 
-def test_sums_are_np_add_at_ones(systems):
-    """Every plan's and every system's sums equal numpy's construction, bit for bit."""
+@pytest.mark.parametrize("plans_first", [False, True])
+def test_sums_are_np_add_at_ones(systems, plans_first):
+    """Every plan's and every system's sums equal numpy's construction, bit for bit: small ones made from Python
+    numbers (alone or together), large ones by numpy."""
+    large = 0
     for sys in systems:
         sys = dataclasses.replace(sys, cache={})
+        if plans_first:
+            kernels._plans(sys)
         everything = np.arange(len(sys.t_r))
         built = list(zip(kernels._system_sums(sys), ((everything, sys.path), (everything, sys.C.T)), strict=True))
         for p in kernels._plans(sys):
@@ -276,11 +292,13 @@ def test_sums_are_np_add_at_ones(systems):
             built += [(p.total, (terms, Cb.T)), (p.known_sum, (terms[known], -Cb.T[known]))]
             built += [(p.vel_sum, (terms[still], Cb.T[still]))]
         for s, args in built:
+            large += args[1].size > kernels.SMALL_SUM
             ref = reference_sum(sys, *args)
             for name, value in ref.items():
                 mine = getattr(s, name)
                 assert (mine is None) == (value is None), name
                 assert value is None or same(mine, value), name
+    assert large >= 4  # the chain's point paths and loops, and its Newton block's sums
 
 
 def reference_block_terms(sys, b) -> tuple:

@@ -36,16 +36,14 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     if not sys.loops:
         return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}, None
     every = TermIndex(sys)
-    ze = every.at(q)  # term vectors and directions at the current q
+    z_typed, e_typed = every.at(q)
     typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
-    z_typed = ze[0]
     initial = _check_typed_closure(sys, q, z_typed)
-    groups = [(LoopGroup(sys, every, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
+    groups = [(LoopGroup(sys, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
     iterations = 0
-    for g, unknowns in groups:
-        it, ze = _close(g, every, q, unknowns, ze)
-        iterations += it
-    z = ze[0]
+    for n, (g, unknowns) in enumerate(groups):  # the first group starts from the typed q: its vectors are known
+        iterations += _close(g, q, unknowns, (z_typed[g.k], e_typed[g.k]) if n == 0 else None)
+    z, e = every.at(q) if groups else (z_typed, e_typed)
     closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
     if closure > 1e-11:
         raise MechanismError(
@@ -56,7 +54,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     z0 = z_typed if typed else every.at(sys.coords_q)[0]
     report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
     for g, unknowns in groups:
-        _check_rank(sys, g.jacobian(ze[0][g.k], ze[1][g.k]), unknowns)
+        _check_rank(sys, g.jacobian(z[g.k], e[g.k]), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report, z
@@ -105,13 +103,11 @@ def _over_note(sys: LoopSystem) -> str:
     )
 
 
-def _close(
-    g: LoopGroup, every: TermIndex, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarray, np.ndarray]
-) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
-    """Newton (least squares) on the group's loops for ``unknowns``, the other variables held. ``ze``: the term
-    vectors and directions at ``q``. Returns the iterations and the term vectors and directions at the new q."""
+def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarray, np.ndarray] | None = None) -> int:
+    """Newton (least squares) on the group's loops for ``unknowns``, the other variables held; returns the
+    iterations. ``ze``: the group's term vectors and directions at ``q``, where known."""
     for it in range(1, 51):
-        zk, ek = ze[0][g.k], ze[1][g.k]
+        zk, ek = g.at(q) if ze is None or it > 1 else ze
         F = g.residual(zk)
         J = g.jacobian(zk, ek)
         rhs = -np.concatenate((F.real, F.imag))
@@ -122,10 +118,9 @@ def _close(
         dq = step.tolist()
         for v, d in zip(unknowns, dq, strict=True):
             q[v] += d
-        ze = every.at(q)
         if _max_abs(dq) <= 1e-14 * (1 + _max_abs(q[unknowns].tolist())):
-            return it, ze
-    return 50, ze
+            return it
+    return 50
 
 
 def _max_abs(xs: list[float]) -> float:

@@ -421,22 +421,21 @@ def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tupl
     """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal)."""
     ang, sl, r = mg.terms.ang, mg.terms.sl, mg.terms.r
     na = len(mg.angle_links)
-    rows, loops = [], []
+    loops = []
+    at_l, at_t, coef = [], [], []  # the nonzero coefficients C[l, t]
     adj = mg.adj
     origin = origin_name(mech)
     for li, cyc in enumerate(cycles):
-        row = [0.0] * len(r)
-        walk: list[int] = []  # terms in traversal order, as the paper writes a loop
+        row: dict[int, float] = {}  # term → coefficient, in traversal order
         for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
             data = adj[u][v]
             sign = 1.0 if data["start"] == u else -1.0
             for tid, s in data["terms"]:
-                row[tid] += sign * s
-                walk.append(tid)
-        for t in walk:
+                row[tid] = row.get(tid, 0.0) + sign * s
+        for t in row:
             if r[t] == 0 and sl[t] < 0:
                 row[t] = 0.0  # zero-length vectors (coincident pins) add nothing
-        used = [t for t in dict.fromkeys(walk) if row[t] != 0]
+        used = [t for t, c in row.items() if c != 0]
         variables: set[int] = set()
         for tid in used:
             if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0):
@@ -444,9 +443,13 @@ def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tupl
             if sl[tid] >= 0:
                 variables.add(na + sl[tid])
         label = loop_label(cyc, mech, origin)
-        rows.append(row)
+        at_l += [li] * len(used)
+        at_t += used
+        coef += [row[t] for t in used]
         loops.append(Loop(li, label, tuple(cyc), tuple(used), tuple(row[t] for t in used), tuple(sorted(variables))))
-    return tuple(loops), np.array(rows, float).reshape(len(cycles), len(r))
+    C = np.zeros((len(cycles), len(r)))
+    C[at_l, at_t] = coef
+    return tuple(loops), C
 
 
 def loop_label(cyc: list, mech: Mechanism, origin: str | None = None) -> str:

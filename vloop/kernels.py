@@ -47,7 +47,7 @@ def row_max(A: np.ndarray) -> np.ndarray:
     return out
 
 
-def _real_reps(G: list[list[complex]], K: int) -> tuple[np.ndarray, np.ndarray]:
+def _real_reps(G: list[list[complex]] | np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray]:
     """The real (2a, 2K) matrices R of G and of j·G (a rows of K) with ``Z.view(float) @ R == (Z @ G).view(float)``
     for complex Z (n, a): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
     work, no temporaries)."""
@@ -64,6 +64,7 @@ def _real_reps(G: list[list[complex]], K: int) -> tuple[np.ndarray, np.ndarray]:
     return R[0], R[1]
 
 
+SMALL_SUM = 400  # a sum of up to this many terms × columns is built from Python numbers (fewer numpy calls)
 _NO_INT, _NO_FLOAT, _NO_COMPLEX = np.zeros(0, int), np.zeros(0), np.zeros(0, complex)
 
 
@@ -109,9 +110,34 @@ class _Sum:
 
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
-        """Σ_t M[t, :]·z_t over ``terms`` (M: one row per term, K columns)."""
+        """Σ_t M[t, :]·z_t over ``terms`` (M: one row per term, K columns). A small sum from Python numbers
+        (:func:`_sums`), a large one by numpy's vector operations (the same values)."""
         M = M.reshape(len(terms), -1)
-        return _sums(sys, [(terms.tolist(), M.tolist())], M.shape[1])[0]
+        if M.size <= SMALL_SUM:
+            return _sums(sys, [(terms.tolist(), M.tolist())], M.shape[1])[0]
+        na, ns = sys.n_angles, len(sys.slider_names)
+        ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
+        cd = _term_lists(sys)[4][terms]
+        M = M.astype(complex)
+        K = M.shape[1]
+        col = np.where(ang < 0, na, ang)  # the padding column stands for the ground
+        ground = (sl < 0) | (ang < 0)  # rigid, or a slider along a ground line: r (and s) times a constant
+        G = np.zeros((na + 1, K), complex)
+        np.add.at(G, col[ground], (r * cd)[ground][:, None] * M[ground])
+        on_line = (sl >= 0) & (ang < 0)
+        H = np.zeros((ns + 1, K), complex)
+        np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
+        acols = _used(set(ang[ground & (ang >= 0)].tolist()), na + 1)
+        scols = _used(set(sl[on_line].tolist()), ns + 1)
+        c0 = np.zeros(2 * K)
+        if acols is not None:  # gathered: the ground vectors are a constant, the padding column is not read
+            c0 = np.ascontiguousarray(G[na]).view(float).copy()
+            G = G[acols]
+        H = H if scols is None else H[scols]
+        H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * K)
+        mv = (sl >= 0) & (ang >= 0)
+        R, Rj = _real_reps(G, K)
+        return cls(acols, R, Rj, c0, scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
@@ -267,41 +293,38 @@ class _Plan:
 def block_terms(sys: LoopSystem, b: Block) -> tuple:
     """A block's terms (those in its loops, as global term ids), their signs in its loops (m, n_terms),
     their angle variables and sliders, the unknown angles and sliders, and which terms depend on none."""
-    return _block_terms(sys, b)[0]
-
-
-def _block_terms(sys: LoopSystem, b: Block) -> tuple[tuple, tuple]:
-    """:func:`block_terms` as arrays, and as Python numbers: the terms, the signs' rows, angles, sliders and
-    the known terms (built from Python numbers: numpy's indexing on a handful of terms costs more)."""
-    t_ang, t_sl, _, _, _ = _term_lists(sys)
-    rows = sys.C[list(b.loops)].tolist()
-    tl = [t for t, column in enumerate(zip(*rows, strict=True)) if any(column)]
-    C_rows = [[row[t] for t in tl] for row in rows]
-    al, sll = [t_ang[t] for t in tl], [t_sl[t] for t in tl]
+    Cb = sys.C[list(b.loops)]
+    terms = (Cb != 0).any(axis=0).nonzero()[0]
+    Cb = Cb[:, terms]
+    ang, sl = sys.t_ang[terms], sys.t_sl[terms]
     unk_ang = [v for v in b.unknowns if v < sys.n_angles]
     unk_sl = [v - sys.n_angles for v in b.unknowns if v >= sys.n_angles]
     ua, us = set(unk_ang), set(unk_sl)
-    kl = [a not in ua and i not in us for a, i in zip(al, sll, strict=True)]
-    Cb = np.array(C_rows, float, order="F").reshape(len(rows), len(tl), order="F")  # numpy's Cb[:, terms] layout
-    arrays = (np.array(tl, int), Cb, np.array(al, int), np.array(sll, int), unk_ang, unk_sl, np.array(kl, bool))
-    return arrays, (tl, C_rows, al, sll, kl)
+    known = np.array([a not in ua and i not in us for a, i in zip(ang.tolist(), sl.tolist(), strict=True)], bool)
+    return terms, Cb, ang, sl, unk_ang, unk_sl, known
 
 
 def _plans(sys: LoopSystem) -> list[_Plan]:
-    """Every block's plan (cached), and the system's sums (:func:`_system_sums`) with them: the sums of equal
-    width are made together."""
+    """Every block's plan (cached), and the system's sums (:func:`_system_sums`) with them: the small sums of
+    equal width are made together."""
     plans = sys.cache.get("plans")
     if plans is not None:
         return plans
     data = [_plan_data(sys, b) for b in sys.blocks]
-    specs: dict[int, list] = {}  # sums by width K: (owner, terms, M's rows)
-    for n, (_, block_specs, m) in enumerate(data):
-        specs.setdefault(m, []).extend((n, *spec) for spec in block_specs)
-    if "sums" not in sys.cache:
-        everything = list(range(len(sys.t_r)))
-        for owner, M in (("points", sys.path), ("loops", sys.C.T)):
-            specs.setdefault(M.shape[1], []).append((owner, everything, M.tolist()))
+    specs: dict[int, list] = {}  # small sums by width K: (owner, terms, M's rows)
     made: dict = {}
+    for n, (_, block_specs, m) in enumerate(data):
+        if isinstance(block_specs[0][1], np.ndarray):  # a large block
+            made[n] = [_Sum.build(sys, terms, M) for terms, M in block_specs]
+        else:
+            specs.setdefault(m, []).extend((n, *spec) for spec in block_specs)
+    if "sums" not in sys.cache:
+        everything = np.arange(len(sys.t_r))
+        for owner, M in (("points", sys.path), ("loops", sys.C.T)):
+            if M.size <= SMALL_SUM:
+                specs.setdefault(M.shape[1], []).append((owner, everything.tolist(), M.tolist()))
+            else:
+                made[owner] = [_Sum.build(sys, everything, M)]
     for K, group in specs.items():
         for (owner, _, _), s in zip(group, _sums(sys, [(t, rows) for _, t, rows in group], K), strict=True):
             made.setdefault(owner, []).append(s)
@@ -318,12 +341,13 @@ def _plans(sys: LoopSystem) -> list[_Plan]:
 def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     """One block's plan but its sums: its terms and the closed forms' constants (in Python numbers: numpy's scalar
     operations, the same bits), and its three sums' terms and rows (all terms, the known ones negated, those
-    still at zero rates) with their width."""
+    still at zero rates; as arrays for a large block) with their width."""
     na = sys.n_angles
-    _, _, t_r, t_cd, _ = _term_lists(sys)
-    (_, Cb, ang, sl, unk_ang, unk_sl, known), (tl, C_rows, al, sll, kl) = _block_terms(sys, b)
+    _, _, t_r, t_cd, cd_all = _term_lists(sys)
+    terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
+    tl, al, sll, kl = terms.tolist(), ang.tolist(), sl.tolist(), known.tolist()
     masks = [np.array([x == v for x in al] if v < na else [x == v - na for x in sll], bool) for v in b.unknowns]
-    g = C_rows[0]
+    g = Cb[0].tolist()
     w_const, w_sl, u_dir = {}, {}, {}
     for a in unk_ang:
         on = [n for n, x in enumerate(al) if x == a]
@@ -332,13 +356,18 @@ def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     for i in unk_sl:
         n = sll.index(i)
         u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
-    rows = [list(r) for r in zip(*C_rows, strict=True)]  # M = Cb.T: a row per term
     ua = set(unk_ang)
     still = [not (i < 0 and a in ua) for a, i in zip(al, sll, strict=True)]
-    specs = [(tl, rows), _rows_where(kl, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
+    CbT = Cb.T
+    if Cb.size <= SMALL_SUM:
+        rows = CbT.tolist()
+        specs = [(tl, rows), _rows_where(kl, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
+    else:
+        still_a = np.array(still, bool)
+        specs = [(terms, CbT), (terms[known], -CbT[known]), (terms[still_a], CbT[still_a])]
     r = np.array([t_r[t] for t in tl], float)
-    cd = np.array([t_cd[t] for t in tl], complex)
-    args = (b, Cb, Cb.T.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
+    cd = cd_all[terms]
+    args = (b, Cb, CbT.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
     return args, specs, len(Cb)
 
 
@@ -350,9 +379,8 @@ def _rows_where(keep: list[bool], terms: list[int], rows: list[list[float]]) -> 
 def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
     """Sums giving every point's position (and rates) and every loop's closure residual (cached)."""
     if "sums" not in sys.cache:
-        everything = list(range(len(sys.t_r)))
-        points, loops = (_sums(sys, [(everything, M.tolist())], M.shape[1])[0] for M in (sys.path, sys.C.T))
-        sys.cache["sums"] = (points, loops)
+        everything = np.arange(len(sys.t_r))
+        sys.cache["sums"] = (_Sum.build(sys, everything, sys.path), _Sum.build(sys, everything, sys.C.T))
     return sys.cache["sums"]
 
 

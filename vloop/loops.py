@@ -142,28 +142,26 @@ class TermIndex:
 _ZERO = np.zeros(1)
 
 
-class LoopGroup:
+class LoopGroup(TermIndex):
     """The equations of ``loops`` in the variables ``cols``, index data gathered once for repeated evaluation
-    (Newton at t = 0) from the term vectors of the whole system (:class:`TermIndex`): the same arithmetic as
-    :func:`loop_residual` and :func:`loop_jacobian`, bit for bit."""
+    (Newton at t = 0): the same arithmetic as :func:`loop_residual` and :func:`loop_jacobian`, bit for bit. Its
+    term vectors are those of the terms ``k`` the loops use (:meth:`at`, or the whole system's at ``k``)."""
 
-    def __init__(self, sys: LoopSystem, every: TermIndex, loops: list[int], cols: list[int]) -> None:
-        rows = sys.C[loops].tolist()
-        ks = [t for t, column in enumerate(zip(*rows, strict=True)) if any(column)]  # the terms the loops use
-        self.k = np.array(ks, int)
-        self.Cg = np.array([[row[t] for t in ks] for row in rows], float).reshape(len(rows), len(ks))
-        na = sys.n_angles
-        ang, sl = every.ang_list, every.sl_list
-        shape = (len(ks), len(cols))  # d z_t / d col: j·z_t where col turns t, e_t where col is t's slider
-        self.on_angle = np.array([[ang[t] == c for c in cols] for t in ks], complex).reshape(shape)
-        self.on_slider = np.array([[c >= na and sl[t] == c - na for c in cols] for t in ks], complex).reshape(shape)
+    def __init__(self, sys: LoopSystem, loops: list[int], cols: list[int]) -> None:
+        self.k = loop_terms(sys, loops)
+        super().__init__(sys, self.k)
+        self.Cg = sys.C[np.ix_(loops, self.k)]
+        na, ang, sl = sys.n_angles, self.ang_list, self.sl_list
+        shape = (len(ang), len(cols))  # d z_t / d col: j·z_t where col turns t, e_t where col is t's slider
+        self.on_angle = np.array([[a == c for c in cols] for a in ang], complex).reshape(shape)
+        self.on_slider = np.array([[c >= na and i == c - na for c in cols] for i in sl], complex).reshape(shape)
 
     def residual(self, zk: np.ndarray) -> np.ndarray:
-        """The group's loops' closure at its term vectors ``zk`` (the whole system's at ``k``)."""
+        """The group's loops' closure at its term vectors ``zk``."""
         return zk @ self.Cg.T
 
     def jacobian(self, zk: np.ndarray, ek: np.ndarray) -> np.ndarray:
-        """[Re; Im] of the loops' Jacobian in ``cols`` at its term vectors and directions (the system's at ``k``)."""
+        """[Re; Im] of the loops' Jacobian in ``cols`` at its term vectors and directions."""
         J = self.Cg @ ((1j * zk)[:, None] * self.on_angle + ek[:, None] * self.on_slider)
         return np.concatenate((J.real, J.imag))
 
