@@ -204,33 +204,34 @@ def _sum_parts(sys: LoopSystem, terms: list[int], rows: list[list[float]], K: in
     bits): the angle and slider columns read, the ground vectors, G's and H's rows, the sliders on moving guides."""
     na, ns = sys.n_angles, len(sys.slider_names)
     t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
-    G = [[0j] * K for _ in range(na + 1)]  # the padding row na stands for the ground
-    H = [[0j] * K for _ in range(ns + 1)]
+    G: dict[int, list[complex]] = {}  # angle column → its row of G (the padding column na: the ground)
+    H: dict[int, list[complex]] = {}  # slider → its row of H
     acols, scols, mv = set(), set(), []
     for n, (t, row) in enumerate(zip(terms, rows, strict=True)):
         a, i = t_ang[t], t_sl[t]
         if i >= 0 and a >= 0:  # a slider vector on a moving guide
             mv.append(n)
             continue
-        rc, g = t_r[t] * t_cd[t], G[na if a < 0 else a]  # rigid, or a slider along a ground line
+        rc, g = t_r[t] * t_cd[t], G.setdefault(na if a < 0 else a, [0j] * K)  # rigid, or along a ground line
         for k, m in enumerate(row):
             g[k] += rc * m
         if i < 0:
             acols.add(a)
             continue
-        h, cd = H[i], t_cd[t]
+        h, cd = H.setdefault(i, [0j] * K), t_cd[t]
         for k, m in enumerate(row):
             h[k] += cd * m
         scols.add(i)
     acols.discard(-1)
     acol, scol = _used(acols, na + 1), _used(scols, ns + 1)
+    zero = [0j] * K  # a row no term adds to
     c0 = None
     if acol is not None:  # gathered: the ground vectors are a constant, the padding column is not read
-        c0 = G[na]
-        G = [G[a] for a in acol.tolist()]
-    H = H if scol is None else [H[i] for i in scol.tolist()]
+        c0 = G.get(na, zero)
+    G_rows = [G.get(a, zero) for a in (range(na + 1) if acol is None else acol.tolist())]
+    H_rows = [H.get(i, zero) for i in (range(ns + 1) if scol is None else scol.tolist())]
     moving = [(terms[n], rows[n]) for n in mv]
-    return acol, scol, c0, G, H, moving
+    return acol, scol, c0, G_rows, H_rows, moving
 
 
 def _sums(sys: LoopSystem, specs: list[tuple[list[int], list[list[float]]]], K: int) -> list[_Sum]:
@@ -346,15 +347,20 @@ def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     _, _, t_r, t_cd, cd_all = _term_lists(sys)
     terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
     tl, al, sll, kl = terms.tolist(), ang.tolist(), sl.tolist(), known.tolist()
-    masks = [np.array([x == v for x in al] if v < na else [x == v - na for x in sll], bool) for v in b.unknowns]
+    masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
     g = Cb[0].tolist()
+    turned_by: dict[int, list[int]] = {}  # angle → the block terms it turns
+    first_of: dict[int, int] = {}  # slider → its first block term
+    for n, (a, i) in enumerate(zip(al, sll, strict=True)):
+        turned_by.setdefault(a, []).append(n)
+        first_of.setdefault(i, n)
     w_const, w_sl, u_dir = {}, {}, {}
     for a in unk_ang:
-        on = [n for n, x in enumerate(al) if x == a]
+        on = turned_by.get(a, [])
         w_const[a] = complex(sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
         w_sl[a] = [(sll[n], complex(g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
     for i in unk_sl:
-        n = sll.index(i)
+        n = first_of[i]
         u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
     ua = set(unk_ang)
     still = [not (i < 0 and a in ua) for a, i in zip(al, sll, strict=True)]
