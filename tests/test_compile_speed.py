@@ -16,6 +16,7 @@ import pytest
 
 import vloop
 from tests.conftest import ROOT, mechanism_files
+from tests.test_bad_input import FOURBAR
 from vloop import assembly, corpus, graph, kernels, structure
 from vloop.drivers import evaluate_all
 from vloop.errors import MechanismError
@@ -342,24 +343,12 @@ def test_plan_constants_are_numpy_scalar_ones(systems):
 # ------------------------------------------------------------------ the t = 0 refusals
 
 
-TOGGLE = """name = "toggle"
-[joints]
-O2 = [0.0, 0.0]
-A = [0.0, 1.0]
-B = [2.0, 1.0]
-O4 = [4.0, 1.0]
-[links]
-ground = { joints = ["O2", "O4"], ground = true }
-crank = { joints = ["O2", "A"] }
-coupler = { joints = ["A", "B"] }
-rocker = { joints = ["O4", "B"] }
-[[drivers]]
-link = "crank"
-omega = 1.0
-[time]
-stop = 1.0
-step = 0.1
-"""
+# the four-bar of tests/test_bad_input.py with the coupler and the rocker in line at t = 0 (a toggle)
+TOGGLE = (
+    FOURBAR.replace("A = [0.0, 2.0]", "A = [0.0, 1.0]")
+    .replace("B = [5.0, 4.0]", "B = [2.0, 1.0]")
+    .replace("O4 = [7.0, 0.0]", "O4 = [4.0, 1.0]")
+)
 
 
 def refusal(text: str) -> str:
