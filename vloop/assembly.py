@@ -8,53 +8,75 @@ reported; beyond it the file is refused, naming the loop and the closure error.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .drivers import evaluate_all
+from .drivers import evaluate
 from .errors import MechanismError
-from .loops import LoopSystem, loop_jacobian, loop_residual, term_values
-from .model import mobility_message
+from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
+from .model import Mechanism, mobility_message
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size
 SINGULAR_RCOND = 1e-10  # smallest/largest singular value below this: singular Jacobian
 
 
-def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict]:
+def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, np.ndarray | None]:
     """Close the loops at t = 0, group by group in solving order; check the rank (mobility) there.
 
-    Returns the assembled variables and a report: Newton iterations, closure, how far the typed
-    joints moved, and for a redundant linkage what is redundant (``report["redundancy"]``).
+    Returns the assembled variables, a report: Newton iterations, closure, how far the typed
+    joints moved, and for a redundant linkage what is redundant (``report["redundancy"]``), and the
+    term vectors there (None without loops).
     """
     mech = sys.mechanism
     q = sys.coords_q.copy()
     if mech.drivers:
-        q[list(sys.drivers)] = evaluate_all(mech, np.zeros(1))[0][0]
+        q[list(sys.drivers)] = _inputs_at_start(mech)
     if not sys.loops:
-        return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}
-    initial = _check_typed_closure(sys, q)
-    iterations = sum(_close(sys, q, list(loops), list(unknowns)) for loops, unknowns in structure.groups)
-    closure = float(np.max(np.abs(loop_residual(sys, q)))) / mech.scale
+        return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}, None
+    every = TermIndex(sys)
+    z_typed, e_typed = every.at(q)
+    typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
+    initial = _check_typed_closure(sys, q, z_typed)
+    groups = [(LoopGroup(sys, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
+    iterations = 0
+    for n, (g, unknowns) in enumerate(groups):  # the first group starts from the typed q: its vectors are known
+        iterations += _close(g, q, unknowns, (z_typed[g.k], e_typed[g.k]) if n == 0 else None)
+    z, e = every.at(q) if groups else (z_typed, e_typed)
+    closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
     if closure > 1e-11:
         raise MechanismError(
             f"{mech.source}: [joints] cannot assemble the mechanism at t = 0 from the given coordinates "
             f"(closure {closure:.2g} of its size after {iterations} Newton steps){_over_note(sys)}",
             entry="joints",
         )
-    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q)}
-    for loops, unknowns in structure.groups:
-        _check_rank(sys, q, list(loops), list(unknowns))
+    z0 = z_typed if typed else every.at(sys.coords_q)[0]
+    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
+    for g, unknowns in groups:
+        _check_rank(sys, g.jacobian(z[g.k], e[g.k]), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
-    return q, report
+    return q, report, z
 
 
-def _check_typed_closure(sys: LoopSystem, q: np.ndarray) -> float:
-    """The typed coordinates' closure (fraction of the size); refused beyond ``assembly_tolerance``."""
+def _inputs_at_start(mech: Mechanism) -> list[float]:
+    """The drivers' inputs at t = 0: x0 + v0·t + a0·t²/2 by drivers.evaluate's operations in the same order (the
+    same bits, without its arrays), a profile by drivers.evaluate itself."""
+    t = 0.0
+    return [
+        d.x0 + d.v0 * t + 0.5 * d.a0 * t * t if d.profile is None else float(evaluate(d, np.zeros(1))[0][0])
+        for d in mech.drivers
+    ]
+
+
+def _check_typed_closure(sys: LoopSystem, q: np.ndarray, z: np.ndarray) -> float:
+    """The typed coordinates' closure (fraction of the size); refused beyond ``assembly_tolerance``. ``z``: the
+    term vectors at ``q``."""
     mech = sys.mechanism
     tol = mech.options.get("assembly_tolerance", DEFAULT_ASSEMBLY_TOL)
-    res0 = np.abs(loop_residual(sys, q))
-    worst = int(np.argmax(res0))
+    res0 = np.abs(z @ sys.C.T)
+    worst = int(res0.argmax())
     if res0[worst] > tol * mech.scale:
         lp = sys.loops[worst]
         why = ""
@@ -81,29 +103,38 @@ def _over_note(sys: LoopSystem) -> str:
     )
 
 
-def _close(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]) -> int:
-    """Newton (least squares) on ``loops`` for ``unknowns``, the other variables held; returns the iterations."""
-    if not unknowns:
-        return 0
+def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarray, np.ndarray] | None = None) -> int:
+    """Newton (least squares) on the group's loops for ``unknowns``, the other variables held; returns the
+    iterations. ``ze``: the group's term vectors and directions at ``q``, where known."""
     for it in range(1, 51):
-        F = loop_residual(sys, q, loops)
-        J = loop_jacobian(sys, q, loops, unknowns)
-        rhs = -np.concatenate([F.real, F.imag])
+        zk, ek = g.at(q) if ze is None or it > 1 else ze
+        F = g.residual(zk)
+        J = g.jacobian(zk, ek)
+        rhs = -np.concatenate((F.real, F.imag))
         try:  # a square group: a plain solve (least squares only for redundant or singular groups)
             step = np.linalg.solve(J, rhs) if J.shape[0] == J.shape[1] else np.linalg.lstsq(J, rhs, rcond=None)[0]
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(J, rhs, rcond=None)[0]
-        q[unknowns] += step
-        if np.max(np.abs(step), initial=0.0) <= 1e-14 * (1 + np.max(np.abs(q[unknowns]), initial=0.0)):
+        dq = step.tolist()
+        for v, d in zip(unknowns, dq, strict=True):
+            q[v] += d
+        if _max_abs(dq) <= 1e-14 * (1 + _max_abs(q[unknowns].tolist())):
             return it
     return 50
 
 
-def _check_rank(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list[int]) -> None:
-    """A group's Jacobian must have full column rank at t = 0 (else a dead point or toggle)."""
-    if not unknowns:
+def _max_abs(xs: list[float]) -> float:
+    """max |x| (nan if any x is nan, as numpy's max), for the few numbers of a group."""
+    m = max(map(abs, xs))
+    return m if all(x == x for x in xs) else math.nan
+
+
+def _check_rank(sys: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:
+    """A group's Jacobian ``J`` (in ``unknowns``) must have full column rank at t = 0 (else a dead point or
+    toggle): its singular values' ratio at least SINGULAR_RCOND."""
+    if J.shape == (2, 2) and _clearly_regular(J):
         return
-    sv = np.linalg.svd(loop_jacobian(sys, q, loops, unknowns), compute_uv=False)
+    sv = np.linalg.svd(J, compute_uv=False)
     if sv[-1] < SINGULAR_RCOND * sv[0]:
         mech = sys.mechanism
         raise MechanismError(
@@ -113,6 +144,20 @@ def _check_rank(sys: LoopSystem, q: np.ndarray, loops: list[int], unknowns: list
             f"M = {mech.gruebler()[2]} does not see this",
             entry="joints",
         )
+
+
+EPS = float(np.finfo(float).eps)
+
+
+def _clearly_regular(J: np.ndarray) -> bool:
+    """Whether a 2×2 matrix's singular values σ₂ ≤ σ₁ certainly have σ₂/σ₁ > 100·SINGULAR_RCOND, so that the SVD's
+    rank test passes (its computed values are within a few ε·σ₁): σ₁σ₂ = |det| and σ₁² ≤ ‖J‖²_F give
+    σ₂/σ₁ ≥ |det|/‖J‖²_F, with det's and the norm's rounding bounded. Overflow, underflow or nan: False (the SVD
+    decides)."""
+    (a, b), (c, d) = J.tolist()
+    ad, bc = a * d, b * c
+    det_low = abs(ad - bc) - 4 * EPS * (abs(ad) + abs(bc))
+    return det_low > 100 * SINGULAR_RCOND * (1 + 8 * EPS) * (a * a + b * b + c * c + d * d)
 
 
 def redundancy(sys: LoopSystem, q: np.ndarray) -> dict:
@@ -162,10 +207,11 @@ def redundancy_text(info: dict, sys: LoopSystem) -> str:
     )
 
 
-def moved(sys: LoopSystem, q: np.ndarray) -> dict:
-    """How far the assembly at ``q`` moved each point from the typed coordinates."""
-    z0 = term_values(sys, sys.coords_q)
-    z1 = term_values(sys, q)
+def moved(sys: LoopSystem, q: np.ndarray, z0: np.ndarray | None = None, z1: np.ndarray | None = None) -> dict:
+    """How far the assembly at ``q`` moved each point from the typed coordinates (``z0``, ``z1``: the term vectors
+    at the typed coordinates and at ``q``, where known)."""
+    z0 = term_values(sys, sys.coords_q) if z0 is None else z0
+    z1 = term_values(sys, q) if z1 is None else z1
     dist = np.abs((z1 - z0) @ sys.path) if len(sys.point_names) else np.zeros(0)
     return {
         "moved": float(dist.max(initial=0.0)),

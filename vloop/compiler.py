@@ -17,7 +17,7 @@ from .assembly import assemble, moved
 from .errors import MechanismError
 from .graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
 from .loops import Block, LoopSystem, branch_name
-from .model import Mechanism
+from .model import Body, Mechanism
 from .solver import assemble_blocks
 from .structure import analyse, block_structure
 
@@ -30,12 +30,13 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     """
     method = method or mech.options.get("method", "auto")
     _check_size(mech)
-    mg = build_graph(mech, mech.bodies())
-    loops, C = build_loops(mg, mech, cycle_basis(mg.G))
-    system = _unknowns(mech, mg, loops, C)
+    bodies = mech.bodies()
+    mg = build_graph(mech, bodies)
+    loops, C = build_loops(mg, mech, cycle_basis(mg.adj, mg.forest))
+    system = _unknowns(mech, mg, loops, C, bodies)
     structure = analyse(system)
-    q0, report = assemble(system, structure)
-    blocks = block_structure(system, structure, q0, method)
+    q0, report, z0 = assemble(system, structure)
+    blocks = block_structure(system, structure, q0, method, z0)
     if mech.options.get("branches"):
         blocks, q0, report = _choose_branches(system, blocks, q0, report)
     return dataclasses.replace(system, blocks=blocks, q0=q0, assembly=report, method=method, cache={})
@@ -58,12 +59,11 @@ def _check_size(mech: Mechanism) -> None:
         )
 
 
-def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray) -> LoopSystem:
+def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray, bodies: dict[str, Body]) -> LoopSystem:
     """The variables (rotating links' angles, then slider displacements), the driven ones, the unknowns,
     and a LoopSystem without blocks, assembled at the typed coordinates."""
     ang, sl, r, delta = mg.terms.arrays()
     na = len(mg.angle_links)
-    bodies = mech.bodies()
     driven = tuple(
         mg.angle_links.index(d.target) if d.kind == "crank" else na + mg.slider_names.index(d.target)
         for d in mech.drivers
@@ -73,8 +73,8 @@ def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray) 
     link_outputs = tuple((name, *mg.owner[name]) for name in mech.moving_links)
     return LoopSystem(
         mech, mg.angle_links, mg.slider_names, ang, sl, r, delta, tuple(mg.terms.label), loops, C,
-        mech.tracked_points, point_paths(mg.G, mech, len(r)), link_outputs, driven, unknowns, (), coords_q,
-        coords_q, mg.G,
+        mech.tracked_points, point_paths(mg.adj, mech, len(r), mg.forest), link_outputs, driven, unknowns, (), coords_q,
+        coords_q, mg.parts,
     )  # fmt: skip
 
 

@@ -14,11 +14,15 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 
 from .model import Body, Mechanism
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 ORIGIN = "@O"  # the world origin node on the ground
 SMALL_RANK = 64  # up to this many loops every candidate cycle is shortened by a search
@@ -56,14 +60,52 @@ class Terms:
 
 @dataclass
 class MechanismGraph:
-    """The graph with its terms, the angle variable of each rotating link and the sliders' t = 0 s."""
+    """The graph with its terms, the angle variable of each rotating link and the sliders' t = 0 s.
 
-    G: nx.Graph
+    The graph is its nodes and edges (u, v, data) in the order they were added, and its adjacency in networkx's
+    layout; ``G`` builds the networkx graph from them on first use (the compiler walks the adjacency)."""
+
+    parts: tuple[list, list[tuple]]  # nodes, edges
     terms: Terms
     angle_links: tuple[str, ...]
     slider_names: tuple[str, ...]
     coords_s: list[float]
     owner: dict[str, tuple[int, float]]  # body → (angle variable turning it or -1, constant frame offset)
+
+    @cached_property
+    def adj(self) -> dict:
+        return adjacency(*self.parts)
+
+    @cached_property
+    def forest(self) -> list[list[tuple]]:
+        """A breadth-first tree per component (:func:`_forest`), shared by the cycle basis and the point paths."""
+        return _forest(self.adj)
+
+    @cached_property
+    def G(self) -> nx.Graph:
+        return networkx_graph(*self.parts)
+
+
+def adjacency(nodes: list, edges: list[tuple]) -> dict:
+    """node → {neighbour: edge data}, as ``nx.Graph`` holds it after ``add_nodes_from(nodes)`` and
+    ``add_edges_from(edges)``: the same orders, one data dict per edge (a repeated edge's data merged)."""
+    adj: dict = {n: {} for n in nodes}
+    for u, v, data in edges:
+        nu, nv = adj.setdefault(u, {}), adj.setdefault(v, {})
+        merged = nu.get(v, {})
+        merged.update(data)
+        nu[v] = nv[u] = merged
+    return adj
+
+
+def networkx_graph(nodes: list, edges: list[tuple]) -> nx.Graph:
+    """The networkx graph of ``nodes`` and ``edges`` (u, v, data), added in that order."""
+    import networkx as nx
+
+    G = nx.Graph()
+    G.add_nodes_from(nodes)
+    G.add_edges_from(edges)
+    return G
 
 
 def build_graph(mech: Mechanism, bodies: dict[str, Body]) -> MechanismGraph:
@@ -71,16 +113,14 @@ def build_graph(mech: Mechanism, bodies: dict[str, Body]) -> MechanismGraph:
     angle_links = tuple(n for n, lk in mech.links.items() if not lk.ground)
     avar = {n: i for i, n in enumerate(angle_links)}
     owner = {name: _owner(bodies, avar, name) for name in mech.body_names}
-    G = nx.Graph()
     terms = Terms()
-    ref = _reference_nodes(mech, bodies, G)
-    _add_body_stars(mech, bodies, G, terms, ref, owner)
+    nodes, ref = _reference_nodes(mech, bodies)
+    edges = _body_stars(mech, bodies, terms, ref, owner)
     for j in mech.joints:
         at = mech.bodies_at(j)
-        for other in at[1:]:
-            G.add_edge((at[0], j), (other, j), terms=(), start=(at[0], j), kind="pin")
-    coords_s = _add_slider_edges(mech, bodies, G, terms, ref, owner)
-    return MechanismGraph(G, terms, angle_links, tuple(mech.sliders), coords_s, owner)
+        edges += [((at[0], j), (other, j), {"terms": (), "start": (at[0], j), "kind": "pin"}) for other in at[1:]]
+    coords_s = _add_slider_edges(mech, bodies, edges, terms, ref, owner)
+    return MechanismGraph((nodes, edges), terms, angle_links, tuple(mech.sliders), coords_s, owner)
 
 
 def _owner(bodies: dict[str, Body], avar: dict[str, int], body: str) -> tuple[int, float]:
@@ -94,27 +134,28 @@ def _owner(bodies: dict[str, Body], avar: dict[str, int], body: str) -> tuple[in
     return (-1 if g.kind == "ground" else avar[g.name]), b.theta0 - g.theta0
 
 
-def _reference_nodes(mech: Mechanism, bodies: dict[str, Body], G: nx.Graph) -> dict[str, tuple[str, str]]:
+def _reference_nodes(mech: Mechanism, bodies: dict[str, Body]) -> tuple[list, dict[str, tuple[str, str]]]:
+    """Every node (the world origin first, then each body's joints and points) and each body's reference node."""
     ground = mech.ground
     ref: dict[str, tuple[str, str]] = {}
-    G.add_node((ground, ORIGIN))
+    nodes = [(ground, ORIGIN)]
     for bname in mech.body_names:
         b = bodies[bname]
         ref[bname] = (bname, ORIGIN) if b.kind == "ground" else (bname, next(iter(b.local)))
-        for m in b.local:
-            G.add_node((bname, m))
-    return ref
+        nodes += [(bname, m) for m in b.local]
+    return nodes, ref
 
 
-def _add_body_stars(
+def _body_stars(
     mech: Mechanism,
     bodies: dict[str, Body],
-    G: nx.Graph,
     terms: Terms,
     ref: dict[str, tuple[str, str]],
     owner: dict[str, tuple[int, float]],
-) -> None:
+) -> list[tuple]:
+    """Each body's edges from its reference node to its other nodes, with their terms."""
     origin = origin_name(mech)
+    edges = []
     for bname in mech.body_names:
         ang, off = owner[bname]
         for m, (lx, ly) in bodies[bname].local.items():
@@ -123,18 +164,20 @@ def _add_body_stars(
                 continue
             start = origin if ref[bname][1] == ORIGIN else ref[bname][1]
             tid = terms.add(ang, -1, math.hypot(lx, ly), math.atan2(ly, lx) + off, f"{start}→{m} ({bname})")
-            G.add_edge(ref[bname], node, terms=((tid, 1.0),), start=ref[bname], kind="link")
+            edges.append((ref[bname], node, {"terms": ((tid, 1.0),), "start": ref[bname], "kind": "link"}))
+    return edges
 
 
 def _add_slider_edges(
     mech: Mechanism,
     bodies: dict[str, Body],
-    G: nx.Graph,
+    edges: list[tuple],
     terms: Terms,
     ref: dict[str, tuple[str, str]],
     owner: dict[str, tuple[int, float]],
 ) -> list[float]:
-    """Guide → block edges: s along the axis plus the sliding line's constant offset. Returns each s at t = 0."""
+    """Guide → block edges (added to ``edges``): s along the axis plus the sliding line's constant offset.
+    Returns each s at t = 0."""
     coords_s = []
     for i, sl in enumerate(mech.sliders.values()):
         g = bodies[sl.guide]
@@ -150,7 +193,8 @@ def _add_slider_edges(
         edge = [(terms.add(ang, i, 0.0, alpha, f"s_{sl.name}"), 1.0)]
         if abs(e) > 1e-15 * mech.scale:
             edge.append((terms.add(ang, -1, e, alpha + math.pi / 2, f"offset of {sl.name}"), 1.0))
-        G.add_edge(ref[sl.guide], (sl.name, sl.joint), terms=tuple(edge), start=ref[sl.guide], kind="slider")
+        data = {"terms": tuple(edge), "start": ref[sl.guide], "kind": "slider"}
+        edges.append((ref[sl.guide], (sl.name, sl.joint), data))
     return coords_s
 
 
@@ -163,7 +207,7 @@ def origin_name(mech: Mechanism) -> str:
 # ------------------------------------------------------------------ cycles
 
 
-def cycle_basis(G: nx.Graph) -> list[list]:
+def cycle_basis(G: nx.Graph | dict, forest: list[list[tuple]] | None = None) -> list[list]:
     """Step 2: independent cycles (J − L + 1 of them), each as nodes in traversal order, in a canonical order.
 
     The shortest cycle through each non-tree edge of a breadth-first spanning forest (a breadth-first
@@ -171,13 +215,55 @@ def cycle_basis(G: nx.Graph) -> list[list]:
     greedily by length while independent (GF(2) elimination on edge bitsets), completed by fundamental
     cycles if needed. Short loops are what the block structure needs; on every catalog mechanism this is
     the minimum cycle basis networkx computes (de Pina's algorithm, whose cost grows like the cube of
-    the size: tests/test_graph.py compares them).
+    the size: tests/test_graph.py compares them). The searches run on plain dicts in networkx's order of
+    nodes, neighbours and edges (its traversals cost more than the small graphs they walk). ``G``: a
+    networkx graph or its adjacency (:func:`adjacency`); ``forest``: its breadth-first trees, where known.
     """
-    rank = G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
-    order = {n: i for i, n in enumerate(G.nodes)}
-    cycles = [_canonical(c, order) for c in _short_cycle_basis(G, rank)]
+    adj = G if isinstance(G, dict) else dict(G.adjacency())
+    edges = _edges(adj)
+    forest = _forest(adj) if forest is None else forest
+    rank = len(edges) - len(adj) + len(forest)
+    order = {n: i for i, n in enumerate(adj)}
+    cycles = [_canonical(c, order) for c in _short_cycle_basis(adj, edges, forest, rank)]
     cycles.sort(key=lambda c: sorted(order[n] for n in c))
     return cycles
+
+
+def _edges(adj: dict) -> list[tuple]:
+    """The edges in networkx's order (``G.edges``): by first node, then neighbour, each once."""
+    seen: set = set()
+    out = []
+    for n, nbrs in adj.items():
+        out += [(n, m) for m in nbrs if m not in seen]
+        seen.add(n)
+    return out
+
+
+def _bfs_edges(adj: dict, root) -> list[tuple]:
+    """Tree edges (parent, child) of a breadth-first search from ``root``, as ``nx.bfs_edges`` gives them."""
+    seen = {root}
+    queue = deque([root])
+    out = []
+    while queue:
+        x = queue.popleft()
+        for y in adj[x]:
+            if y not in seen:
+                seen.add(y)
+                queue.append(y)
+                out.append((x, y))
+    return out
+
+
+def _forest(adj: dict) -> list[list[tuple]]:
+    """A breadth-first tree of each connected component, from its first node in node order (as networkx's
+    components and ``bfs_edges`` give them): each as its edges (parent, child), the root first."""
+    trees, seen = [], set()
+    for n in adj:
+        if n not in seen:
+            tree = [(None, n), *_bfs_edges(adj, n)]
+            seen.update(y for _, y in tree)
+            trees.append(tree)
+    return trees
 
 
 def _walk_cycle(G: nx.Graph, nodes: list) -> list:
@@ -203,18 +289,17 @@ def _canonical(nodes: list, order: dict) -> list:
     return nodes
 
 
-def _short_cycle_basis(G: nx.Graph, rank: int) -> list[list]:
+def _short_cycle_basis(adj: dict, edges: list[tuple], forest: list[list[tuple]], rank: int) -> list[list]:
     """The shortest cycle through each non-tree edge of a breadth-first forest, kept greedily by length while
     independent; fundamental cycles complete the basis if some of them coincide."""
-    edge_id = {frozenset(e): i for i, e in enumerate(G.edges)}
-    adjacency = {n: list(G.adj[n]) for n in G.nodes}
-    fundamental = _fundamental_cycles(G)
+    edge_id = {frozenset(e): i for i, e in enumerate(edges)}
+    fundamental = _fundamental_cycles(edges, forest)
     candidates = []
     for cyc in fundamental:  # each closes on one non-tree edge (its last and first nodes)
         if rank > SMALL_RANK and len(cyc) <= SHORT_CYCLE:
             candidates.append(cyc)  # already short: a search would cross the ground's hub (O(size) each)
             continue
-        path = _shortest_path_avoiding(adjacency, cyc[-1], cyc[0])
+        path = _shortest_path_avoiding(adj, cyc[-1], cyc[0])
         candidates.append(path if path is not None else cyc)
     candidates.sort(key=len)
     basis: dict[int, int] = {}  # pivot bit → reduced bitset, for independence tests
@@ -246,19 +331,18 @@ def _shortest_path_avoiding(adjacency: dict, u, v) -> list | None:
     return None
 
 
-def _fundamental_cycles(G: nx.Graph) -> list[list]:
-    """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space)."""
+def _fundamental_cycles(edges: list[tuple], forest: list[list[tuple]]) -> list[list]:
+    """Cycles of the non-tree edges of a breadth-first spanning forest (they always span the cycle space),
+    component by component, each edge in networkx's order."""
     out = []
-    order = {n: i for i, n in enumerate(G.nodes)}
-    for comp in nx.connected_components(G):
-        root = min(comp, key=order.__getitem__)  # not next(iter(comp)): set order follows the hash seed
-        parent = {root: None}
-        depth = {root: 0}
-        for a, b in nx.bfs_edges(G, root):
-            parent[b], depth[b] = a, depth[a] + 1
-        tree = {frozenset((b, a)) for b, a in parent.items() if a is not None}
-        for a, b in G.subgraph(comp).edges:
-            if frozenset((a, b)) in tree:
+    for tree in forest:
+        parent = dict((b, a) for a, b in tree)
+        depth = {tree[0][1]: 0}
+        for a, b in tree[1:]:
+            depth[b] = depth[a] + 1
+        in_tree = {frozenset((b, a)) for b, a in parent.items() if a is not None}
+        for a, b in edges:
+            if a not in parent or frozenset((a, b)) in in_tree:
                 continue
             left, right = [a], [b]
             while left[-1] != right[-1]:
@@ -291,16 +375,21 @@ def _insert(basis: dict[int, int], bits: int) -> bool:
 # ------------------------------------------------------------------ paths
 
 
-def point_paths(G: nx.Graph, mech: Mechanism, n_terms: int) -> np.ndarray:
+def point_paths(
+    G: nx.Graph | dict, mech: Mechanism, n_terms: int, forest: list[list[tuple]] | None = None
+) -> np.ndarray:
     """Step 4: every joint/point's position as a sum of terms along a breadth-first tree from the origin.
 
-    Returns (n_terms, n_points) coefficients (±1, 0): position = z @ path.
+    Returns (n_terms, n_points) coefficients (±1, 0): position = z @ path. ``forest``: the graph's
+    breadth-first trees (:func:`_forest`), whose first starts at the origin, where known.
     """
     points = mech.tracked_points
     root = (mech.ground, ORIGIN)
     coeff: dict[tuple[str, str], dict[int, float]] = {root: {}}
-    for u, v in nx.bfs_edges(G, root):
-        data = G.edges[u, v]
+    adj = G if isinstance(G, dict) else dict(G.adjacency())
+    tree = forest[0][1:] if forest and forest[0][0][1] == root else _bfs_edges(adj, root)
+    for u, v in tree:
+        data = adj[u][v]
         sign = 1.0 if data["start"] == u else -1.0
         c = dict(coeff[u])
         for tid, s in data["terms"]:
@@ -330,36 +419,43 @@ class Loop:
 
 def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tuple[tuple[Loop, ...], np.ndarray]:
     """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal)."""
-    ang, sl, r, _ = mg.terms.arrays()
+    ang, sl, r = mg.terms.ang, mg.terms.sl, mg.terms.r
     na = len(mg.angle_links)
-    C = np.zeros((len(cycles), len(r)))
     loops = []
+    at_l, at_t, coef = [], [], []  # the nonzero coefficients C[l, t]
+    adj = mg.adj
+    origin = origin_name(mech)
     for li, cyc in enumerate(cycles):
-        walk: list[int] = []  # terms in traversal order, as the paper writes a loop
+        row: dict[int, float] = {}  # term → coefficient, in traversal order
         for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
-            data = mg.G.edges[u, v]
+            data = adj[u][v]
             sign = 1.0 if data["start"] == u else -1.0
             for tid, s in data["terms"]:
-                C[li, tid] += sign * s
-                walk.append(tid)
-        C[li, (r == 0) & (sl < 0)] = 0.0  # zero-length vectors (coincident pins) add nothing
-        used = np.array([t for t in dict.fromkeys(walk) if C[li, t] != 0], int)
+                row[tid] = row.get(tid, 0.0) + sign * s
+        for t in row:
+            if r[t] == 0 and sl[t] < 0:
+                row[t] = 0.0  # zero-length vectors (coincident pins) add nothing
+        used = [t for t, c in row.items() if c != 0]
         variables: set[int] = set()
         for tid in used:
             if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0):
-                variables.add(int(ang[tid]))
+                variables.add(ang[tid])
             if sl[tid] >= 0:
-                variables.add(na + int(sl[tid]))
-        label = loop_label(cyc, mech)
-        loops.append(
-            Loop(li, label, tuple(cyc), tuple(int(t) for t in used), tuple(C[li, used]), tuple(sorted(variables)))
-        )
+                variables.add(na + sl[tid])
+        label = loop_label(cyc, mech, origin)
+        at_l += [li] * len(used)
+        at_t += used
+        coef += [row[t] for t in used]
+        loops.append(Loop(li, label, tuple(cyc), tuple(used), tuple(row[t] for t in used), tuple(sorted(variables))))
+    C = np.zeros((len(cycles), len(r)))
+    C[at_l, at_t] = coef
     return tuple(loops), C
 
 
-def loop_label(cyc: list, mech: Mechanism) -> str:
-    """Joint names along the loop; the world origin takes the name of a ground joint placed there."""
-    origin = origin_name(mech)
+def loop_label(cyc: list, mech: Mechanism, origin: str | None = None) -> str:
+    """Joint names along the loop; the world origin takes the name of a ground joint placed there (``origin``,
+    where known)."""
+    origin = origin_name(mech) if origin is None else origin
     names: list[str] = []
     for _, j in cyc:
         n = origin if j == ORIGIN else j

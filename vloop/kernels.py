@@ -47,14 +47,25 @@ def row_max(A: np.ndarray) -> np.ndarray:
     return out
 
 
-def _real_rep(G: np.ndarray) -> np.ndarray:
-    """The real (2a, 2K) matrix R with ``Z.view(float) @ R == (Z @ G).view(float)`` for complex Z (n, a): one real
-    BLAS product on the interleaved [Re, Im] view instead of a complex one (half the work, no temporaries)."""
-    a, K = G.shape
-    R = np.empty((2 * a, 2 * K))
-    R[0::2, 0::2], R[0::2, 1::2] = G.real, G.imag
-    R[1::2, 0::2], R[1::2, 1::2] = -G.imag, G.real
-    return R
+def _real_reps(G: list[list[complex]] | np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray]:
+    """The real (2a, 2K) matrices R of G and of j·G (a rows of K) with ``Z.view(float) @ R == (Z @ G).view(float)``
+    for complex Z (n, a): one real BLAS product on the interleaved [Re, Im] view instead of a complex one (half the
+    work, no temporaries)."""
+    a = len(G)
+    B = np.empty((2, a, K), complex)
+    B[0] = np.array(G, complex).reshape(a, K)
+    np.multiply(1j, B[0], out=B[1])
+    F = B.view(float).reshape(2, a, K, 2)  # [Re, Im] of each entry
+    R = np.empty((2, a, 2, K, 2))
+    R[:, :, 0] = F  # rows 2i: Re, Im of row i interleaved
+    np.negative(F[..., 1], out=R[:, :, 1, :, 0])  # rows 2i + 1: −Im, Re
+    R[:, :, 1, :, 1] = F[..., 0]
+    R = R.reshape(2, 2 * a, 2 * K)
+    return R[0], R[1]
+
+
+SMALL_SUM = 400  # a sum of up to this many terms × columns is built from Python numbers (fewer numpy calls)
+_NO_INT, _NO_FLOAT, _NO_COMPLEX = np.zeros(0, int), np.zeros(0), np.zeros(0, complex)
 
 
 def _columns_of(A: np.ndarray, cols: np.ndarray | None) -> np.ndarray:
@@ -62,10 +73,18 @@ def _columns_of(A: np.ndarray, cols: np.ndarray | None) -> np.ndarray:
     return A if cols is None else A.take(cols, axis=1)
 
 
-def _used(idx: np.ndarray, width: int) -> np.ndarray | None:
+def _used(cols: set[int], width: int) -> np.ndarray | None:
     """The state columns a sum reads (None: most of them, read whole rows rather than gather)."""
-    cols = np.array(sorted(set(idx.tolist())), int)  # (np.unique costs ~30 µs on a handful of numbers)
-    return None if 2 * len(cols) > width else cols
+    return None if 2 * len(cols) > width else np.array(sorted(cols), int)
+
+
+def _term_lists(sys: LoopSystem) -> tuple[list[int], list[int], list[float], list[complex], np.ndarray]:
+    """Every term's angle variable, slider, magnitude and e^{jδ} as Python numbers, and e^{jδ} as an array
+    (cached)."""
+    if "term_lists" not in sys.cache:
+        cd = np.exp(1j * sys.t_delta)
+        sys.cache["term_lists"] = (sys.t_ang.tolist(), sys.t_sl.tolist(), sys.t_r.tolist(), cd.tolist(), cd)
+    return sys.cache["term_lists"]
 
 
 @dataclass
@@ -91,10 +110,15 @@ class _Sum:
 
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
+        """Σ_t M[t, :]·z_t over ``terms`` (M: one row per term, K columns). A small sum from Python numbers
+        (:func:`_sums`), a large one by numpy's vector operations (the same values)."""
+        M = M.reshape(len(terms), -1)
+        if M.size <= SMALL_SUM:
+            return _sums(sys, [(terms.tolist(), M.tolist())], M.shape[1])[0]
         na, ns = sys.n_angles, len(sys.slider_names)
         ang, sl, r = sys.t_ang[terms], sys.t_sl[terms], sys.t_r[terms]
-        cd = np.exp(1j * sys.t_delta[terms])
-        M = M.astype(complex).reshape(len(terms), -1)
+        cd = _term_lists(sys)[4][terms]
+        M = M.astype(complex)
         K = M.shape[1]
         col = np.where(ang < 0, na, ang)  # the padding column stands for the ground
         ground = (sl < 0) | (ang < 0)  # rigid, or a slider along a ground line: r (and s) times a constant
@@ -103,7 +127,8 @@ class _Sum:
         on_line = (sl >= 0) & (ang < 0)
         H = np.zeros((ns + 1, K), complex)
         np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
-        acols, scols = _used(ang[ground & (ang >= 0)], na + 1), _used(sl[on_line], ns + 1)
+        acols = _used(set(ang[ground & (ang >= 0)].tolist()), na + 1)
+        scols = _used(set(sl[on_line].tolist()), ns + 1)
         c0 = np.zeros(2 * K)
         if acols is not None:  # gathered: the ground vectors are a constant, the padding column is not read
             c0 = np.ascontiguousarray(G[na]).view(float).copy()
@@ -111,7 +136,8 @@ class _Sum:
         H = H if scols is None else H[scols]
         H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * K)
         mv = (sl >= 0) & (ang >= 0)
-        return cls(acols, _real_rep(G), _real_rep(1j * G), c0, scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
+        R, Rj = _real_reps(G, K)
+        return cls(acols, R, Rj, c0, scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv])
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
@@ -173,6 +199,66 @@ class _Sum:
         return out
 
 
+def _sum_parts(sys: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> tuple:
+    """A sum's constants in Python numbers, term by term in order (np.add.at's operations on complex M: the same
+    bits): the angle and slider columns read, the ground vectors, G's and H's rows, the sliders on moving guides."""
+    na, ns = sys.n_angles, len(sys.slider_names)
+    t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
+    G: dict[int, list[complex]] = {}  # angle column → its row of G (the padding column na: the ground)
+    H: dict[int, list[complex]] = {}  # slider → its row of H
+    acols, scols, mv = set(), set(), []
+    for n, (t, row) in enumerate(zip(terms, rows, strict=True)):
+        a, i = t_ang[t], t_sl[t]
+        if i >= 0 and a >= 0:  # a slider vector on a moving guide
+            mv.append(n)
+            continue
+        rc, g = t_r[t] * t_cd[t], G.setdefault(na if a < 0 else a, [0j] * K)  # rigid, or along a ground line
+        for k, m in enumerate(row):
+            g[k] += rc * m
+        if i < 0:
+            acols.add(a)
+            continue
+        h, cd = H.setdefault(i, [0j] * K), t_cd[t]
+        for k, m in enumerate(row):
+            h[k] += cd * m
+        scols.add(i)
+    acols.discard(-1)
+    acol, scol = _used(acols, na + 1), _used(scols, ns + 1)
+    zero = [0j] * K  # a row no term adds to
+    c0 = None
+    if acol is not None:  # gathered: the ground vectors are a constant, the padding column is not read
+        c0 = G.get(na, zero)
+    G_rows = [G.get(a, zero) for a in (range(na + 1) if acol is None else acol.tolist())]
+    H_rows = [H.get(i, zero) for i in (range(ns + 1) if scol is None else scol.tolist())]
+    moving = [(terms[n], rows[n]) for n in mv]
+    return acol, scol, c0, G_rows, H_rows, moving
+
+
+def _sums(sys: LoopSystem, specs: list[tuple[list[int], list[list[float]]]], K: int) -> list[_Sum]:
+    """The sums Σ_t M[t, :]·z_t of several (terms, M's rows) with K columns each, their arrays made together
+    (the same values as one by one, in fewer numpy calls)."""
+    t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
+    parts = [_sum_parts(sys, terms, rows, K) for terms, rows in specs]
+    R, Rj = _real_reps([g for p in parts for g in p[3]], K)
+    H_rows = [h for p in parts for h in p[4]]
+    H = np.array(H_rows, complex).view(float).reshape(len(H_rows), 2 * K)
+    c0s = np.array([p[2] if p[2] is not None else [0j] * K for p in parts], complex)
+    c0s = c0s.view(float).reshape(len(parts), 2 * K)
+    no_Ms = np.zeros((0, K), complex)
+    out, g_at, h_at = [], 0, 0
+    for n, (acol, scol, _, G, Hp, moving) in enumerate(parts):
+        rows = slice(2 * g_at, 2 * (g_at + len(G)))
+        s_ang, s_sl, s_r, s_cd, Ms = _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, no_Ms
+        if moving:
+            s_ang, s_sl = np.array([t_ang[t] for t, _ in moving], int), np.array([t_sl[t] for t, _ in moving], int)
+            s_r, s_cd = np.array([t_r[t] for t, _ in moving], float), np.array([t_cd[t] for t, _ in moving], complex)
+            Ms = np.array([row for _, row in moving], complex).reshape(len(moving), K)
+        H_n = H[h_at : h_at + len(Hp)]
+        out.append(_Sum(acol, R[rows], Rj[rows], c0s[n], scol, H_n, s_ang, s_sl, s_r, s_cd, Ms))
+        g_at, h_at = g_at + len(G), h_at + len(Hp)
+    return out
+
+
 @dataclass
 class _Plan:
     """Index data of one block (precomputed once per LoopSystem)."""
@@ -209,56 +295,98 @@ def block_terms(sys: LoopSystem, b: Block) -> tuple:
     """A block's terms (those in its loops, as global term ids), their signs in its loops (m, n_terms),
     their angle variables and sliders, the unknown angles and sliders, and which terms depend on none."""
     Cb = sys.C[list(b.loops)]
-    terms = np.nonzero(np.any(Cb != 0, axis=0))[0]
+    terms = (Cb != 0).any(axis=0).nonzero()[0]
     Cb = Cb[:, terms]
     ang, sl = sys.t_ang[terms], sys.t_sl[terms]
     unk_ang = [v for v in b.unknowns if v < sys.n_angles]
     unk_sl = [v - sys.n_angles for v in b.unknowns if v >= sys.n_angles]
-    known = ~(_member(ang, unk_ang) | _member(sl, unk_sl))
+    ua, us = set(unk_ang), set(unk_sl)
+    known = np.array([a not in ua and i not in us for a, i in zip(ang.tolist(), sl.tolist(), strict=True)], bool)
     return terms, Cb, ang, sl, unk_ang, unk_sl, known
 
 
-def _member(values: np.ndarray, among: list[int]) -> np.ndarray:
-    """np.isin for the few values of a block (a set lookup: np.isin costs ~50 µs on such small arrays)."""
-    pool = set(among)
-    return np.fromiter((v in pool for v in values.tolist()), bool, len(values))
-
-
 def _plans(sys: LoopSystem) -> list[_Plan]:
+    """Every block's plan (cached), and the system's sums (:func:`_system_sums`) with them: the small sums of
+    equal width are made together."""
     plans = sys.cache.get("plans")
     if plans is not None:
         return plans
-    na = sys.n_angles
-    cd_all = np.exp(1j * sys.t_delta)
+    data = [_plan_data(sys, b) for b in sys.blocks]
+    specs: dict[int, list] = {}  # small sums by width K: (owner, terms, M's rows)
+    made: dict = {}
+    for n, (_, block_specs, m) in enumerate(data):
+        if isinstance(block_specs[0][1], np.ndarray):  # a large block
+            made[n] = [_Sum.build(sys, terms, M) for terms, M in block_specs]
+        else:
+            specs.setdefault(m, []).extend((n, *spec) for spec in block_specs)
+    if "sums" not in sys.cache:
+        everything = np.arange(len(sys.t_r))
+        for owner, M in (("points", sys.path), ("loops", sys.C.T)):
+            if M.size <= SMALL_SUM:
+                specs.setdefault(M.shape[1], []).append((owner, everything.tolist(), M.tolist()))
+            else:
+                made[owner] = [_Sum.build(sys, everything, M)]
+    for K, group in specs.items():
+        for (owner, _, _), s in zip(group, _sums(sys, [(t, rows) for _, t, rows in group], K), strict=True):
+            made.setdefault(owner, []).append(s)
+    if "sums" not in sys.cache:
+        sys.cache["sums"] = (made["points"][0], made["loops"][0])
     plans = []
-    for b in sys.blocks:
-        terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
-        masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
-        g = Cb[0]
-        w_const, w_sl, u_dir = {}, {}, {}
-        for a in unk_ang:
-            on = np.nonzero(ang == a)[0]
-            w_const[a] = complex(sum(g[t] * sys.t_r[terms[t]] * cd_all[terms[t]] for t in on))
-            w_sl[a] = [(int(sl[t]), complex(g[t] * cd_all[terms[t]])) for t in on if sl[t] >= 0]
-        for i in unk_sl:
-            t = int(np.nonzero(sl == i)[0][0])
-            u_dir[i] = (int(ang[t]), complex(g[t] * cd_all[terms[t]]))
-        plan = _Plan(
-            b, Cb, Cb.T.astype(complex), ang, sl, sys.t_r[terms], cd_all[terms], unk_ang, unk_sl, masks,
-            _Sum.build(sys, terms, Cb.T), _Sum.build(sys, terms[known], -Cb.T[known]), w_const, w_sl, u_dir, known,
-        )  # fmt: skip
-        still = ~((sl < 0) & _member(ang, unk_ang))
-        plan.vel_sum = _Sum.build(sys, terms[still], Cb.T[still])
-        plans.append(plan)
+    for n, (args, _, _) in enumerate(data):
+        total, known_sum, vel_sum = made[n]
+        plans.append(_Plan(*args[:10], total, known_sum, *args[10:], vel_sum=vel_sum))  # type: ignore[misc]
     sys.cache["plans"] = plans
     return plans
+
+
+def _plan_data(sys: LoopSystem, b: Block) -> tuple[tuple, list, int]:
+    """One block's plan but its sums: its terms and the closed forms' constants (in Python numbers: numpy's scalar
+    operations, the same bits), and its three sums' terms and rows (all terms, the known ones negated, those
+    still at zero rates; as arrays for a large block) with their width."""
+    na = sys.n_angles
+    _, _, t_r, t_cd, cd_all = _term_lists(sys)
+    terms, Cb, ang, sl, unk_ang, unk_sl, known = block_terms(sys, b)
+    tl, al, sll, kl = terms.tolist(), ang.tolist(), sl.tolist(), known.tolist()
+    masks = [(ang == v) if v < na else (sl == v - na) for v in b.unknowns]
+    g = Cb[0].tolist()
+    turned_by: dict[int, list[int]] = {}  # angle → the block terms it turns
+    first_of: dict[int, int] = {}  # slider → its first block term
+    for n, (a, i) in enumerate(zip(al, sll, strict=True)):
+        turned_by.setdefault(a, []).append(n)
+        first_of.setdefault(i, n)
+    w_const, w_sl, u_dir = {}, {}, {}
+    for a in unk_ang:
+        on = turned_by.get(a, [])
+        w_const[a] = complex(sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
+        w_sl[a] = [(sll[n], complex(g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
+    for i in unk_sl:
+        n = first_of[i]
+        u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
+    ua = set(unk_ang)
+    still = [not (i < 0 and a in ua) for a, i in zip(al, sll, strict=True)]
+    CbT = Cb.T
+    if Cb.size <= SMALL_SUM:
+        rows = CbT.tolist()
+        specs = [(tl, rows), _rows_where(kl, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
+    else:
+        still_a = np.array(still, bool)
+        specs = [(terms, CbT), (terms[known], -CbT[known]), (terms[still_a], CbT[still_a])]
+    r = np.array([t_r[t] for t in tl], float)
+    cd = cd_all[terms]
+    args = (b, Cb, CbT.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
+    return args, specs, len(Cb)
+
+
+def _rows_where(keep: list[bool], terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:
+    """The terms and rows where ``keep`` holds."""
+    return [t for t, k in zip(terms, keep, strict=True) if k], [r for r, k in zip(rows, keep, strict=True) if k]
 
 
 def _system_sums(sys: LoopSystem) -> tuple[_Sum, _Sum]:
     """Sums giving every point's position (and rates) and every loop's closure residual (cached)."""
     if "sums" not in sys.cache:
-        terms = np.arange(len(sys.t_r))
-        sys.cache["sums"] = (_Sum.build(sys, terms, sys.path), _Sum.build(sys, terms, sys.C.T))
+        everything = np.arange(len(sys.t_r))
+        sys.cache["sums"] = (_Sum.build(sys, everything, sys.path), _Sum.build(sys, everything, sys.C.T))
     return sys.cache["sums"]
 
 

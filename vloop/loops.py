@@ -10,18 +10,24 @@ It is built by :func:`vloop.compiler.compile_system`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 
-from .graph import ORIGIN, Loop
+from .graph import ORIGIN, Loop, networkx_graph
+
+if TYPE_CHECKING:
+    import networkx as nx
 from .model import Mechanism
 
 __all__ = [
     "ORIGIN",
     "Block",
     "Loop",
+    "LoopGroup",
     "LoopSystem",
+    "TermIndex",
     "branch_name",
     "loop_jacobian",
     "loop_polygon",
@@ -69,10 +75,15 @@ class LoopSystem:
     blocks: tuple[Block, ...]
     q0: np.ndarray  # assembled variables at t = 0
     coords_q: np.ndarray  # variables read from the file's coordinates
-    graph: nx.Graph = field(repr=False)
+    graph_parts: tuple = field(repr=False)  # the graph's nodes and edges (u, v, data): see the ``graph`` property
     assembly: dict = field(default_factory=dict)
     method: str = "auto"
     cache: dict = field(default_factory=dict, repr=False, compare=False)  # solver plans
+
+    @cached_property
+    def graph(self) -> nx.Graph:
+        """The paper's graph (:mod:`vloop.graph`) as a networkx graph, built on first use."""
+        return networkx_graph(*self.graph_parts)
 
     @property
     def n_angles(self) -> int:
@@ -106,6 +117,53 @@ def term_values(sys: LoopSystem, q: np.ndarray, terms: np.ndarray | None = None)
 def loop_terms(sys: LoopSystem, loops: list[int]) -> np.ndarray:
     """The terms ``loops`` use (a loop's equations involve only these)."""
     return np.nonzero(np.any(sys.C[loops] != 0, axis=0))[0]
+
+
+class TermIndex:
+    """Term vectors at one configuration, for the terms ``k`` (all by default), the index data gathered once:
+    :func:`term_values`' arithmetic, bit for bit (the variables extended by a zero stand for "none")."""
+
+    def __init__(self, sys: LoopSystem, k: np.ndarray | None = None) -> None:
+        k = np.arange(len(sys.t_r)) if k is None else k
+        n, na = sys.n_vars, sys.n_angles
+        self.r, self.delta = sys.t_r[k], sys.t_delta[k]
+        ang, sl = sys.t_ang[k], sys.t_sl[k]
+        self.ang_list, self.sl_list = ang.tolist(), sl.tolist()
+        self.at_ang = np.where(ang < 0, n, ang)
+        self.at_sl = np.where(sl < 0, n, na + sl)
+
+    def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The term vectors z and their directions e = e^{j(φ + δ)} at ``q`` (one configuration)."""
+        qx = np.concatenate((q, _ZERO))
+        e = np.exp(1j * (qx[self.at_ang] + self.delta))
+        return (self.r + qx[self.at_sl]) * e, e
+
+
+_ZERO = np.zeros(1)
+
+
+class LoopGroup(TermIndex):
+    """The equations of ``loops`` in the variables ``cols``, index data gathered once for repeated evaluation
+    (Newton at t = 0): the same arithmetic as :func:`loop_residual` and :func:`loop_jacobian`, bit for bit. Its
+    term vectors are those of the terms ``k`` the loops use (:meth:`at`, or the whole system's at ``k``)."""
+
+    def __init__(self, sys: LoopSystem, loops: list[int], cols: list[int]) -> None:
+        self.k = loop_terms(sys, loops)
+        super().__init__(sys, self.k)
+        self.Cg = sys.C[np.ix_(loops, self.k)]
+        na, ang, sl = sys.n_angles, self.ang_list, self.sl_list
+        shape = (len(ang), len(cols))  # d z_t / d col: j·z_t where col turns t, e_t where col is t's slider
+        self.on_angle = np.array([[a == c for c in cols] for a in ang], complex).reshape(shape)
+        self.on_slider = np.array([[c >= na and i == c - na for c in cols] for i in sl], complex).reshape(shape)
+
+    def residual(self, zk: np.ndarray) -> np.ndarray:
+        """The group's loops' closure at its term vectors ``zk``."""
+        return zk @ self.Cg.T
+
+    def jacobian(self, zk: np.ndarray, ek: np.ndarray) -> np.ndarray:
+        """[Re; Im] of the loops' Jacobian in ``cols`` at its term vectors and directions."""
+        J = self.Cg @ ((1j * zk)[:, None] * self.on_angle + ek[:, None] * self.on_slider)
+        return np.concatenate((J.real, J.imag))
 
 
 def loop_jacobian(sys: LoopSystem, q: np.ndarray, loops: list[int], cols: list[int]) -> np.ndarray:

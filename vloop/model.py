@@ -180,11 +180,11 @@ class Mechanism:
     loads: tuple[Load, ...] = ()
 
     # ----- derived views (pure functions of the description) -----
-    @property
+    @cached_property
     def ground(self) -> str:
         return next(n for n, lk in self.links.items() if lk.ground)
 
-    @property
+    @cached_property
     def body_names(self) -> tuple[str, ...]:
         """Ground first, then links in file order, then slider blocks."""
         return (self.ground, *(n for n, lk in self.links.items() if not lk.ground), *self.sliders)
@@ -236,11 +236,16 @@ class Mechanism:
     @cached_property
     def scale(self) -> float:
         """A length scale: the diagonal of the bounding box of all joints/points at t = 0."""
-        pts = np.array([*self.joints.values(), *(p.at for p in self.points.values())], float)
+        pts = [*self.joints.values(), *(p.at for p in self.points.values())]
         if len(pts) < 2:
             return 1.0
-        span = np.ptp(pts, axis=0)
+        span = [_ptp([float(x) for x in axis]) for axis in zip(*pts, strict=True)]  # np.ptp's, in Python numbers
         return float(max(math.hypot(*span), 1e-300))
+
+
+def _ptp(xs: list[float]) -> float:
+    """max − min (nan if any x is nan, as numpy's)."""
+    return max(xs) - min(xs) if all(x == x for x in xs) else math.nan
 
 
 # ---------------------------------------------------------------- bodies
@@ -256,11 +261,15 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
     for s in m.sliders.values():
         guided.setdefault(s.guide, []).append(s)
 
+    carried: dict[str, tuple[str, ...]] = {}  # the points on each body
+    for p in m.points.values():
+        carried[p.link] = (*carried.get(p.link, ()), p.name)
+
     def pos(name: str) -> tuple[float, float]:
         return m.points[name].at if name in m.points else m.joints[name]
 
     def on_body(body: str, joints: tuple[str, ...]) -> tuple[str, ...]:
-        return joints + tuple(p.name for p in m.points.values() if p.link == body)
+        return joints + carried.get(body, ())
 
     for name, lk in m.links.items():
         members = on_body(name, lk.joints)
@@ -276,7 +285,8 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
         c, s = math.cos(th), math.sin(th)
         local = {}
         for j in members:
-            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            x, y = pos(j)
+            dx, dy = x - o[0], y - o[1]
             local[j] = (c * dx + s * dy, -s * dx + c * dy)
         if len(lk.joints) >= 2:  # the x axis points at the second joint by definition
             local[lk.joints[1]] = (lk.length if lk.length is not None else math.dist(o, pos(lk.joints[1])), 0.0)
@@ -287,7 +297,8 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
         c, s = math.cos(th), math.sin(th)
         local = {}
         for j in on_body(name, (sl.joint,)):
-            dx, dy = pos(j)[0] - o[0], pos(j)[1] - o[1]
+            x, y = pos(j)
+            dx, dy = x - o[0], y - o[1]
             local[j] = (c * dx + s * dy, -s * dx + c * dy)
         out[name] = Body(name, "block", (sl.joint,), o, th, local, guide=sl.guide)
     return out

@@ -10,10 +10,11 @@ the assembly branch σ of each is read from the t = 0 configuration.
 
 from __future__ import annotations
 
+import heapq
 import math
+from collections import deque
 from dataclasses import dataclass
 
-import networkx as nx
 import numpy as np
 
 from .errors import MechanismError
@@ -35,34 +36,129 @@ class Structure:
 
 def analyse(sys: LoopSystem) -> Structure:
     """Dulmage–Mendelsohn at the level of loops: a maximum matching of equation rows to unknowns, then the
-    strongly connected components of "this unknown's equation needs that unknown", dependencies first."""
+    strongly connected components of "this unknown's equation needs that unknown", dependencies first.
+
+    Where every unknown is matched, the components, the loops of each and the order are the same whatever
+    matching is taken (the fine Dulmage–Mendelsohn decomposition is unique; a loop's two rows need the
+    same unknowns, so they fall in one group and the lowest loop numbers of the groups differ): any
+    maximum matching serves (plain augmenting paths). Otherwise networkx's finds the free unknowns.
+    """
     unk = list(sys.unknowns)
     if not unk:
         return Structure(((tuple(range(len(sys.loops))), ()),) if sys.loops else (), bool(sys.loops))
-    match, unmatched_rows = _matching(sys, unk)
-    if unmatched_rows:
+    row_of = _augmenting_matching(sys, unk)
+    if len(row_of) < len(unk):
+        _matching(sys, unk)  # raises, naming the unknowns no loop fixes
+    if len(row_of) < 2 * len(sys.loops):
         return Structure(((tuple(range(len(sys.loops))), tuple(unk)),), True)
     unk_set = set(unk)
-    D = nx.DiGraph()
-    D.add_nodes_from(unk)
+    needs = {v: [w for w in sys.loops[row_of[v]].variables if w in unk_set and w != v] for v in unk}
+    comps = _strong_components(unk, needs)
+    comp_of = {v: c for c, members in enumerate(comps) for v in members}
+    first_loop = [min(row_of[v] for v in members) for members in comps]
+    waiting = [0] * len(comps)  # groups each group still waits for
+    users: list[set[int]] = [set() for _ in comps]
     for v in unk:
-        r = match[("var", v)]
-        for w in sys.loops[r[1]].variables:
-            if w in unk_set and w != v:
-                D.add_edge(v, w)  # v's equation needs w
-    cond = nx.condensation(D)
+        for w in needs[v]:
+            a, b = comp_of[v], comp_of[w]
+            if a != b and a not in users[b]:
+                users[b].add(a)
+                waiting[a] += 1
+    ready = [(first_loop[c], c) for c in range(len(comps)) if not waiting[c]]
+    heapq.heapify(ready)
     groups = []
-    # dependencies first; among groups ready together, the lower loop number first
-    first_loop = {c: min(match[("var", v)][1] for v in cond.nodes[c]["members"]) for c in cond.nodes}
-    for c in nx.lexicographical_topological_sort(cond.reverse(copy=False), key=first_loop.get):
-        vars_ = sorted(cond.nodes[c]["members"])
-        loops = sorted({match[("var", v)][1] for v in vars_})
-        groups.append((tuple(loops), tuple(vars_)))
+    while ready:  # dependencies first; among groups ready together, the lower loop number first
+        _, c = heapq.heappop(ready)
+        vars_ = sorted(comps[c])
+        groups.append((tuple(sorted({row_of[v] for v in vars_})), tuple(vars_)))
+        for a in users[c]:
+            waiting[a] -= 1
+            if not waiting[a]:
+                heapq.heappush(ready, (first_loop[a], a))
     return Structure(tuple(groups))
+
+
+def _augmenting_matching(sys: LoopSystem, unk: list[int]) -> dict[int, int]:
+    """A maximum matching of unknowns to loop rows (two per loop), by augmenting paths: unknown → its row's loop."""
+    loops_of: dict[int, list[int]] = {v: [] for v in unk}
+    for lp in sys.loops:
+        for v in lp.variables:
+            if v in loops_of:
+                loops_of[v].append(lp.index)
+    free_rows = [2] * len(sys.loops)  # rows of each loop not matched yet
+    row_of: dict[int, int] = {}  # unknown → loop of its matched row
+    matched: list[list[int]] = [[] for _ in sys.loops]  # loop → the unknowns matched to its rows
+    for v in unk:
+        prev = {v: None}  # breadth-first search for a loop with a free row, through matched unknowns
+        queue, end = deque([v]), None
+        while queue and end is None:
+            x = queue.popleft()
+            for li in loops_of[x]:
+                if free_rows[li]:
+                    end = (x, li)
+                    break
+                for y in matched[li]:
+                    if y not in prev:
+                        prev[y] = x
+                        queue.append(y)
+        if end is None:
+            continue
+        x, li = end
+        free_rows[li] -= 1
+        while x is not None:  # shift the matches along the path: x takes loop li, leaving its own to prev[x]
+            old = row_of.get(x)
+            if old is not None:
+                matched[old].remove(x)
+            row_of[x] = li
+            matched[li].append(x)
+            x, li = prev[x], old
+    return row_of
+
+
+def _strong_components(nodes: list[int], succ: dict[int, list[int]]) -> list[list[int]]:
+    """Strongly connected components (Tarjan's algorithm, iterative)."""
+    index: dict[int, int] = {}
+    low: dict[int, int] = {}
+    stack: list[int] = []
+    on_stack: set[int] = set()
+    comps: list[list[int]] = []
+    for root in nodes:
+        if root in index:
+            continue
+        work = [(root, 0)]
+        while work:
+            v, i = work.pop()
+            if i == 0:
+                index[v] = low[v] = len(index)
+                stack.append(v)
+                on_stack.add(v)
+            for k in range(i, len(succ[v])):
+                w = succ[v][k]
+                if w not in index:
+                    work += [(v, k + 1), (w, 0)]
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            else:
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    comps.append(comp)
+                if work:
+                    u = work[-1][0]
+                    low[u] = min(low[u], low[v])
+    return comps
 
 
 def _matching(sys: LoopSystem, unk: list[int]) -> tuple[dict, list]:
     """Hopcroft–Karp matching of loop rows (Re, Im) to unknowns; raises if an unknown is fixed by no loop."""
+    import networkx as nx
+
     unk_set = set(unk)
     B = nx.Graph()
     rows = [("row", lp.index, part) for lp in sys.loops for part in (0, 1)]
@@ -84,25 +180,36 @@ def _matching(sys: LoopSystem, unk: list[int]) -> tuple[dict, list]:
     return match, [r for r in rows if r not in match]
 
 
-def block_structure(sys: LoopSystem, structure: Structure, q0: np.ndarray, method: str) -> tuple[Block, ...]:
+def block_structure(
+    sys: LoopSystem, structure: Structure, q0: np.ndarray, method: str, z: np.ndarray | None = None
+) -> tuple[Block, ...]:
     """The blocks to solve, in order: each group classified (closed-form dyad kind and branch σ at the
-    t = 0 assembly) under method "auto"; one Newton block over everything under "newton"."""
+    t = 0 assembly) under method "auto"; one Newton block over everything under "newton". ``z``: the term
+    vectors at ``q0``, where known."""
     if not sys.unknowns:
         return ()
     if method == "newton" or structure.over_determined:
         return (Block(tuple(range(len(sys.loops))), tuple(sys.unknowns), "newton"),)
-    return tuple(classify(sys, q0, loops, unknowns) for loops, unknowns in structure.groups)
+    zs = (term_values(sys, q0) if z is None else z).tolist()  # Python numbers: numpy's scalar operations
+    return tuple(classify(sys, q0, loops, unknowns, zs) for loops, unknowns in structure.groups)
 
 
-def classify(sys: LoopSystem, q0: np.ndarray, loops: tuple[int, ...], unknowns: tuple[int, ...]) -> Block:
-    """Closed-form kind and assembly branch (at the t = 0 assembly) of a one-loop block; "newton" otherwise."""
+def classify(
+    sys: LoopSystem,
+    q0: np.ndarray,
+    loops: tuple[int, ...],
+    unknowns: tuple[int, ...],
+    z: np.ndarray | list[complex] | None = None,
+) -> Block:
+    """Closed-form kind and assembly branch (at the t = 0 assembly) of a one-loop block; "newton" otherwise.
+    ``z``: the term vectors at ``q0``, where known."""
     na = sys.n_angles
     if len(loops) != 1 or len(unknowns) != 2:
         return Block(loops, unknowns, "newton")
     lp = sys.loops[loops[0]]
     angs = [v for v in unknowns if v < na]
     sls = [v - na for v in unknowns if v >= na]
-    z = term_values(sys, q0)
+    z = term_values(sys, q0) if z is None else z
     phi = np.append(q0[:na], 0.0)
     terms = list(zip(lp.terms, lp.signs, strict=True))
 
