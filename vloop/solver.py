@@ -442,8 +442,7 @@ def _in_memory_chunk(sys: LoopSystem, n: int) -> int:
     the run (the Jansen pair, 576 bytes a row, 48,000 samples against 4,800: 1.19–1.21× in one chunk, 1.17× in
     chunks of 24,000, 1.11× of 16,000, 0.99–1.03× of 12,000, 1.05× of 8,000; the eight-bar, 290 bytes a row: 0.81×
     in one chunk, 0.85× in chunks of 24,000; CPU time, best of 12 in one process)."""
-    na, ns = sys.n_angles, len(sys.slider_names)
-    row = 16 * (na + 1) + 8 * na + 2 * 8 * (na + 1) + 3 * 8 * (ns + 1)  # _State: E, TH, W and AL, S/SD/SDD
+    row = budget.state_bytes(sys)
     rows = IN_MEMORY * CHUNK
     if row > WIDE_ROW:
         rows = min(rows, max(CHUNK // 4, STATE_BYTES // row))
