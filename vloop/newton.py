@@ -448,8 +448,7 @@ class _Ctx:
         p, st, na, blk = self.p, self.st, self.na, self.blk
         X = _s.invert_rows(J) if blk.square else None  # one inverse for both right-hand sides
         for what, out in (("v", self.xd), ("a", self.xdd)):
-            R = -(p.total.vel(st, rows) if what == "v" else p.total.acc(st, rows))
-            rhs = np.concatenate([R.real, R.imag], axis=1)
+            rhs = _s.known_rhs(p.total, st, rows, what)
             val = _s.least_squares_rows(J, rhs) if X is None else (X @ rhs[..., None])[..., 0]
             out[rows] = val
             if what == "v":

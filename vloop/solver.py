@@ -676,7 +676,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
     rows = grid.out[grid.skip :][grid.out[grid.skip :] < n_ok]  # the requested samples solved
     points, loops = _system_sums(sys)
     k = _as_slice(rows)
-    P, V, A = points.pos(st, k), points.vel(st, k), points.acc(st, k)
+    P, V, A = (points.by_column(st, k, what) for what in ("p", "v", "a"))  # (points, rows) each
     cols: dict[str, np.ndarray] = {}
 
     def column(state: np.ndarray, j: int) -> np.ndarray:  # a state column's rows, as an array of its own
@@ -692,9 +692,9 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
             cols[f"{name}.omega"] = np.zeros(len(rows))
             cols[f"{name}.alpha"] = np.zeros(len(rows))
     for i, name in enumerate(sys.point_names):
-        cols[f"{name}.x"], cols[f"{name}.y"] = P[:, i].real, P[:, i].imag
-        cols[f"{name}.vx"], cols[f"{name}.vy"] = V[:, i].real, V[:, i].imag
-        cols[f"{name}.ax"], cols[f"{name}.ay"] = A[:, i].real, A[:, i].imag
+        cols[f"{name}.x"], cols[f"{name}.y"] = P[i].real, P[i].imag
+        cols[f"{name}.vx"], cols[f"{name}.vy"] = V[i].real, V[i].imag
+        cols[f"{name}.ax"], cols[f"{name}.ay"] = A[i].real, A[i].imag
     for i, name in enumerate(sys.slider_names):
         cols[f"{name}.s"], cols[f"{name}.v"], cols[f"{name}.a"] = (column(q, i) for q in (st.S, st.SD, st.SDD))
     if run.sink is not None:  # (the sink copies each column once: a state column is given as a view)
@@ -732,8 +732,8 @@ def _health(run: _Run, st: _State, t: np.ndarray, rows: np.ndarray, solved: _Sol
     k = _as_slice(rows)
     residual = np.zeros(len(rows))
     if len(sys.loops):
-        F = loops.pos(st, k).view(float) * (1.0 / run.scale)  # in sizes first: the squares cannot overflow
-        np.sqrt(row_max(F[:, 0::2] * F[:, 0::2] + F[:, 1::2] * F[:, 1::2]), out=residual)
+        F = loops.by_column(st, k, "p").view(float) * (1.0 / run.scale)  # in sizes: the squares cannot overflow
+        np.sqrt(np.max(F[:, 0::2] * F[:, 0::2] + F[:, 1::2] * F[:, 1::2], axis=0), out=residual)
     cond = np.ones(len(rows))
     if solved.conds:
         cond = solved.conds[0][k].copy()
