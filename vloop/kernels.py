@@ -300,13 +300,15 @@ def _turning(st: _State, k: slice | np.ndarray, a: int, what: str) -> np.ndarray
 
 
 def _add_line(col: np.ndarray, s: np.ndarray, h: complex) -> None:
-    """col += h·s for real s: on the real or imaginary part alone for a line along an axis."""
-    if h.imag == 0:
-        col.real += s * h.real
-    elif h.real == 0:
-        col.imag += s * h.imag
+    """col += h·s for real s: on the real or imaginary part alone for a line along an axis (without the product
+    for a unit coefficient, the usual one: x or y)."""
+    part, c = (col.real, h.real) if h.imag == 0 else (col.imag, h.imag) if h.real == 0 else (col, h)
+    if c == 1:
+        np.add(part, s, out=part)
+    elif c == -1:
+        np.subtract(part, s, out=part)
     else:
-        col += s * h
+        part += s * c
 
 
 def _sum_parts(sys: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> tuple:
