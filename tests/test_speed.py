@@ -26,7 +26,7 @@ from vloop import kernels, solver
 from vloop.budget import MemoryBudgetError, parse_size
 from vloop.cli import main
 from vloop.compare import assert_histories_close
-from vloop.loops import LoopSystem
+from vloop.loops import LoopSystem, loop_jacobian
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -136,6 +136,55 @@ def test_point_outputs_are_their_terms_summed(path, entry_by_entry, monkeypatch)
     for ref, (x, y) in zip(points_by_definition(system, res), (("x", "y"), ("vx", "vy"), ("ax", "ay")), strict=True):
         got = np.stack([res.columns[f"{p}.{x}"] + 1j * res.columns[f"{p}.{y}"] for p in system.point_names], axis=1)
         assert np.max(np.abs(got - ref)) <= 1e-12 * np.max(np.abs(ref)), (x, np.max(np.abs(got - ref)))
+
+
+def variables_of(system: LoopSystem, res: vloop.Result) -> np.ndarray:
+    """(rows, n_vars): every angle and slider variable per sample, from the Result's columns."""
+    q = np.zeros((len(res.t), system.n_vars))
+    for name, a, offset in system.link_outputs:
+        if a >= 0:
+            q[:, a] = res.columns[f"{name}.theta"] - offset
+    for i, name in enumerate(system.slider_names):
+        q[:, system.n_angles + i] = res.columns[f"{name}.s"]
+    return q
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "eightbar",
+        "fourbar_textbook_example",
+        "slider_crank_offset",
+        "jansen_pair",
+        "whitworth_quick_return",
+        "inverted_slider_crank",
+        "fourbar_nongrashof_rocking",
+        "fourbar_nongrashof_past_limit",
+    ],
+)
+def test_closed_form_condition_numbers_are_the_svd_ones(name):
+    """health.cond on the closed-form path is, per sample, the largest 2-norm condition number (numpy's SVD) of the
+    blocks' Jacobians, angle columns divided by the mechanism size — each Jacobian built by loops.loop_jacobian from
+    the Result's own angles and sliders, on every dyad kind and up to a toggle (cond ≈ 2e3). Relative tolerance
+    1e-13 + 16·ε·cond: an exact formula for a 2×2 matrix against the SVD, both with ~cond·ε of round-off (measured
+    ≤ 3.7·ε·cond)."""
+    mech = vloop.load(MECHANISMS / f"{name}.toml")
+    times = np.linspace(0.0, mech.times[-1], 157)
+    if name == "fourbar_nongrashof_past_limit":  # up to the toggle: cond → ∞ (the run stops at cond ≈ 2e3)
+        lim = math.acos((3.0**2 + 6.0**2 - 8.5**2) / (2 * 3.0 * 6.0))
+        times = (lim - mech.drivers[0].x0) / mech.drivers[0].v0 - np.geomspace(1e-1, 1e-9, 300)
+    system = vloop.compile(mech)
+    assert all(b.kind in ("RRR", "RRP", "RPR") for b in system.blocks)
+    res, _ = outcome(lambda: vloop.solve(system, times))
+    q = variables_of(system, res)
+    worst = np.zeros(len(q))
+    for b in system.blocks:
+        scale = np.where(np.array(b.unknowns) < system.n_angles, 1.0 / system.mechanism.scale, 1.0)
+        J = np.array([loop_jacobian(system, row, list(b.loops), list(b.unknowns)) for row in q]) * scale
+        worst = np.maximum(worst, np.linalg.cond(J))
+    assert worst.max() > (1e3 if name == "fourbar_nongrashof_past_limit" else 1.8)
+    # both sides carry ~cond·ε of relative round-off (the Jacobian's entries, the smallest singular value)
+    assert np.all(np.abs(res.health["cond"] - worst) <= (1e-13 + 16 * np.finfo(float).eps * worst) * worst)
 
 
 def test_change_points_across_chunk_borders():

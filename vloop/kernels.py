@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -103,7 +103,7 @@ class _Entries:
     lines: list[tuple[int, int, complex]]
 
     @classmethod
-    def of(cls, acols: Any, G: list, scols: Any, H: list, na: int, c0: list[complex]) -> _Entries:
+    def of(cls, acols: Iterable[int], G: list, scols: Iterable[int], H: list, na: int, c0: list[complex]) -> _Entries:
         """From G's rows (for angle columns ``acols``; the padding column na: the ground) and H's rows (for slider
         columns ``scols``); ``c0``: ground vectors given apart."""
         const = list(c0)
@@ -121,8 +121,9 @@ class _Entries:
         """Itself where entry by entry is the cheaper way to evaluate the sum whose dense product reads R and H,
         else None. Entry by entry costs about a pass over the rows per entry (half one for a slider along a
         ground line: real arithmetic), the dense product a pass per ~20 multiply-adds of a row plus two passes of
-        calls and copies: fitted on the catalog's sums at 4,800 and 48,000 samples (within 2 % of the faster
-        choice for each sum there; always one or always the other: 8 % and 31–71 % slower)."""
+        calls and copies. Fitted on the catalog's sums at 4,800 and 48,000 samples: their total time is then
+        within 2 % of the faster choice taken for each sum (always entry by entry: 8 % and 3 % over it; always
+        the dense product: 31 % and 71 %)."""
         work = len(self.rigid) + 0.5 * len(self.lines)
         few = len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES
         return self if few and work <= (R.size + H.size) / 20 + 2 else None
@@ -135,7 +136,9 @@ class _Sum:
     (H: only s varies) and slider vectors on moving guides. Complex products are taken as real ones on the
     interleaved [Re, Im] view (_real_reps): half the work. A sum that reads most angle columns reads whole state
     rows, the ground vectors on the padding column (E = 1, ω = α = 0); one that reads a few gathers them.
-    Evaluated for positions, velocities or accelerations from the state arrays."""
+    Evaluated for positions, velocities or accelerations from the state arrays: (rows, K) by pos/vel/acc, or
+    (K, rows) by :meth:`by_column`, entry by entry (``entries``) where the sum has so few that this is cheaper
+    than the dense products (most sums: a point or loop sees one or two of the mechanism's vectors per link)."""
 
     acols: np.ndarray | None  # state angle columns read (None: whole rows, padding included, c0 in R)
     R: np.ndarray  # (2·len(acols), 2K): real representation of G = Σ M·r·e^{jδ} per turning angle
@@ -148,7 +151,7 @@ class _Sum:
     s_r: np.ndarray
     s_cd: np.ndarray
     Ms: np.ndarray
-    entries: _Entries | None = None  # the same sum entry by entry, for a sum of few entries (see columns)
+    entries: _Entries | None = None  # the same sum entry by entry, where that is the cheaper way (by_column)
 
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
