@@ -699,7 +699,8 @@ def det_sign(J: np.ndarray) -> np.ndarray:
 @dataclass
 class _Cols2:
     """The two Jacobian columns of a one-loop block (j·W_a·E_a for an angle, U for a slider) as contiguous real
-    and imaginary parts, their cross product det and 1/det: shared by the health columns and both rates."""
+    and imaginary parts, their cross product det and 1/det, and their squared lengths (one number where the column
+    is a constant times a unit e^{jθ}): shared by the health columns and both rates."""
 
     c1r: np.ndarray
     c1i: np.ndarray
@@ -707,6 +708,8 @@ class _Cols2:
     c2i: np.ndarray
     det: np.ndarray
     inv_det: np.ndarray
+    n1: np.ndarray | float
+    n2: np.ndarray | float
 
     def head(self, n: int) -> _Cols2:
         """The first n rows (a constant column stays a constant)."""
@@ -715,19 +718,25 @@ class _Cols2:
 
 def _columns(p: _Plan, st: _State, k: slice) -> _Cols2:
     """The Jacobian columns of a one-loop (two-unknown) block on rows ``k``."""
-    cols = []
+    cols, norms = [], []
     for v in p.block.unknowns:
         if v in p.unk_ang:
-            cols.append(1j * _w(p, st, k, v) * st.E[k, v])
-        else:  # a slider's direction: a constant along a ground line
-            cols.append(_u(p, st, k, p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]))
+            W = _w(p, st, k, v)
+            cols.append(1j * W * st.E[k, v])
+            norms.append(abs(W) ** 2 if np.ndim(W) == 0 else None)  # |E| = 1: a rigid link's length, squared
+        else:  # a slider's direction: a constant along a ground line, a constant times E on a moving one
+            i = p.unk_sl[p.block.unknowns.index(v) - len(p.unk_ang)]
+            cols.append(_u(p, st, k, i))
+            norms.append(abs(p.u_dir[i][1]) ** 2)
     n = len(st.E[k])
     if all(np.ndim(c) == 0 for c in cols):  # both constant (two sliders along ground lines): one per row all the same
         cols = [np.full(n, c) for c in cols]
     c1r, c1i, c2r, c2i = (np.ascontiguousarray(x) if np.ndim(x) else float(x) for c in cols for x in (c.real, c.imag))
     det = c1r * c2i - c1i * c2r
+    n1 = c1r * c1r + c1i * c1i if norms[0] is None else norms[0]
+    n2 = c2r * c2r + c2i * c2i if norms[1] is None else norms[1]
     with np.errstate(divide="ignore"):
-        return _Cols2(c1r, c1i, c2r, c2i, det, 1.0 / det)
+        return _Cols2(c1r, c1i, c2r, c2i, det, 1.0 / det, n1, n2)
 
 
 def _store(p: _Plan, st: _State, k: slice, vals: np.ndarray, what: str, na: int) -> None:
@@ -745,12 +754,17 @@ def _block_health(
     c = cols if cols is not None else _columns(p, st, k)
     s1 = 1.0 / scale if p.block.unknowns[0] in p.unk_ang else 1.0  # angle columns in lengths: per size
     s2 = 1.0 / scale if p.block.unknowns[1] in p.unk_ang else 1.0
-    f2 = (c.c1r * c.c1r + c.c1i * c.c1i) * (s1 * s1) + (c.c2r * c.c2r + c.c2i * c.c2i) * (s2 * s2)
-    ad = np.abs(c.det) * (s1 * s2)
-    root = np.sqrt(np.maximum(f2 * f2 - 4 * ad * ad, 0.0))  # σ_max² − σ_min² of the scaled 2×2 block
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cond = (f2 + root) / (2 * ad)  # σ_max/σ_min = (σ_max² + ... )/(2·|det|); |det| = 0 gives inf
-    cond[ad == 0] = np.inf
+    f2 = c.n1 * (s1 * s1) + c.n2 * (s2 * s2)  # σ_max² + σ_min² of the scaled block (one number for most dyads)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        q = f2 / (np.abs(c.det) * (s1 * s2))  # ... over σ_max·σ_min = |det|: κ + 1/κ (∞ where det = 0)
+        cond = q * q
+        cond -= 4.0
+        np.maximum(cond, 0.0, out=cond)
+        np.sqrt(cond, out=cond)
+        cond += q
+        cond *= 0.5  # κ = (q + √(q² − 4))/2
+    if not (np.ndim(f2) == 0 and f2 > 0):  # 0/0 where both columns vanish with det: singular too
+        cond[c.det == 0] = np.inf
     return cond, np.sign(c.det)
 
 
