@@ -172,17 +172,54 @@ def reference_assemble_q(sys, struct) -> tuple[np.ndarray, int]:
 
 
 def test_assembly_is_the_step_by_step_one(systems):
-    """The compiled q0 and the report are those of Newton by loop_residual/loop_jacobian, bit for bit."""
+    """The compiled q0 is that of Newton by loop_residual/loop_jacobian with the same iterations: bit for bit where
+    a group is solved by numpy, within a few units in the last place where a one-loop group of two unknowns is
+    solved in Python numbers (math.cos/sin, Cramer's rule: 2 of 600 generated mechanisms differ, by ≤ 8.9e-16;
+    none of the catalog). The report's closure and distances are those at q0."""
+    differ = 0
     for sys in systems:
         if sys.mechanism.options.get("branches"):
             continue  # re-assembled by the closed forms after the branch flip
         struct = structure.analyse(sys)
         q, iterations = reference_assemble_q(sys, struct)
-        assert same(sys.q0, q), sys.mechanism.name
+        assert np.all(np.abs(sys.q0 - q) <= 4 * np.spacing(np.maximum(np.abs(q), 1.0))), sys.mechanism.name
+        differ += not same(sys.q0, q)
         assert sys.assembly["iterations"] == iterations
-        closure = float(np.max(np.abs(loop_residual(sys, q)))) / sys.mechanism.scale
+        closure = float(np.max(np.abs(loop_residual(sys, sys.q0)))) / sys.mechanism.scale
         assert sys.assembly["closure"] == closure
-        assert sys.assembly == {**sys.assembly, **assembly.moved(sys, q)}
+        assert sys.assembly == {**sys.assembly, **assembly.moved(sys, sys.q0)}
+    assert differ <= len(systems) // 50
+
+
+def test_a_dyad_group_assembles_like_least_squares():
+    """assembly._Dyad's residual and Jacobian are loop_residual's and loop_jacobian's (to round-off) at random
+    configurations, and a group it cannot step (a singular Jacobian) is left to numpy's least squares."""
+    rng = np.random.default_rng(11)
+    mechs = [vloop.load(p) for p in mechanism_files()] + [item.mechanism for item in corpus.generate(40, 5)[0]]
+    checked = 0
+    for mech in mechs:
+        sys = vloop.compile(mech)
+        for loops, unknowns in structure.analyse(sys).groups:
+            if len(loops) != 1 or len(unknowns) != 2:
+                continue
+            dyad = assembly._Dyad(sys, loops[0], list(unknowns))
+            for _ in range(3):
+                q = sys.q0 + rng.normal(0, 0.3, sys.n_vars)
+                F, (j0, j1) = dyad.residual_jacobian(q.tolist())
+                ref_F = loop_residual(sys, q, list(loops))[0]
+                ref_J = loop_jacobian(sys, q, list(loops), list(unknowns))
+                size = sys.mechanism.scale
+                assert abs(F - ref_F) <= 1e-14 * size
+                np.testing.assert_allclose(dyad.jacobian_at(q), ref_J, rtol=0, atol=1e-14 * size)
+                assert np.allclose([[j0.real, j1.real], [j0.imag, j1.imag]], ref_J, rtol=0, atol=1e-14 * size)
+                checked += 1
+    assert checked > 100
+    singular = vloop.compile(vloop.load(mechanism_files()[0]))
+    loops, unknowns = next((lp, un) for lp, un in structure.analyse(singular).groups if len(un) == 2)
+    dyad = assembly._Dyad(singular, loops[0], list(unknowns))
+    dyad.terms = [(0.0, *t[1:]) for t in dyad.terms]  # every coefficient zero: J = 0
+    q = singular.q0.copy()
+    assert dyad.close(q) is None and same(q, singular.q0)
 
 
 def test_loop_group_is_loop_residual_and_jacobian(systems):

@@ -39,10 +39,18 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     z_typed, e_typed = every.at(q)
     typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
     initial = _check_typed_closure(sys, q, z_typed)
-    groups = [(LoopGroup(sys, list(lp), list(un)), list(un)) for lp, un in structure.groups if un]
+    groups: list[tuple[LoopGroup | _Dyad, list[int]]] = []
     iterations = 0
-    for n, (g, unknowns) in enumerate(groups):  # the first group starts from the typed q: its vectors are known
-        iterations += _close(g, q, unknowns, (z_typed[g.k], e_typed[g.k]) if n == 0 else None)
+    for lp, un in structure.groups:
+        if not un:
+            continue
+        g: LoopGroup | _Dyad | None = _Dyad(sys, lp[0], list(un)) if len(lp) == 1 and len(un) == 2 else None
+        steps = g.close(q) if g is not None else None
+        if steps is None:  # numpy's least squares; the first group starts from the typed q: its vectors are known
+            g = LoopGroup(sys, list(lp), list(un))
+            steps = _close(g, q, list(un), (z_typed[g.k], e_typed[g.k]) if not groups else None)
+        groups.append((g, list(un)))
+        iterations += steps
     z, e = every.at(q) if groups else (z_typed, e_typed)
     closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
     if closure > 1e-11:
@@ -54,7 +62,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     z0 = z_typed if typed else every.at(sys.coords_q)[0]
     report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
     for g, unknowns in groups:
-        _check_rank(sys, g.jacobian(z[g.k], e[g.k]), unknowns)
+        _check_rank(sys, g.jacobian_at(q) if isinstance(g, _Dyad) else g.jacobian(z[g.k], e[g.k]), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report, z
@@ -121,6 +129,64 @@ def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarra
         if _max_abs(dq) <= 1e-14 * (1 + _max_abs(q[unknowns].tolist())):
             return it
     return 50
+
+
+class _Dyad:
+    """One loop in two unknowns, Newton at t = 0 in Python numbers (numpy's calls cost more than the arithmetic of
+    a few terms): the same steps as :func:`_close` on its LoopGroup — term vectors z = (r + s)·e^{j(φ + δ)}, their
+    derivatives j·z (an angle) and e^{j(φ + δ)} (a slider), the 2×2 step by Cramer's rule."""
+
+    def __init__(self, sys: LoopSystem, loop: int, unknowns: list[int]) -> None:
+        na = sys.n_angles
+        row = sys.C[loop]
+        self.unknowns = unknowns
+        k = np.flatnonzero(row)
+        self.terms = []  # (sign, angle or -1, slider variable or -1, r, δ, the unknown turning it, sliding it or -1)
+        columns = (x.tolist() for x in (row[k], sys.t_ang[k], sys.t_sl[k], sys.t_r[k], sys.t_delta[k]))
+        for c, a, i, r, d in zip(*columns, strict=True):
+            v = na + i if i >= 0 else -1
+            turn, slide = (unknowns.index(x) if x in unknowns else -1 for x in (a, v))
+            self.terms.append((float(c), a, v, r, d, turn, slide))
+
+    def residual_jacobian(self, q: list[float]) -> tuple[complex, list[complex]]:
+        """The loop's closure Σ c·z and its two complex Jacobian columns at the variables q."""
+        F, J = 0j, [0j, 0j]
+        for c, a, i, r, d, ua, ui in self.terms:
+            phi = (q[a] if a >= 0 else 0.0) + d
+            e = complex(math.cos(phi), math.sin(phi))
+            z = (r + (q[i] if i >= 0 else 0.0)) * e
+            F += c * z
+            if ua >= 0:
+                J[ua] += c * 1j * z
+            if ui >= 0:
+                J[ui] += c * e
+        return F, J
+
+    def jacobian_at(self, q: np.ndarray) -> np.ndarray:
+        """[Re; Im] of the Jacobian at q (2×2), for the rank check."""
+        _, (j0, j1) = self.residual_jacobian(q.tolist())
+        return np.array([[j0.real, j1.real], [j0.imag, j1.imag]])
+
+    def close(self, q: np.ndarray) -> int | None:
+        """Newton from q, written into q; the iterations, or None (q untouched) where a step is singular or not
+        finite or 50 do not converge: the caller then takes :func:`_close`'s least-squares path."""
+        x = q.tolist()
+        u0, u1 = self.unknowns
+        for it in range(1, 51):
+            F, (j0, j1) = self.residual_jacobian(x)
+            det = j0.real * j1.imag - j1.real * j0.imag
+            if det == 0 or not math.isfinite(det):
+                return None
+            d0 = (j1.real * F.imag - j1.imag * F.real) / det  # J·d = −[Re F; Im F]
+            d1 = (j0.imag * F.real - j0.real * F.imag) / det
+            if not (math.isfinite(d0) and math.isfinite(d1)):
+                return None
+            x[u0] += d0
+            x[u1] += d1
+            if max(abs(d0), abs(d1)) <= 1e-14 * (1 + max(abs(x[u0]), abs(x[u1]))):
+                q[u0], q[u1] = x[u0], x[u1]
+                return it
+        return None
 
 
 def _max_abs(xs: list[float]) -> float:

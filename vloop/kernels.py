@@ -322,24 +322,22 @@ def _sum_parts(sys: LoopSystem, terms: list[int], rows: list[list[float]], K: in
     G: dict[int, list[complex]] = {}  # angle column → its row of G (the padding column na: the ground)
     H: dict[int, list[complex]] = {}  # slider → its row of H
     acols, scols, mv = set(), set(), []
+    zero = [0j] * K  # a row no term adds to
     for n, (t, row) in enumerate(zip(terms, rows, strict=True)):
         a, i = t_ang[t], t_sl[t]
         if i >= 0 and a >= 0:  # a slider vector on a moving guide
             mv.append(n)
             continue
-        rc, g = t_r[t] * t_cd[t], G.setdefault(na if a < 0 else a, [0j] * K)  # rigid, or along a ground line
-        for k, m in enumerate(row):
-            g[k] += rc * m
+        rc, key = t_r[t] * t_cd[t], na if a < 0 else a  # rigid, or along a ground line
+        G[key] = [x + rc * m for x, m in zip(G.get(key, zero), row, strict=True)]
         if i < 0:
             acols.add(a)
             continue
-        h, cd = H.setdefault(i, [0j] * K), t_cd[t]
-        for k, m in enumerate(row):
-            h[k] += cd * m
+        cd = t_cd[t]
+        H[i] = [x + cd * m for x, m in zip(H.get(i, zero), row, strict=True)]
         scols.add(i)
     acols.discard(-1)
     acol, scol = _used(acols, na + 1), _used(scols, ns + 1)
-    zero = [0j] * K  # a row no term adds to
     c0 = None
     if acol is not None:  # gathered: the ground vectors are a constant, the padding column is not read
         c0 = G.get(na, zero)
