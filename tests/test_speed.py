@@ -78,18 +78,23 @@ def test_chunk_borders_change_nothing(name, method):
         assert np.array_equal(one.health[k], many.health[k]), k
 
 
-def test_a_wide_state_is_solved_in_shorter_chunks_written_in_place():
-    """The Jansen pair (13 angle columns: 576 bytes of state a row) at 48,000 samples: solve() takes four chunks
-    of 12,000 written in place into the run's columns — the streamed run's numbers (chunks of 16,384, joined here
-    by hand) to round-off (1e-13 of peak, as for any chunk borders: numpy rounds some operations differently on
-    arrays of other lengths) and the same flags, every quantity within 1e-12 of its peak of the hand closed form
-    (validators.analytic), every column one contiguous array of the run's length."""
+def test_a_long_run_is_solved_in_chunks_written_in_place(monkeypatch):
+    """solve() on more samples than one chunk takes (forced here: chunks of up to 16,384 for the Jansen pair's
+    48,000) splits them evenly, three chunks of 16,000 written in place into the run's columns — the streamed
+    run's numbers (chunks of 16,384, joined here by hand) to round-off (1e-13 of peak, as for any chunk borders:
+    numpy rounds some operations differently on arrays of other lengths) and the same flags, every quantity within
+    1e-12 of its peak of the hand closed form (validators.analytic), every column one contiguous array of the
+    run's length."""
+    assert solver._in_memory_chunk(48_000) == 48_000 and solver._in_memory_chunk(100_000) == 50_000
+    monkeypatch.setattr(solver, "IN_MEMORY", 1)
+    assert solver._in_memory_chunk(48_000) == 16_000
     mech = vloop.load(MECHANISMS / "jansen_pair.toml")
     system = vloop.compile(mech)
-    assert solver._in_memory_chunk(system, 48_000) == 12_000
-    assert solver._in_memory_chunk(vloop.compile(vloop.load(MECHANISMS / "eightbar.toml")), 48_000) == 48_000
     t = np.linspace(mech.times[0], mech.times[-1], 48_000)
+    sinks = []
+    monkeypatch.setattr(solver, "_Sink", lambda *a, _Sink=solver._Sink: sinks.append(_Sink(*a)) or sinks[-1])
     res = vloop.solve(system, t)
+    assert len(sinks) == 1  # the run's columns, every chunk written into them
     parts = list(solver.solve_iter(system, t))
     assert len(parts) == 3
     for name, col in res.columns.items():
