@@ -117,40 +117,61 @@ class _Entries:
         lines = [(i, c, h) for c, row in zip(scols, H, strict=True) for i, h in enumerate(row) if h]
         return cls(sorted({a for _, a, _ in rigid}), rigid, const, lines)
 
-    def pay(self, R: np.ndarray, H: np.ndarray) -> _Entries | None:
-        """Itself where entry by entry is the cheaper way to evaluate the sum (whose dense product reads R and H),
-        else None: for every sum of at most FEW_ENTRIES entries and columns. Each entry is a pass over a state
-        column, contiguous in the column-major state; the dense product reads whole rows, transposed (measured on
-        every sum of the catalog at 4,800 and 48,000 samples: entry by entry the faster for each, the dense
-        product 1.5–8.6× their time in total per mechanism). A larger sum's Python loop would cost more than its
-        dense product saves."""
-        few = len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES
-        return self if few else None
+    def pay(self) -> _Entries | None:
+        """Itself where entry by entry is the cheaper way to evaluate the sum, else None: for every sum of at most
+        FEW_ENTRIES entries and columns. Each entry is a pass over a state column, contiguous in the column-major
+        state; the dense product reads whole rows, transposed (measured on every sum of the catalog at 4,800 and
+        48,000 samples: entry by entry the faster for each, the dense product 1.5–8.6× their time in total per
+        mechanism). A larger sum's Python loop would cost more than its dense product saves."""
+        return self if len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES else None
 
 
 @dataclass
 class _Sum:
-    """Σ_t M[t, :]·z_t over a set of terms, regrouped so it costs a few small real matrix products: rigid
-    vectors by the angle that turns them (G), vectors fixed to the ground (c0), slider vectors on the ground
-    (H: only s varies) and slider vectors on moving guides. Complex products are taken as real ones on the
-    interleaved [Re, Im] view (_real_reps): half the work. A sum that reads most angle columns reads whole state
-    rows, the ground vectors on the padding column (E = 1, ω = α = 0); one that reads a few gathers them.
-    Evaluated for positions, velocities or accelerations from the state arrays: (rows, K) by pos/vel/acc, or
-    (K, rows) by :meth:`by_column`, entry by entry (``entries``) where the sum has so few that this is cheaper
-    than the dense products (most sums: a point or loop sees one or two of the mechanism's vectors per link)."""
+    """Σ_t M[t, :]·z_t over a set of terms, regrouped: rigid vectors by the angle that turns them (G), vectors
+    fixed to the ground (c0), slider vectors on the ground (H: only s varies) and slider vectors on moving guides.
+    Evaluated for positions, velocities or accelerations from the state arrays by :meth:`by_column` ((K, rows)):
+    entry by entry (``entries``: every sum but the largest; a point or loop sees one or two of the mechanism's
+    vectors per link), else by a few dense real matrix products (pos/vel/acc, (rows, K)) on the interleaved
+    [Re, Im] view (_real_reps: half the work of complex ones), whose arrays R, Rj, c0 and H are made on first use.
+    A dense sum that reads most angle columns reads whole state rows, the ground vectors on the padding column
+    (E = 1, ω = α = 0); one that reads a few gathers them."""
 
     acols: np.ndarray | None  # state angle columns read (None: whole rows, padding included, c0 in R)
-    R: np.ndarray  # (2·len(acols), 2K): real representation of G = Σ M·r·e^{jδ} per turning angle
-    Rj: np.ndarray  # ... of j·G (velocities)
-    c0: np.ndarray  # (2K,): the ground vectors, interleaved (zero where R has them: acols None)
     scols: np.ndarray | None  # state slider columns read
-    H: np.ndarray  # (len(scols), 2K) real: Σ M·e^{jδ} of each slider's vectors on ground lines, interleaved
     s_ang: np.ndarray  # slider vectors on moving guides: angle, slider, r, e^{jδ}, M
     s_sl: np.ndarray
     s_r: np.ndarray
     s_cd: np.ndarray
     Ms: np.ndarray
-    entries: _Entries | None = None  # the same sum entry by entry, where that is the cheaper way (by_column)
+    entries: _Entries | None  # the same sum entry by entry (None: evaluated by the dense products)
+    coef: tuple  # G's rows (for acols), H's rows (for scols), the ground vectors (None: in G) and K
+
+    @cached_property
+    def _reps(self) -> tuple[np.ndarray, np.ndarray]:
+        return _real_reps(self.coef[0], self.coef[3])
+
+    @property
+    def R(self) -> np.ndarray:
+        """(2·len(acols), 2K): the real representation of G = Σ M·r·e^{jδ} per turning angle."""
+        return self._reps[0]
+
+    @property
+    def Rj(self) -> np.ndarray:
+        """... of j·G (velocities)."""
+        return self._reps[1]
+
+    @cached_property
+    def c0(self) -> np.ndarray:
+        """(2K,): the ground vectors, interleaved (zero where R has them: acols None)."""
+        c0, K = self.coef[2], self.coef[3]
+        return np.array([0j] * K if c0 is None else c0, complex).view(float)
+
+    @cached_property
+    def H(self) -> np.ndarray:
+        """(len(scols), 2K) real: Σ M·e^{jδ} of each slider's vectors on ground lines, interleaved."""
+        H, K = self.coef[1], self.coef[3]
+        return np.array(H, complex).view(float).reshape(len(H), 2 * K)
 
     @classmethod
     def build(cls, sys: LoopSystem, terms: np.ndarray, M: np.ndarray) -> _Sum:
@@ -173,18 +194,13 @@ class _Sum:
         np.add.at(H, sl[on_line], cd[on_line][:, None] * M[on_line])
         acols = _used(set(ang[ground & (ang >= 0)].tolist()), na + 1)
         scols = _used(set(sl[on_line].tolist()), ns + 1)
-        c0 = np.zeros(2 * K)
-        if acols is not None:  # gathered: the ground vectors are a constant, the padding column is not read
-            c0 = np.ascontiguousarray(G[na]).view(float).copy()
-        H_all = H
-        H = H if scols is None else H[scols]
-        H = np.ascontiguousarray(H).view(float).reshape(len(H), 2 * K)
+        c0 = None if acols is None else G[na]  # gathered: the ground vectors are a constant, the padding not read
+        rows = (G if acols is None else G[acols], H if scols is None else H[scols], c0, K)
         mv = (sl >= 0) & (ang >= 0)
-        R, Rj = _real_reps(G if acols is None else G[acols], K)
         entries = None
         if np.count_nonzero(G) + np.count_nonzero(H) + K <= FEW_ENTRIES:
-            entries = _Entries.of(range(na + 1), G.tolist(), range(ns + 1), H_all.tolist(), na, [0j] * K).pay(R, H)
-        return cls(acols, R, Rj, c0, scols, H, ang[mv], sl[mv], r[mv], cd[mv], M[mv], entries)
+            entries = _Entries.of(range(na + 1), G.tolist(), range(ns + 1), H.tolist(), na, [0j] * K).pay()
+        return cls(acols, scols, ang[mv], sl[mv], r[mv], cd[mv], M[mv], entries, rows)
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
@@ -347,30 +363,20 @@ def _sum_parts(sys: LoopSystem, terms: list[int], rows: list[list[float]], K: in
 
 
 def _sums(sys: LoopSystem, specs: list[tuple[list[int], list[list[float]]]], K: int) -> list[_Sum]:
-    """The sums Σ_t M[t, :]·z_t of several (terms, M's rows) with K columns each, their arrays made together
-    (the same values as one by one, in fewer numpy calls)."""
+    """The sums Σ_t M[t, :]·z_t of several (terms, M's rows) with K columns each."""
     t_ang, t_sl, t_r, t_cd, _ = _term_lists(sys)
-    parts = [_sum_parts(sys, terms, rows, K) for terms, rows in specs]
-    R, Rj = _real_reps([g for p in parts for g in p[3]], K)
-    H_rows = [h for p in parts for h in p[4]]
-    H = np.array(H_rows, complex).view(float).reshape(len(H_rows), 2 * K)
-    c0s = np.array([p[2] if p[2] is not None else [0j] * K for p in parts], complex)
-    c0s = c0s.view(float).reshape(len(parts), 2 * K)
     no_Ms = np.zeros((0, K), complex)
-    out, g_at, h_at = [], 0, 0
-    for n, (acol, scol, c0, G, Hp, moving) in enumerate(parts):
-        rows = slice(2 * g_at, 2 * (g_at + len(G)))
+    out = []
+    for acol, scol, c0, G, Hp, moving in (_sum_parts(sys, terms, rows, K) for terms, rows in specs):
         s_ang, s_sl, s_r, s_cd, Ms = _NO_INT, _NO_INT, _NO_FLOAT, _NO_COMPLEX, no_Ms
         if moving:
             s_ang, s_sl = np.array([t_ang[t] for t, _ in moving], int), np.array([t_sl[t] for t, _ in moving], int)
             s_r, s_cd = np.array([t_r[t] for t, _ in moving], float), np.array([t_cd[t] for t, _ in moving], complex)
             Ms = np.array([row for _, row in moving], complex).reshape(len(moving), K)
-        H_n = H[h_at : h_at + len(Hp)]
         acols = range(sys.n_angles + 1) if acol is None else acol.tolist()
         scols = range(len(sys.slider_names) + 1) if scol is None else scol.tolist()
-        entries = _Entries.of(acols, G, scols, Hp, sys.n_angles, c0 or [0j] * K).pay(R[rows], H_n)
-        out.append(_Sum(acol, R[rows], Rj[rows], c0s[n], scol, H_n, s_ang, s_sl, s_r, s_cd, Ms, entries))
-        g_at, h_at = g_at + len(G), h_at + len(Hp)
+        entries = _Entries.of(acols, G, scols, Hp, sys.n_angles, c0 or [0j] * K).pay()
+        out.append(_Sum(acol, scol, s_ang, s_sl, s_r, s_cd, Ms, entries, (G, Hp, c0, K)))
     return out
 
 
