@@ -195,12 +195,12 @@ class _Sum:
         acols = _used(set(ang[ground & (ang >= 0)].tolist()), na + 1)
         scols = _used(set(sl[on_line].tolist()), ns + 1)
         c0 = None if acols is None else G[na]  # gathered: the ground vectors are a constant, the padding not read
-        rows = (G if acols is None else G[acols], H if scols is None else H[scols], c0, K)
+        coef = (G if acols is None else G[acols], H if scols is None else H[scols], c0, K)
         mv = (sl >= 0) & (ang >= 0)
         entries = None
         if np.count_nonzero(G) + np.count_nonzero(H) + K <= FEW_ENTRIES:
             entries = _Entries.of(range(na + 1), G.tolist(), range(ns + 1), H.tolist(), na, [0j] * K).pay()
-        return cls(acols, scols, ang[mv], sl[mv], r[mv], cd[mv], M[mv], entries, rows)
+        return cls(acols, scols, ang[mv], sl[mv], r[mv], cd[mv], M[mv], entries, coef)
 
     def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
         """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
