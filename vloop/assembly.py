@@ -62,7 +62,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     z0 = z_typed if typed else every.at(sys.coords_q)[0]
     report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
     for g, unknowns in groups:
-        _check_rank(sys, g.jacobian_at(q) if isinstance(g, _Dyad) else g.jacobian(z[g.k], e[g.k]), unknowns)
+        _check_rank(sys, g.jacobian(z[g.k], e[g.k]), unknowns)
     if structure.over_determined:
         report["redundancy"] = redundancy(sys, q)
     return q, report, z
@@ -134,13 +134,15 @@ def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarra
 class _Dyad:
     """One loop in two unknowns, Newton at t = 0 in Python numbers (numpy's calls cost more than the arithmetic of
     a few terms): the same steps as :func:`_close` on its LoopGroup — term vectors z = (r + s)·e^{j(φ + δ)}, their
-    derivatives j·z (an angle) and e^{j(φ + δ)} (a slider), the 2×2 step by Cramer's rule."""
+    derivatives j·z (an angle) and e^{j(φ + δ)} (a slider), the 2×2 step by Cramer's rule. ``k`` and
+    :meth:`jacobian` as LoopGroup's."""
 
     def __init__(self, sys: LoopSystem, loop: int, unknowns: list[int]) -> None:
         na = sys.n_angles
         row = sys.C[loop]
         self.unknowns = unknowns
-        k = np.flatnonzero(row)
+        self.k = np.flatnonzero(row)
+        k = self.k
         self.terms = []  # (sign, angle or -1, slider variable or -1, r, δ, the unknown turning it, sliding it or -1)
         columns = (x.tolist() for x in (row[k], sys.t_ang[k], sys.t_sl[k], sys.t_r[k], sys.t_delta[k]))
         for c, a, i, r, d in zip(*columns, strict=True):
@@ -148,23 +150,28 @@ class _Dyad:
             turn, slide = (unknowns.index(x) if x in unknowns else -1 for x in (a, v))
             self.terms.append((float(c), a, v, r, d, turn, slide))
 
-    def residual_jacobian(self, q: list[float]) -> tuple[complex, list[complex]]:
-        """The loop's closure Σ c·z and its two complex Jacobian columns at the variables q."""
-        F, J = 0j, [0j, 0j]
-        for c, a, i, r, d, ua, ui in self.terms:
+    def at(self, q: list[float]) -> tuple[list[complex], list[complex]]:
+        """The loop's term vectors z and directions e at the variables q."""
+        z, e = [], []
+        for _, a, i, r, d, _, _ in self.terms:
             phi = (q[a] if a >= 0 else 0.0) + d
-            e = complex(math.cos(phi), math.sin(phi))
-            z = (r + (q[i] if i >= 0 else 0.0)) * e
-            F += c * z
-            if ua >= 0:
-                J[ua] += c * 1j * z
-            if ui >= 0:
-                J[ui] += c * e
-        return F, J
+            e.append(complex(math.cos(phi), math.sin(phi)))
+            z.append((r + (q[i] if i >= 0 else 0.0)) * e[-1])
+        return z, e
 
-    def jacobian_at(self, q: np.ndarray) -> np.ndarray:
-        """[Re; Im] of the Jacobian at q (2×2), for the rank check."""
-        _, (j0, j1) = self.residual_jacobian(q.tolist())
+    def columns(self, z: list[complex], e: list[complex]) -> list[complex]:
+        """The loop's two complex Jacobian columns at its term vectors and directions."""
+        J = [0j, 0j]
+        for (c, _, _, _, _, ua, ui), zt, et in zip(self.terms, z, e, strict=True):
+            if ua >= 0:
+                J[ua] += c * 1j * zt
+            if ui >= 0:
+                J[ui] += c * et
+        return J
+
+    def jacobian(self, zk: np.ndarray, ek: np.ndarray) -> np.ndarray:
+        """[Re; Im] of the Jacobian (2×2) at its term vectors and directions, as LoopGroup.jacobian."""
+        j0, j1 = self.columns(zk.tolist(), ek.tolist())
         return np.array([[j0.real, j1.real], [j0.imag, j1.imag]])
 
     def close(self, q: np.ndarray) -> int | None:
@@ -173,7 +180,9 @@ class _Dyad:
         x = q.tolist()
         u0, u1 = self.unknowns
         for it in range(1, 51):
-            F, (j0, j1) = self.residual_jacobian(x)
+            z, e = self.at(x)
+            F = sum(t[0] * zt for t, zt in zip(self.terms, z, strict=True))
+            j0, j1 = self.columns(z, e)
             det = j0.real * j1.imag - j1.real * j0.imag
             if det == 0 or not math.isfinite(det):
                 return None

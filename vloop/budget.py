@@ -158,17 +158,10 @@ def columns(sys: Any) -> int:
     return 1 + 3 * len(sys.link_outputs) + 6 * len(sys.point_names) + 3 * len(sys.slider_names)
 
 
-def state_bytes(sys: Any) -> int:
-    """The solver's state arrays per internal row [bytes]: e^{jθ}, θ, ω and α per link, s, ṡ, s̈ per slider (each
-    with its padding column)."""
-    na, ns = sys.n_angles, len(sys.slider_names)
-    return 16 * (na + 1) + 8 * na + 16 * (na + 1) + 24 * (ns + 1)
-
-
 def row_bytes(sys: Any) -> int:
     """The solver's state per internal row [bytes], with room for its temporaries."""
-    nd = len(sys.mechanism.drivers)
-    state = state_bytes(sys) + 24 * nd + 8
+    na, ns, nd = sys.n_angles, len(sys.slider_names), len(sys.mechanism.drivers)
+    state = 16 * (na + 1) + 8 * na + 16 * (na + 1) + 24 * (ns + 1) + 24 * nd + 8
     newton = sum(8 * 2 * (2 * len(b.loops)) * len(b.unknowns) for b in sys.blocks if b.kind == "newton")
     points = 48 * len(sys.point_names)  # positions, velocities, accelerations as complex numbers
     return 3 * (state + newton + points) + 8 * columns(sys)

@@ -211,26 +211,16 @@ class _Sum:
             E = E * _columns_of(factor, self.acols)
         return np.ascontiguousarray(E).view(float) @ R
 
-    @cached_property
-    def _line_entries(self) -> list[tuple[int, int, float]]:
-        """(slider column, output column, coefficient) of H's nonzero entries, for a tiny H (≤ 4 entries)."""
-        cols = range(self.H.shape[0]) if self.scols is None else self.scols.tolist()
-        return [(c, j, float(h)) for r, c in enumerate(cols) for j, h in enumerate(self.H[r].tolist()) if h]
-
     def _on_lines(self, out: np.ndarray, S: np.ndarray) -> np.ndarray:
         """out (real, interleaved) += the slider vectors along ground lines for slider values (or rates) S."""
-        if self.H.size > 4:
+        if self.H.size:
             out += _columns_of(S, self.scols) @ self.H
-        else:  # one slider into one complex sum: BLAS is slow on such a thin product
-            for c, j, h in self._line_entries:
-                out[:, j] += S[:, c] * h
         return out.view(complex)
 
     def pos(self, st: _State, k: slice | np.ndarray) -> np.ndarray:
         rigid = self._rigid(st.E[k], self.R)
-        if self.acols is not None:  # column by column: a broadcast add over 2K ≈ 2 columns loops per row
-            for j in np.flatnonzero(self.c0).tolist():
-                rigid[:, j] += self.c0[j]
+        if self.acols is not None:
+            rigid += self.c0
         out = self._on_lines(rigid, st.S[k])
         if len(self.s_sl):
             out += self._moving(st, k, "p")
