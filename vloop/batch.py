@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import Self
 
 import numpy as np
 
@@ -851,7 +852,8 @@ class Outcomes:
     q0: np.ndarray  # (V, n_vars): the assembled variables at t = 0 (NaN where not assembled)
 
     @classmethod
-    def empty(cls, n: int, n_points: int, n_vars: int) -> Outcomes:
+    def empty(cls, n: int, n_points: int, n_vars: int) -> Self:
+        """n variants that did not assemble (a subclass's other fields at their defaults)."""
         return cls(
             np.zeros(n, bool),
             np.zeros(n, bool),
@@ -899,8 +901,7 @@ def solve(model: VariantModel, values: np.ndarray, grid: Grid, names: list[str])
     V = len(values)
     N = len(grid.out)
     sys = model.system
-    empty = Outcomes.empty(V, len(sys.point_names), sys.n_vars)
-    out = BatchOut(**{f.name: getattr(empty, f.name) for f in dataclasses.fields(Outcomes)})
+    out = BatchOut.empty(V, len(sys.point_names), sys.n_vars)
     out.columns = {c: np.full((V, N), np.nan) for c in names}
     per = max(1, ROWS // max(len(grid.t), 1))
     for lo in range(0, V, per):

@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .graph import ORIGIN, Loop, networkx_graph
+from .model import Mechanism
 
 if TYPE_CHECKING:
     import networkx as nx
-from .model import Mechanism
 
 __all__ = [
     "ORIGIN",
