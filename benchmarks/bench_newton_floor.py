@@ -17,7 +17,8 @@ Prints, per mechanism and size, the newton/auto ratio and the ratio of what rema
 out — the per-row passes (prediction, Newton and chord steps, the factor, rates, results). That remainder
 is the floor of this design in numpy: the Newton path cannot come closer to the dyad path than it without
 giving up the branch tracking or the exact flags. Ratios are medians (and 10th percentiles) over rounds,
-each round's newton time over the same round's auto time. BLAS runs one thread.
+each round's newton time over the same round's auto time (auto's own Newton blocks, as the output-driven
+six-bar's, timed whole). BLAS runs one thread.
 """
 
 from __future__ import annotations
