@@ -4,7 +4,7 @@
     python benchmarks/bench_newton_floor.py --only eightbar jansen_pair --steps 4800 48000 --repeat 200
 
 For each mechanism, rounds in which ``solve(system)`` (auto) and ``solve(system, method="newton")`` take
-turns (each called once untimed first, as in bench_speed.py). Inside the Newton run two stages are timed
+turns (bench_speed.rounds_of_each: each called once untimed first). Inside the Newton run two stages are timed
 by wrapping the functions of ``vloop.newton`` that do them:
 
 * the coarse continuation (``_coarse_pass``): rows ~15° of input travel apart solved one window after the
@@ -38,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench_speed import worst_relative  # noqa: E402  (this script's folder is on sys.path)
+from bench_speed import rounds_of_each, worst_relative  # noqa: E402  (this script's folder is on sys.path)
 
 import vloop  # noqa: E402
 from vloop import newton as _newton  # noqa: E402
@@ -60,24 +60,21 @@ def timed(fn: Callable, spent: dict[str, float], label: str) -> Callable:
 
 
 def rounds(name: str, steps: int, repeat: int, spent: dict[str, float]) -> tuple[np.ndarray, float]:
-    """(repeat, 4): auto, newton, coarse, exact-cond seconds per round; and newton's largest difference from
-    auto (relative to each column's peak)."""
+    """(repeat, 4): auto, newton, coarse, exact-cond seconds per round (bench_speed's turns: each function called
+    twice, the second call timed); and newton's largest difference from auto (relative to each column's peak)."""
     mech = vloop.load(ROOT / "mechanisms" / f"{name}.toml")
     system = vloop.compile(mech)
     t = np.linspace(mech.times[0], mech.times[-1], steps)
     gap = worst_relative(vloop.solve(system, t, method="newton"), vloop.solve(system, t))
-    out = np.empty((repeat, 4))
-    for r in range(repeat):
-        vloop.solve(system, t)
-        t0 = time.perf_counter()
-        vloop.solve(system, t)
-        auto = time.perf_counter() - t0
-        vloop.solve(system, t, method="newton")
+    stages: list[tuple[float, float]] = []  # per newton call: its coarse and exact-cond seconds
+
+    def newton() -> None:
         spent.update(dict.fromkeys(spent, 0.0))
-        t0 = time.perf_counter()
         vloop.solve(system, t, method="newton")
-        out[r] = auto, time.perf_counter() - t0, spent["coarse"], spent["exact_cond"]
-    return out, gap
+        stages.append((spent["coarse"], spent["exact_cond"]))
+
+    times = rounds_of_each({"auto": lambda: vloop.solve(system, t), "newton": newton}, repeat)
+    return np.column_stack([times["auto"], times["newton"], np.array(stages[1::2])]), gap
 
 
 def report(name: str, steps: int, R: np.ndarray, gap: float) -> str:

@@ -65,19 +65,24 @@ def best_of(fn: Callable[[], object], repeat: int) -> float:
 
 
 def best_of_each(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, float]:
-    """The best time of each function over ``repeat`` rounds, the functions taking turns within a round: a burst
-    of load on a shared machine then falls on all of them alike, not on whichever ran during it. Each turn runs
-    its function once untimed first: the one timed then finds the caches and the heap as its own last call left
+    """The best time of each function over ``repeat`` rounds (:func:`rounds_of_each`)."""
+    return {label: min(times, default=math.inf) for label, times in rounds_of_each(fns, repeat).items()}
+
+
+def rounds_of_each(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, list[float]]:
+    """The time of each function in each of ``repeat`` rounds, the functions taking turns within a round: a burst
+    of load on a shared machine then falls on all of them alike, not on whichever ran during it. Each turn calls
+    its function twice and times the second call: it then finds the caches and the heap as its own last call left
     them, not as the function before it did (the first of a round measured 5–25 % slower than the same call
     later in it)."""
-    best = dict.fromkeys(fns, math.inf)
+    times: dict[str, list[float]] = {label: [] for label in fns}
     for _ in range(repeat):
         for label, fn in fns.items():
             fn()
             t0 = time.perf_counter()
             fn()
-            best[label] = min(best[label], time.perf_counter() - t0)
-    return best
+            times[label].append(time.perf_counter() - t0)
+    return times
 
 
 def worst_relative(a: vloop.Result, b: vloop.Result) -> float:
