@@ -39,9 +39,12 @@ import numpy as np
 from ..drivers import evaluate
 from ..errors import MotionError, VloopError
 from ..method.loops import Block, LoopSystem
+from .accuracy import DEFAULT_MAX_ITER, DEFAULT_RTOL, DEFAULT_TOL, EPS
 from .changepoints import CHANGE_GAP, DIP, ETA_INPUT, ZOOM_POINTS
-from .kernels import DEFAULT_RTOL, EPS, block_terms, cross, det_sign, newton_rows, pinv_rows, solve_rows
-from .solver import DEFAULT_MAX_ITER, DEFAULT_TOL, MAX_INPUT_STEP
+from .grid import MAX_INPUT_STEP
+from .linalg import cross, det_sign, pinv_rows, solve_rows
+from .newton import newton_rows
+from .plans import block_terms
 from .variants import Designs, VariantModel
 
 TWO_PI = 2.0 * math.pi
