@@ -77,7 +77,8 @@ class State:
         return (r + self.s[k][:, sl]) * e, e
 
     def set_angle(self, k: slice, a: int, E: np.ndarray) -> None:
-        """Store e^{jθ} and the unwrapped θ = φ + 2π·n for rows ``k`` (row k.start keeps its turn count).
+        """Store e^{jθ} and the unwrapped θ = φ + 2π·n for rows ``k`` (row k.start keeps its turn count; several
+        variants: ``k`` all rows, each variant's first row keeps its own).
 
         φ is the principal angle of E, n the whole turns counted by continuity from the first row:
         the stored θ is then exactly φ + 2πn whatever the sampling before it, so a run that starts
@@ -86,6 +87,9 @@ class State:
         E = E / np.abs(E)
         self.e[k, a] = E
         phi = np.arctan2(E.imag, E.real)
+        if self.variants > 1:
+            self.theta[k, a] = self._unwrap_variants(phi, a)
+            return
         start = self.theta[k.start or 0, a]
         turns = np.empty(len(phi))  # whole turns between each row's principal angle and the one before
         turns[:1] = phi[:1] - start
@@ -103,3 +107,16 @@ class State:
                 n[jumps[0] :] = np.repeat(-np.cumsum(turns[jumps]), np.diff(np.append(jumps, len(phi))))
             th = phi + TWO_PI * n
         self.theta[k, a] = th
+
+    def _unwrap_variants(self, phi: np.ndarray, a: int) -> np.ndarray:
+        """θ = φ + 2π·n on every row of every variant, the turns n counted from each variant's first row (whose θ
+        is the reference: the turns before it kept), as :meth:`set_angle` counts them for one."""
+        V, n = self.variants, self.samples
+        phi = phi.reshape(V, n)
+        turns = np.empty((V, n))
+        turns[:, 0] = phi[:, 0] - self.per_variant("theta")[:, 0, a]
+        np.subtract(phi[:, 1:], phi[:, :-1], out=turns[:, 1:])
+        turns *= 1.0 / TWO_PI
+        np.rint(turns, out=turns)
+        th = phi + TWO_PI * -np.cumsum(turns, axis=1)
+        return np.where(np.any(turns != 0, axis=1)[:, None], th, phi).reshape(-1)

@@ -23,16 +23,17 @@ from .plans import Plan
 
 def _turning_vector(plan: Plan, state: State, k: slice, a: int, skip: int = -2) -> np.ndarray | complex:
     """W_a: the block's vectors turning with unknown angle a, before rotation (slider ``skip`` left out)."""
-    w: np.ndarray | complex = plan.w_const[a]
+    w: np.ndarray | complex = plan.at(plan.w_const[a], k)
     for i, coef in plan.w_sl[a]:
         if i != skip:
-            w = w + coef * state.s[k, i]
+            w = w + plan.at(coef, k) * state.s[k, i]
     return w
 
 
 def _slider_direction(plan: Plan, state: State, k: slice, i: int) -> np.ndarray | complex:
     """U: the unit direction of unknown slider i's vector (a constant for a slider along a ground line)."""
     a, coef = plan.u_dir[i]
+    coef = plan.at(coef, k)
     return coef if a < 0 else coef * state.e[k, a]
 
 
@@ -90,7 +91,7 @@ def closed_form(plan: Plan, state: State, k: slice, na: int, sigma: np.ndarray) 
     if b.kind == "RPR":
         # (W + s·c)·E = X with c a unit direction fixed to the same link: |W + s·c| = |X|
         i, a = plan.unk_sl[0], plan.unk_ang[0]
-        cdir = plan.u_dir[i][1]
+        cdir = plan.at(plan.u_dir[i][1], k)
         W = _turning_vector(plan, state, k, a, skip=i)
         bb = (W * np.conj(cdir)).real
         D2 = X.real**2 + X.imag**2
@@ -183,7 +184,7 @@ def jacobian_columns(plan: Plan, state: State, k: slice) -> JacobianColumns:
         else:  # a slider's direction: a constant along a ground line, a constant times E on a moving one
             i = plan.unk_sl[plan.block.unknowns.index(v) - len(plan.unk_ang)]
             cols.append(_slider_direction(plan, state, k, i))
-            norms.append(abs(plan.u_dir[i][1]) ** 2)
+            norms.append(np.abs(plan.at(plan.u_dir[i][1], k)) ** 2 if plan.per_row else abs(plan.u_dir[i][1]) ** 2)
     n = len(state.e[k])
     if all(np.ndim(c) == 0 for c in cols):  # both constant (two sliders along ground lines): one per row all the same
         cols = [np.full(n, c) for c in cols]

@@ -151,7 +151,7 @@ class _Block:
     def residual_jacobian(self, state: State, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """[Re; Im] of the block's loop sums (rows, 2m) and their Jacobian (rows, 2m, nu)."""
         plan = self.plan
-        z, e = state.term_vectors(rows, plan.ang, plan.sl, plan.r, plan.cd)
+        z, e = state.term_vectors(rows, plan.ang, plan.sl, *plan.term_values(rows))
         F = z @ plan.Ct
         Jc = (np.concatenate([1j * z, e], axis=1) @ self.D).reshape(len(rows), -1, self.nu)
         return np.concatenate([F.real, F.imag], axis=1), np.concatenate([Jc.real, Jc.imag], axis=1)

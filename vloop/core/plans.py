@@ -14,7 +14,7 @@ import numpy as np
 
 from ..method.loops import Block, LoopSystem
 from .data import State
-from .sums import SMALL_SUM, Sum, build_sums, term_constants
+from .sums import SMALL_SUM, Sum, build_sums, is_per_row, term_constants
 
 
 @dataclass
@@ -42,11 +42,23 @@ class Plan:
     # Σ over the block's loops without the rigid vectors turning with an unknown angle: with the unknowns' rates
     # still zero those add nothing to the velocities' known part (a sum for velocities only)
     vel_sum: Sum = None  # type: ignore[assignment]
+    per_row: bool = False  # r, cd and the closed form's constants given one per row (variants: sums.per_row)
 
     def known_magnitude(self, state: State, k: slice | np.ndarray) -> np.ndarray:
         """Σ |r + s| over the known vectors per row: what the known part X is summed from (its round-off
         grows with it, not with |X|: a mechanism far from the origin sums large vectors to a small X)."""
-        return np.abs(self.r[self.known] + state.s[k][:, self.sl[self.known]]).sum(axis=1)
+        r = self.r[self.known] if not self.per_row else np.ascontiguousarray(self.r[self.known][:, k].T)
+        return np.abs(r + state.s[k][:, self.sl[self.known]]).sum(axis=1)
+
+    def term_values(self, k: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The block terms' r and e^{jδ} for rows ``k``: (terms,) each, or (rows, terms) where given per row."""
+        if not self.per_row:
+            return self.r, self.cd
+        return self.r[:, k].T, self.cd[:, k].T
+
+    def at(self, x: complex | np.ndarray, k: slice | np.ndarray) -> complex | np.ndarray:
+        """One of the closed form's constants at rows ``k`` (itself unless given per row)."""
+        return x[k] if self.per_row else x
 
 
 def block_terms(system: LoopSystem, b: Block) -> tuple:
@@ -69,6 +81,7 @@ def block_plans(system: LoopSystem) -> list[Plan]:
     plans = system.cache.get("plans")
     if plans is not None:
         return plans
+    rows = is_per_row(system)
     data = [_plan_data(system, b) for b in system.blocks]
     specs: dict[int, list] = {}  # small sums by width K: (owner, terms, M's rows)
     made: dict = {}
@@ -79,7 +92,7 @@ def block_plans(system: LoopSystem) -> list[Plan]:
             specs.setdefault(m, []).extend((n, *spec) for spec in block_specs)
     everything = np.arange(len(system.t_r))
     for owner, M in (("points", system.path), ("loops", system.C.T)):
-        if M.size <= SMALL_SUM:
+        if M.size <= SMALL_SUM or rows:
             specs.setdefault(M.shape[1], []).append((owner, everything.tolist(), M.tolist()))
         else:
             made[owner] = [Sum.build(system, everything, M)]
@@ -90,7 +103,7 @@ def block_plans(system: LoopSystem) -> list[Plan]:
     plans = []
     for n, (args, _, _) in enumerate(data):
         total, known_sum, vel_sum = made[n]
-        plans.append(Plan(*args[:10], total, known_sum, *args[10:], vel_sum=vel_sum))  # type: ignore[misc]
+        plans.append(Plan(*args[:10], total, known_sum, *args[10:], vel_sum=vel_sum, per_row=rows))  # type: ignore[misc]
     system.cache["plans"] = plans
     return plans
 
@@ -113,15 +126,15 @@ def _plan_data(system: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     w_const, w_sl, u_dir = {}, {}, {}
     for a in unk_ang:
         on = turned_by.get(a, [])
-        w_const[a] = complex(sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
-        w_sl[a] = [(sll[n], complex(g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
+        w_const[a] = _number(sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
+        w_sl[a] = [(sll[n], _number(g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
     for i in unk_sl:
         n = first_of[i]
-        u_dir[i] = (al[n], complex(g[n] * t_cd[tl[n]]))
+        u_dir[i] = (al[n], _number(g[n] * t_cd[tl[n]]))
     ua = set(unk_ang)
     still = [not (i < 0 and a in ua) for a, i in zip(al, sll, strict=True)]
     CbT = Cb.T
-    if Cb.size <= SMALL_SUM:
+    if Cb.size <= SMALL_SUM or is_per_row(system):
         rows = CbT.tolist()
         specs = [(tl, rows), _rows_where(kl, tl, [[-x for x in row] for row in rows]), _rows_where(still, tl, rows)]
     else:
@@ -131,6 +144,11 @@ def _plan_data(system: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     cd = cd_all[terms]
     args = (b, Cb, CbT.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
     return args, specs, len(Cb)
+
+
+def _number(x: complex | np.ndarray) -> complex | np.ndarray:
+    """A constant as a Python complex number (one per row: the array as it is)."""
+    return complex(x) if np.ndim(x) == 0 else x
 
 
 def _rows_where(keep: list[bool], terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:

@@ -8,6 +8,7 @@ and slider vectors on moving guides. It is evaluated for positions, velocities o
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property
@@ -49,13 +50,37 @@ def _used(cols: set[int], width: int) -> np.ndarray | None:
     return None if 2 * len(cols) > width else np.array(sorted(cols), int)
 
 
-def term_constants(system: LoopSystem) -> tuple[list[int], list[int], list[float], list[complex], np.ndarray]:
+def term_constants(system: LoopSystem) -> tuple[list[int], list[int], list, list, np.ndarray]:
     """Every term's angle variable, slider, magnitude and e^{jδ} as Python numbers, and e^{jδ} as an array
-    (cached)."""
+    (cached); for a system of :func:`per_row`, each magnitude and e^{jδ} an array over the rows."""
     if "term_lists" not in system.cache:
         cd = np.exp(1j * system.t_delta)
         system.cache["term_lists"] = (system.t_ang.tolist(), system.t_sl.tolist(), system.t_r.tolist(), cd.tolist(), cd)
     return system.cache["term_lists"]
+
+
+def per_row(system: LoopSystem, r: np.ndarray, cd: np.ndarray) -> LoopSystem:
+    """The system with every term's magnitude and e^{jδ} given per row (r, cd: (n_terms, rows)): variants of one
+    structure solved together, each row with its own numbers. Its plans and sums (built from these in the same
+    order of operations as from Python numbers) take each coefficient at the rows they evaluate."""
+    out = dataclasses.replace(system, cache={"per_row": True})
+    out.cache["term_lists"] = (system.t_ang.tolist(), system.t_sl.tolist(), list(r), list(cd), cd)
+    return out
+
+
+def is_per_row(system: LoopSystem) -> bool:
+    """Whether the system's term constants are per row (:func:`per_row`)."""
+    return bool(system.cache.get("per_row"))
+
+
+def at_rows(x: complex | np.ndarray, k: slice | np.ndarray) -> complex | np.ndarray:
+    """A coefficient at rows ``k``: itself where it is one number for every row, else its rows k."""
+    return x if np.ndim(x) == 0 else x[k]
+
+
+def nonzero(x: complex | np.ndarray) -> bool:
+    """Whether a coefficient adds anything (one per row: unless it is zero on every row)."""
+    return bool(x) if np.ndim(x) == 0 else bool(np.any(x))
 
 
 FEW_ENTRIES = 128  # a sum of more entries and columns than this is evaluated by the dense product (Sum.by_column)
@@ -71,29 +96,44 @@ class Entries:
     rigid: list[tuple[int, int, complex]]
     const: list[complex]
     lines: list[tuple[int, int, complex]]
+    per_row: bool = False  # coefficients one per row (variants: :func:`per_row`), taken at the rows evaluated
 
     @classmethod
-    def of(cls, acols: Iterable[int], G: list, scols: Iterable[int], H: list, na: int, c0: list[complex]) -> Entries:
+    def of(
+        cls, acols: Iterable[int], G: list, scols: Iterable[int], H: list, na: int, c0: list, per_row: bool = False
+    ) -> Entries:
         """From G's rows (for angle columns ``acols``; the padding column na: the ground) and H's rows (for slider
         columns ``scols``); ``c0``: ground vectors given apart."""
         const = list(c0)
         rigid = []
         for a, row in zip(acols, G, strict=True):
             for i, g in enumerate(row):
-                if g and a == na:
+                if nonzero(g) and a == na:
                     const[i] += g
-                elif g:
+                elif nonzero(g):
                     rigid.append((i, a, g))
-        lines = [(i, c, h) for c, row in zip(scols, H, strict=True) for i, h in enumerate(row) if h]
-        return cls(sorted({a for _, a, _ in rigid}), rigid, const, lines)
+        lines = [(i, c, h) for c, row in zip(scols, H, strict=True) for i, h in enumerate(row) if nonzero(h)]
+        return cls(sorted({a for _, a, _ in rigid}), rigid, const, lines, per_row)
+
+    def at(self, k: slice | np.ndarray) -> Entries:
+        """The entries with their coefficients at rows ``k`` (themselves unless one per row)."""
+        if not self.per_row:
+            return self
+        return Entries(
+            self.angles,
+            [(i, a, g[k]) for i, a, g in self.rigid],
+            [at_rows(c, k) for c in self.const],
+            [(i, c, h[k]) for i, c, h in self.lines],
+        )
 
     def pay(self) -> Entries | None:
         """Itself where entry by entry is the cheaper way to evaluate the sum, else None: for every sum of at most
         FEW_ENTRIES entries and columns. Each entry is a pass over a state column, contiguous in the column-major
         state; the dense product reads whole rows, transposed (measured on every sum of the catalog at 4,800 and
         48,000 samples: entry by entry the faster for each, the dense product 1.5–8.6× their time in total per
-        mechanism). A larger sum's Python loop would cost more than its dense product saves."""
-        return self if len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES else None
+        mechanism). A larger sum's Python loop would cost more than its dense product saves. Coefficients one
+        per row have no dense product: entry by entry always."""
+        return self if self.per_row or len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES else None
 
 
 @dataclass
@@ -148,7 +188,7 @@ class Sum:
         """Σ_t M[t, :]·z_t over ``terms`` (M: one row per term, K columns). A small sum from Python numbers
         (:func:`build_sums`), a large one by numpy's vector operations (the same values)."""
         M = M.reshape(len(terms), -1)
-        if M.size <= SMALL_SUM:
+        if M.size <= SMALL_SUM or is_per_row(system):
             return build_sums(system, [(terms.tolist(), M.tolist())], M.shape[1])[0]
         na, ns = system.n_angles, len(system.slider_names)
         ang, sl, r = system.t_ang[terms], system.t_sl[terms], system.t_r[terms]
@@ -220,18 +260,14 @@ class Sum:
 
     def _moving(self, state: State, k: slice | np.ndarray, what: str) -> np.ndarray:
         """(rows, K) complex: Σ over the slider vectors on moving guides, (r + s)·e^{j(θ + δ)} and its rates."""
-        es = self.s_cd * state.e[k][:, self.s_ang]
-        ms = self.s_r + state.s[k][:, self.s_sl]
-        if what == "p":
-            return (ms * es) @ self.Ms
-        ws = state.omega[k][:, self.s_ang]
-        sd = state.s_dot[k][:, self.s_sl]
-        if what == "v":
-            return ((sd + 1j * ws * ms) * es) @ self.Ms
-        coriolis = 2j * sd * ws  # a slider on a rotating guide
-        return (
-            (state.s_ddot[k][:, self.s_sl] + coriolis + (1j * state.alpha[k][:, self.s_ang] - ws * ws) * ms) * es
-        ) @ self.Ms
+        if self.s_r.ndim == 1:
+            return _moving_terms(state, k, what, self.s_ang, self.s_sl, self.s_r, self.s_cd) @ self.Ms
+        values = _moving_terms(state, k, what, self.s_ang, self.s_sl, self.s_r[:, k].T, self.s_cd[:, k].T)
+        out = np.zeros((len(values), self.Ms.shape[1]), complex)  # term by term: each row's sum its own
+        for j, row in enumerate(self.Ms):
+            for i in np.nonzero(row)[0]:
+                out[:, i] += row[i] * values[:, j]
+        return out
 
     def by_column(self, state: State, k: slice | np.ndarray, what: str) -> np.ndarray:
         """(K, rows) complex: the sum over rows ``k`` — of positions (what="p"), velocities ("v") or accelerations
@@ -244,6 +280,7 @@ class Sum:
                 (self.pos if what == "p" else self.vel if what == "v" else self.acc)(state, k).T
             )
         n = len(state.e[k]) if isinstance(k, slice) else len(k)
+        e = e.at(k)
         turning = {a: _turning(state, k, a, what) for a in e.angles}
         out = np.empty((len(e.const), n), complex)
         started = [False] * len(out)
@@ -257,7 +294,7 @@ class Sum:
         for i, c in enumerate(e.const if what == "p" else [0j] * len(out)):
             if not started[i]:
                 out[i] = c
-            elif c:
+            elif nonzero(c):
                 out[i] += c
         S = (state.s if what == "p" else state.s_dot if what == "v" else state.s_ddot)[k]
         for i, c, h in e.lines:  # sliders along ground lines
@@ -265,6 +302,23 @@ class Sum:
         if len(self.s_sl):
             out += self._moving(state, k, what).T
         return out
+
+
+def _moving_terms(
+    state: State, k: slice | np.ndarray, what: str, ang: np.ndarray, sl: np.ndarray, r: np.ndarray, cd: np.ndarray
+) -> np.ndarray:
+    """(rows, terms): slider vectors on moving guides z = (r + s)·e^{jδ}·e^{jθ}, or ż = (ṡ + jω(r + s))·e^{j(θ+δ)},
+    or z̈ = (s̈ + 2jṡω + (jα − ω²)(r + s))·e^{j(θ+δ)} (a slider on a rotating guide: the Coriolis term 2jṡω)."""
+    es = cd * state.e[k][:, ang]
+    ms = r + state.s[k][:, sl]
+    if what == "p":
+        return ms * es
+    ws = state.omega[k][:, ang]
+    sd = state.s_dot[k][:, sl]
+    if what == "v":
+        return (sd + 1j * ws * ms) * es
+    coriolis = 2j * sd * ws
+    return (state.s_ddot[k][:, sl] + coriolis + (1j * state.alpha[k][:, ang] - ws * ws) * ms) * es
 
 
 def _turning(state: State, k: slice | np.ndarray, a: int, what: str) -> np.ndarray:
@@ -283,16 +337,21 @@ def _turning(state: State, k: slice | np.ndarray, a: int, what: str) -> np.ndarr
     return f
 
 
-def _add_line(col: np.ndarray, s: np.ndarray, h: complex) -> None:
+def _add_line(col: np.ndarray, s: np.ndarray, h: complex | np.ndarray) -> None:
     """col += h·s for real s: on the real or imaginary part alone for a line along an axis (without the product
-    for a unit coefficient, the usual one: x or y)."""
-    part, c = (col.real, h.real) if h.imag == 0 else (col.imag, h.imag) if h.real == 0 else (col, h)
-    if c == 1:
+    for a unit coefficient, the usual one: x or y). ``h`` one number, or one per row (the same choice where
+    every row allows it)."""
+    part, c = (col.real, h.real) if _all(h.imag == 0) else (col.imag, h.imag) if _all(h.real == 0) else (col, h)
+    if _all(c == 1):
         np.add(part, s, out=part)
-    elif c == -1:
+    elif _all(c == -1):
         np.subtract(part, s, out=part)
     else:
         part += s * c
+
+
+def _all(condition: bool | np.ndarray) -> bool:
+    return bool(condition) if np.ndim(condition) == 0 else bool(np.all(condition))
 
 
 def _sum_parts(system: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> tuple:
@@ -338,10 +397,11 @@ def build_sums(system: LoopSystem, specs: list[tuple[list[int], list[list[float]
         if moving:
             s_ang, s_sl = np.array([t_ang[t] for t, _ in moving], int), np.array([t_sl[t] for t, _ in moving], int)
             s_r, s_cd = np.array([t_r[t] for t, _ in moving], float), np.array([t_cd[t] for t, _ in moving], complex)
+            # (one per row: (terms, rows))
             Ms = np.array([row for _, row in moving], complex).reshape(len(moving), K)
         acols = range(system.n_angles + 1) if acol is None else acol.tolist()
         scols = range(len(system.slider_names) + 1) if scol is None else scol.tolist()
-        entries = Entries.of(acols, G, scols, Hp, system.n_angles, c0 or [0j] * K).pay()
+        entries = Entries.of(acols, G, scols, Hp, system.n_angles, c0 or [0j] * K, is_per_row(system)).pay()
         out.append(Sum(acol, scol, s_ang, s_sl, s_r, s_cd, Ms, entries, (G, Hp, c0, K)))
     return out
 
