@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import MechanismError
 from .accuracy import EPS, error_bound
-from .context import ChangePoint, Failure, Run, Solved, change_point_choices, impose_drivers
+from .context import ChangePoint, Failure, Run, Solved, change_point_choices, impose_drivers, input_units
 from .data import State
 from .plans import Plan, block_plans, store_rates
 
@@ -32,8 +32,9 @@ ETA_INPUT = 1e-5  # the rates across a change point are compared this far from i
 DIP = 0.9  # a sampled minimum of h below this fraction of its larger neighbour is zoomed on
 
 
-def _candidate_minima(t: np.ndarray, h: np.ndarray, tail: bool = True) -> list[tuple[int, int]]:
-    """Brackets (row lo, row hi) around sampled minima of h that dip: where a zero could hide between samples.
+def candidate_minima(h: np.ndarray, tail: bool = True) -> np.ndarray:
+    """(brackets, 3) ints (variant, row lo, row hi) around sampled minima of h (variants × samples) that dip:
+    where a zero could hide between samples; per variant in the order of their rows.
 
     Near a double zero √h is V-shaped, so a sample next to it is well below its larger neighbour
     (h below 1/4 of it for an even V) whatever the sampling's phase; a broad, shallow minimum keeps
@@ -41,17 +42,52 @@ def _candidate_minima(t: np.ndarray, h: np.ndarray, tail: bool = True) -> list[t
     ``tail``: also look between the last two samples (the end of the run, not of a chunk: the next
     chunk sees that minimum with both its neighbours).
     """
-    n = len(h)
-    if n < 2:
-        return []
-    m = np.nonzero((h[1:-1] <= h[:-2]) & (h[1:-1] <= h[2:]))[0] + 1
-    dips = m[h[m] < DIP * np.maximum(h[m - 1], h[m + 1])]
-    out = [(int(c) - 1, int(c) + 1) for c in dips]
-    if n > 2 and h[0] < DIP * h[1] and h[1] <= h[2]:  # rising from the first sample: a zero may lie just after it
-        out.insert(0, (0, 1))
-    if tail and h[-1] < DIP * h[-2]:  # still falling at the end: a zero may lie before the last sample
-        out.append((n - 2, n - 1))
-    return out
+    n = h.shape[1]
+    found = [np.zeros((0, 3), int)]
+    if n > 2:
+        mid, left, right = h[:, 1:-1], h[:, :-2], h[:, 2:]
+        v, c = np.nonzero((mid <= left) & (mid <= right) & (mid < DIP * np.maximum(left, right)))
+        found.append(np.stack([v, c, c + 2], 1))
+        v = np.nonzero((h[:, 0] < DIP * h[:, 1]) & (h[:, 1] <= h[:, 2]))[0]  # rising from the first sample
+        found.append(np.stack([v, np.zeros_like(v), np.ones_like(v)], 1))
+    if tail and n > 1:  # still falling at the end: a zero may lie before the last sample
+        v = np.nonzero(h[:, -1] < DIP * h[:, -2])[0]
+        found.append(np.stack([v, np.full_like(v, n - 2), np.full_like(v, n - 1)], 1))
+    out = np.concatenate(found)
+    return out[np.lexsort((out[:, 2], out[:, 1], out[:, 0]))]
+
+
+LIMIT, CLEAR, ZOOM = 0, 1, 2  # what a first look at a bracket finds (:func:`first_look`)
+
+
+def look_times(a: np.ndarray, b: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """(brackets, 3·ZOOM_POINTS): ZOOM_POINTS times from a to b, then each less η, then each plus η (times h is
+    probed at: its values, and g(t) = h(t + η) − h(t − η), which crosses zero linearly at h's minimum)."""
+    ts = np.linspace(a, b, ZOOM_POINTS, axis=-1)
+    return np.concatenate([ts, ts - eta[..., None], ts + eta[..., None]], axis=-1)
+
+
+def first_look(h: np.ndarray, scale: float) -> np.ndarray:
+    """What the discriminants h at :func:`look_times` (brackets, 3·ZOOM_POINTS) say of each bracket: LIMIT
+    where h < 0 (the loop cannot close between the samples), CLEAR where no change point can hide (h least at
+    an end of the bracket, or √h kept above CHANGE_GAP of the size between the probes by its Lipschitz bound),
+    ZOOM where one may."""
+    p = ZOOM_POINTS
+    mid, g = h[:, :p], h[:, 2 * p :] - h[:, p : 2 * p]
+    at_end = ~((g[:, 0] < 0) & (0 <= g[:, -1]))  # (e.g. a limit approached but not passed: h falls to the end)
+    with np.errstate(invalid="ignore"):
+        root = np.sqrt(mid)  # √h is Lipschitz: no lower between grid points than this bound allows (the
+        # slope is taken twice the largest seen, since √h bends: steepest at its vertex, between grid points)
+        apart = root.min(axis=1) - np.max(np.abs(np.diff(root, axis=1)), axis=1) > 0.5 * CHANGE_GAP * scale
+    return np.where(np.any(mid < 0, axis=1), LIMIT, np.where(at_end | apart, CLEAR, ZOOM))
+
+
+def eta_of_rates(rates: np.ndarray, units: np.ndarray, width: np.ndarray, move: float = ETA_INPUT) -> np.ndarray:
+    """Time offsets over which inputs moving at ``rates`` (…, drivers) move ``move`` (radians, or mechanism sizes
+    for sliders: ``units``), at most a quarter of ``width``."""
+    rate = np.max(np.abs(rates) / units, axis=-1, initial=0.0)
+    with np.errstate(divide="ignore"):
+        return np.minimum(np.where(rate > 0, move / np.where(rate > 0, rate, 1.0), np.inf), 0.25 * width)
 
 
 def probe(run: Run, state: State, t_grid: np.ndarray, base: int, times: np.ndarray, upto: int, **mode: bool) -> tuple:
@@ -83,7 +119,7 @@ def find_change_points(run: Run, state: State, t_grid: np.ndarray, i: int, h: np
     found = []
     loop = run.system.loops[block_plans(run.system)[i].block.loops[0]]
     choices = change_point_choices(run.system, loop.index + 1)
-    for lo, hi in _candidate_minima(t_grid[: len(h)], h, run.tail):
+    for _, lo, hi in candidate_minima(h[None, :], run.tail).tolist():
         if any(t_grid[lo] <= ev.time <= t_grid[hi] for ev in run.events.get(i, ())):
             continue  # found already (by the chunk before, whose last rows this chunk starts from)
         t_star, h_min = _zoom(run, state, t_grid, i, lo, hi)
@@ -110,21 +146,17 @@ def _zoom(run: Run, state: State, t_grid: np.ndarray, i: int, lo: int, hi: int) 
     eta = time_to_move(run, 0.5 * (a + b), b - a)
     first = True
     for _ in range(ZOOM_STEPS):
-        ts = np.linspace(a, b, ZOOM_POINTS)
-        h = _discriminant(run, state, t_grid, lo, i, np.concatenate([ts, ts - eta, ts + eta]))
+        times = look_times(np.array(a), np.array(b), np.array(eta))
+        h = _discriminant(run, state, t_grid, lo, i, times)
         if h is None:  # an earlier block cannot be solved in the bracket: leave it to the main run
             return a, math.inf
-        mid, g = h[: len(ts)], h[2 * len(ts) :] - h[len(ts) : 2 * len(ts)]
-        if np.any(mid < 0):
+        ts, mid, g = times[:ZOOM_POINTS], h[:ZOOM_POINTS], h[2 * ZOOM_POINTS :] - h[ZOOM_POINTS : 2 * ZOOM_POINTS]
+        look = first_look(h[None], run.scale)[0]
+        if look == LIMIT:
             j = int(np.argmin(mid))
             return float(ts[j]), float(mid[j])
-        if first and not (g[0] < 0 <= g[-1]):  # h least at an end of the bracket: no minimum inside it
-            return a, math.inf  # (e.g. a limit approached but not passed: h falls to the last sample)
-        root = np.sqrt(mid)  # √h is Lipschitz: no lower between grid points than this bound allows (the
-        # slope is taken twice the largest seen, since √h bends: steepest at its vertex, between grid points)
-        if first and root.min() - np.max(np.abs(np.diff(root))) > 0.5 * CHANGE_GAP * run.scale:
-            j = int(np.argmin(mid))
-            return float(ts[j]), float(mid[j])  # the branches stay apart: no change point here
+        if first and look == CLEAR:  # no change point in the bracket
+            return a, math.inf
         first = False
         j = int(np.argmax(g >= 0)) if np.any(g >= 0) else len(ts) - 1
         a, b = float(ts[max(j - 1, 0)]), float(ts[j])
@@ -151,9 +183,7 @@ def _discriminant(
 def time_to_move(run: Run, t_star: float, width: float, move: float = ETA_INPUT) -> float:
     """A time offset over which the inputs move ``move`` (radians, or mechanism sizes for sliders)."""
     _, XD, _ = run.inputs(np.array([t_star]))
-    units = np.array([1.0 if d.kind == "crank" else run.scale for d in run.system.mechanism.drivers])
-    rate = float(np.max(np.abs(XD[0]) / units, initial=0.0))
-    return min(move / rate if rate > 0 else math.inf, 0.25 * width)
+    return float(eta_of_rates(XD[0], input_units(run.system.mechanism, run.scale), np.array(width), move))
 
 
 def _block_rates(run: Run, trial: State, i: int, rows: slice) -> np.ndarray:

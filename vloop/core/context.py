@@ -143,6 +143,11 @@ def initial_state(system: LoopSystem, n: int) -> State:
     return state
 
 
+def input_units(mech: Mechanism, slider_unit: float) -> np.ndarray:
+    """What each input's move is measured in: 1 rad for a crank, ``slider_unit`` (a length) for a slider."""
+    return np.array([1.0 if d.kind == "crank" else slider_unit for d in mech.drivers])
+
+
 def change_point_choices(system: LoopSystem, loop_number: int) -> list[str]:
     """``[solver] change_points`` for a loop: "smooth" (default) or "other", or a list for successive ones."""
     spec = system.mechanism.options.get("change_points", {}).get(loop_number, "smooth")

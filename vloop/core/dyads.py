@@ -85,7 +85,8 @@ def closed_form(plan: Plan, state: State, k: slice, na: int, sigma: np.ndarray) 
         c = sigma * np.sqrt(np.where(ok, h, 0.0))
         E = np.empty(len(y), complex)
         E.real, E.imag = c, y
-        state.set_angle(k, plan.unk_ang[0], E * (1.0 / WU) if np.ndim(WU) == 0 else E / WU)
+        rigid = not plan.w_sl[plan.unk_ang[0]] and plan.u_dir[i][0] < 0  # W1·Ū one number per variant
+        state.set_angle(k, plan.unk_ang[0], E * (1.0 / WU) if rigid else E / WU)
         state.s[k, i] = XU.real - c
         return ok, h
     if b.kind == "RPR":

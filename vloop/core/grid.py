@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import MotionError
 from ..method.loops import LoopSystem
-from .context import Failure, Run
+from .context import Failure, Run, input_units
 from .linalg import row_max
 
 
@@ -71,11 +71,11 @@ def internal_grid(run: Run, lead: np.ndarray, times: np.ndarray) -> Grid:
     steps = np.ones(max(n - 1, 0), np.int64)
     if mech.drivers and n > 1:
         X, XD, XDD = run.inputs(times)
-        units = np.array([1.0 if d.kind == "crank" else mech.scale / (2 * math.pi) for d in mech.drivers])
+        units = input_units(mech, mech.scale / (2 * math.pi))
         h = np.diff(times)[:, None]
         if _within_one_step(mech, h, XD, units):
             return _as_requested(lead, times, (X, XD, XDD))
-        travel = np.maximum(np.abs(np.diff(X, axis=0)), 0.5 * h * (np.abs(XD[1:]) + np.abs(XD[:-1]))) / units
+        travel = input_travel(X, XD, h, units)
         need = np.ceil(row_max(travel) / MAX_INPUT_STEP)
         need = np.where(np.isfinite(need) & (need <= MAX_INSERTED), need, 1.0)  # absurd inputs: refused later
         if need.sum() - len(need) > MAX_INSERTED:
@@ -88,13 +88,33 @@ def internal_grid(run: Run, lead: np.ndarray, times: np.ndarray) -> Grid:
         steps = np.maximum(need, 1).astype(np.int64)
         if int(steps.sum()) == n - 1:  # no row to insert
             return _as_requested(lead, times, (X, XD, XDD))
-    starts = np.concatenate([[0], np.cumsum(steps)])  # internal index of each requested sample
+    inner, starts = insert_rows(times, steps)
+    return Grid(np.concatenate([lead, inner]), len(lead) + starts)
+
+
+def input_travel(X: np.ndarray, XD: np.ndarray, h: np.ndarray, units: np.ndarray) -> np.ndarray:
+    """How far each input moves over each interval between samples (axis −2), at most, in ``units``: |Δx|, or
+    the trapezoid of its rate |ẋ| over the interval h."""
+    return np.maximum(np.abs(np.diff(X, axis=-2)), 0.5 * h * (np.abs(XD[..., 1:, :]) + np.abs(XD[..., :-1, :]))) / units
+
+
+def insert_rows(times: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The times with ``steps[i]`` − 1 rows inserted evenly between times i and i + 1, and the row of each given
+    time (which is kept exactly)."""
+    n = len(times)
+    starts = np.concatenate([[0], np.cumsum(steps)]).astype(np.int64)  # internal index of each given time
     k = np.arange(starts[-1])
     seg = np.repeat(np.arange(len(steps)), steps)
     frac = (k - starts[seg]) / steps[seg]
     inner = np.append(times[seg] + frac * (times[seg + 1] - times[seg]), times[-1]) if n > 1 else times.copy()
-    inner[starts] = times  # the requested times exactly
-    return Grid(np.concatenate([lead, inner]), len(lead) + starts)
+    inner[starts] = times
+    return inner, starts
+
+
+def too_large(rtol: float) -> float:
+    """The smallest crank angle [rad] whose floating-point spacing exceeds ``rtol``: spacing(x) = 2^(e − 52) on
+    [2^e, 2^(e+1)), which exceeds rtol from 2^(⌊log2 rtol⌋ + 53) on."""
+    return 2.0 ** (math.floor(math.log2(rtol)) + 53) if 0 < rtol < math.inf else math.inf
 
 
 def check_inputs(
@@ -104,11 +124,10 @@ def check_inputs(
     resolve to ``rtol`` (its floating-point spacing exceeds rtol radians)."""
     mech = system.mechanism
     bad = ~np.isfinite(X) | ~np.isfinite(XD) | ~np.isfinite(XDD)
-    # spacing(x) = 2^(e − 52) on [2^e, 2^(e+1)): it exceeds rtol from 2^(⌊log2 rtol⌋ + 53) on
-    too_large = 2.0 ** (math.floor(math.log2(rtol)) + 53) if 0 < rtol < math.inf else math.inf
+    largest = too_large(rtol)
     for j, d in enumerate(mech.drivers):
         if d.kind == "crank":
-            bad[off:, j] |= np.abs(X[off:, j]) >= too_large
+            bad[off:, j] |= np.abs(X[off:, j]) >= largest
     rows = np.nonzero(row_max(bad) if bad.shape[1] else np.zeros(len(bad), bool))[0]
     if not len(rows):
         return None

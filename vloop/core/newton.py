@@ -80,12 +80,11 @@ class Factor:
     sign: np.ndarray  # sign of det J (+1 for a rectangular block: no branch sign)
 
 
-class _Block:
+class NewtonBlock:
     """Index data to evaluate one Newton block's residual and Jacobian on any set of rows."""
 
-    def __init__(self, run: Run, plan: Plan) -> None:
-        system = run.system
-        na = system.n_angles
+    def __init__(self, plan: Plan, n_angles: int, scale: float) -> None:
+        na = n_angles
         unk = plan.block.unknowns
         self.plan = plan
         self.nu = len(unk)
@@ -101,8 +100,8 @@ class _Block:
             # ∂z/∂θ = j·z for every term turning with θ; ∂z/∂s = e for the slider's own term
             D[np.nonzero(mask)[0] + (0 if v < na else nt), :, u] = plan.C.T[mask]
         self.D = D.reshape(2 * nt, -1)
-        self.colscale = np.where([v < na for v in unk], 1.0 / run.scale, 1.0)
-        self.scale = run.scale
+        self.colscale = np.where([v < na for v in unk], 1.0 / scale, 1.0)
+        self.scale = scale
         # per term: the position in x of its unknown angle and of its unknown slider (-1: none)
         where = {v: u for u, v in enumerate(unk)}
         self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in plan.ang], int)
@@ -149,11 +148,17 @@ class _Block:
             state.s[r, self.scol] = x[:, self.isl]
 
     def residual_jacobian(self, state: State, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """[Re; Im] of the block's loop sums (rows, 2m) and their Jacobian (rows, 2m, nu)."""
+        """[Re; Im] of the block's loop sums (rows, 2m) and their Jacobian (rows, 2m, nu). Constants per row
+        (variants): each row summed on its own (einsum's loops; a BLAS product's rounding depends on how many
+        rows it is given)."""
         plan = self.plan
         z, e = state.term_vectors(rows, plan.ang, plan.sl, *plan.term_values(rows))
-        F = z @ plan.Ct
-        Jc = (np.concatenate([1j * z, e], axis=1) @ self.D).reshape(len(rows), -1, self.nu)
+        ze = np.concatenate([1j * z, e], axis=1)
+        if plan.per_row:
+            F, Jc = np.einsum("rt,tm->rm", z, plan.Ct), np.einsum("rt,tk->rk", ze, self.D)
+        else:
+            F, Jc = z @ plan.Ct, ze @ self.D
+        Jc = Jc.reshape(len(rows), -1, self.nu)
         return np.concatenate([F.real, F.imag], axis=1), np.concatenate([Jc.real, Jc.imag], axis=1)
 
     def factor(self, state: State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
@@ -195,7 +200,7 @@ class _Rows:
     what the unknowns do not move (the other terms' sum, every moved term's known length and direction) is
     gathered once, so a Newton iteration costs a few small products over the rows."""
 
-    def __init__(self, blk: _Block, state: State, n: int) -> None:
+    def __init__(self, blk: NewtonBlock, state: State, n: int) -> None:
         plan, d = blk.plan, blk.dep
         E, S = state.e[:n], state.s[:n]
         kn = blk.known
@@ -303,7 +308,7 @@ def newton_rows(
 
 
 def newton(
-    blk: _Block, state: State, rows: np.ndarray, x: np.ndarray, tol: float, max_iter: int
+    blk: NewtonBlock, state: State, rows: np.ndarray, x: np.ndarray, tol: float, max_iter: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched Newton from ``x`` on ``rows``: (solution, converged mask); rows stop as their step falls
     below tol·(1 + |x|)."""
@@ -333,8 +338,8 @@ class _Ctx:
         self.run, self.state, self.t_grid, self.i, self.plan, self.n = run, state, t_grid, i, plan, n
         cache = run.system.cache.setdefault("newton", {})
         if i not in cache:
-            cache[i] = _Block(run, plan)
-        self.blk: _Block = cache[i]
+            cache[i] = NewtonBlock(plan, run.system.n_angles, run.scale)
+        self.blk: NewtonBlock = cache[i]
         self.na = run.system.n_angles
         self.xd = np.zeros((n, self.blk.nu))  # rates at the rows continued one by one (predictors)
         self.xdd = np.zeros((n, self.blk.nu))
@@ -418,7 +423,7 @@ def solve_block(
     return failure, factor
 
 
-def _refactor(blk: _Block, state: State, n: int, run: Run) -> tuple[Factor, np.ndarray, np.ndarray]:
+def _refactor(blk: NewtonBlock, state: State, n: int, run: Run) -> tuple[Factor, np.ndarray, np.ndarray]:
     """The Factor of rows 0..n-1 as they stand (a last Newton step applied)."""
     if blk.square and n:
         return _factor_square(_Rows(blk, state, n), state, blk.read_last(state, n), run.rtol, run.tol)
@@ -653,7 +658,7 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     return float(np.linalg.det(J[0])) if ctx.blk.square else 1.0
 
 
-def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
+def _far(blk: NewtonBlock, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Rows whose Newton correction exceeds JUMP of the predicted move (largest component, angles in rad,
     sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)
@@ -699,7 +704,7 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) ->
     return j, pred
 
 
-def _far_dense(blk: _Block, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
+def _far_dense(blk: NewtonBlock, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
     """:func:`_far` for rows between coarse rows (batch-last: correction (nu, rows), the coarse rows' x (nu, ·),
     each row's interval j): the move and the scale of each interval taken once, not per row."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
@@ -782,7 +787,7 @@ def _factor_square(
     J: np.ndarray | None = None,
     X: np.ndarray | None = None,
 ) -> tuple[Factor, np.ndarray, np.ndarray]:
-    """:meth:`_Block.factor` on rows 0..n-1 of a square block at x (batch-last), by
+    """:meth:`NewtonBlock.factor` on rows 0..n-1 of a square block at x (batch-last), by
     :func:`vloop.core.linalg.invert_last`: the Factor, the closure of each row and whether its last step was
     below tol and FRESH (it is applied).
     J, X: buffers for the Jacobian (one :meth:`_Rows.eval` wrote) and its inverse."""

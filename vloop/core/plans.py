@@ -14,7 +14,7 @@ import numpy as np
 
 from ..method.loops import Block, LoopSystem
 from .data import State
-from .sums import SMALL_SUM, Sum, build_sums, is_per_row, term_constants
+from .sums import SMALL_SUM, Sum, build_sums, is_per_row, rows_of, term_constants
 
 
 @dataclass
@@ -42,19 +42,23 @@ class Plan:
     # Σ over the block's loops without the rigid vectors turning with an unknown angle: with the unknowns' rates
     # still zero those add nothing to the velocities' known part (a sum for velocities only)
     vel_sum: Sum = None  # type: ignore[assignment]
-    per_row: bool = False  # r, cd and the closed form's constants given one per row (variants: sums.per_row)
+    per_row: bool = False  # r, cd one per variant and the closed form's constants one per row (sums.per_row)
+    samples: int = 0  # ... each variant's rows
 
     def known_magnitude(self, state: State, k: slice | np.ndarray) -> np.ndarray:
         """Σ |r + s| over the known vectors per row: what the known part X is summed from (its round-off
         grows with it, not with |X|: a mechanism far from the origin sums large vectors to a small X)."""
-        r = self.r[self.known] if not self.per_row else np.ascontiguousarray(self.r[self.known][:, k].T)
+        r = self.r[self.known] if not self.per_row else self.term_values(k)[0][:, self.known]
         return np.abs(r + state.s[k][:, self.sl[self.known]]).sum(axis=1)
 
     def term_values(self, k: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The block terms' r and e^{jδ} for rows ``k``: (terms,) each, or (rows, terms) where given per row."""
+        """The block terms' r and e^{jδ} for rows ``k``: (terms,) each, or (rows, terms) where given per variant
+        (rows of ``samples`` each, variant by variant)."""
         if not self.per_row:
             return self.r, self.cd
-        return self.r[:, k].T, self.cd[:, k].T
+        variant = np.arange(k.start or 0, k.stop) if isinstance(k, slice) else np.asarray(k)
+        variant = variant // self.samples
+        return np.ascontiguousarray(self.r[:, variant].T), np.ascontiguousarray(self.cd[:, variant].T)
 
     def at(self, x: complex | np.ndarray, k: slice | np.ndarray) -> complex | np.ndarray:
         """One of the closed form's constants at rows ``k`` (itself unless given per row)."""
@@ -103,7 +107,17 @@ def block_plans(system: LoopSystem) -> list[Plan]:
     plans = []
     for n, (args, _, _) in enumerate(data):
         total, known_sum, vel_sum = made[n]
-        plans.append(Plan(*args[:10], total, known_sum, *args[10:], vel_sum=vel_sum, per_row=rows))  # type: ignore[misc]
+        plans.append(
+            Plan(
+                *args[:10],
+                total,
+                known_sum,
+                *args[10:],
+                vel_sum=vel_sum,
+                per_row=rows,
+                samples=system.cache.get("per_row", 0),
+            )
+        )  # type: ignore[misc]
     system.cache["plans"] = plans
     return plans
 
@@ -126,11 +140,11 @@ def _plan_data(system: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     w_const, w_sl, u_dir = {}, {}, {}
     for a in unk_ang:
         on = turned_by.get(a, [])
-        w_const[a] = _number(sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
-        w_sl[a] = [(sll[n], _number(g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
+        w_const[a] = _number(system, sum(g[n] * t_r[tl[n]] * t_cd[tl[n]] for n in on))
+        w_sl[a] = [(sll[n], _number(system, g[n] * t_cd[tl[n]])) for n in on if sll[n] >= 0]
     for i in unk_sl:
         n = first_of[i]
-        u_dir[i] = (al[n], _number(g[n] * t_cd[tl[n]]))
+        u_dir[i] = (al[n], _number(system, g[n] * t_cd[tl[n]]))
     ua = set(unk_ang)
     still = [not (i < 0 and a in ua) for a, i in zip(al, sll, strict=True)]
     CbT = Cb.T
@@ -140,15 +154,15 @@ def _plan_data(system: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     else:
         still_a = np.array(still, bool)
         specs = [(terms, CbT), (terms[known], -CbT[known]), (terms[still_a], CbT[still_a])]
-    r = np.array([t_r[t] for t in tl], float)
+    r = np.array([t_r[t] for t in tl], float)  # one per variant: (terms, variants)
     cd = cd_all[terms]
     args = (b, Cb, CbT.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
     return args, specs, len(Cb)
 
 
-def _number(x: complex | np.ndarray) -> complex | np.ndarray:
-    """A constant as a Python complex number (one per row: the array as it is)."""
-    return complex(x) if np.ndim(x) == 0 else x
+def _number(system: LoopSystem, x: complex | np.ndarray) -> complex | np.ndarray:
+    """A constant as a Python complex number (one per variant: spread over the rows, :func:`sums.rows_of`)."""
+    return complex(x) if np.ndim(x) == 0 else rows_of(system, x)
 
 
 def _rows_where(keep: list[bool], terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:

@@ -9,7 +9,7 @@ and slider vectors on moving guides. It is evaluated for positions, velocities o
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -59,11 +59,12 @@ def term_constants(system: LoopSystem) -> tuple[list[int], list[int], list, list
     return system.cache["term_lists"]
 
 
-def per_row(system: LoopSystem, r: np.ndarray, cd: np.ndarray) -> LoopSystem:
-    """The system with every term's magnitude and e^{jδ} given per row (r, cd: (n_terms, rows)): variants of one
-    structure solved together, each row with its own numbers. Its plans and sums (built from these in the same
-    order of operations as from Python numbers) take each coefficient at the rows they evaluate."""
-    out = dataclasses.replace(system, cache={"per_row": True})
+def per_row(system: LoopSystem, r: np.ndarray, cd: np.ndarray, samples: int) -> LoopSystem:
+    """The system with every term's magnitude and e^{jδ} given per variant (r, cd: (n_terms, variants)), each
+    variant's on its ``samples`` rows (variants of one structure solved together, their samples stacked). Its
+    plans and sums are built from these in the same order of operations as from Python numbers, each constant
+    one per variant, then one per row (:func:`rows_of`); they take each coefficient at the rows they evaluate."""
+    out = dataclasses.replace(system, cache={"per_row": samples})
     out.cache["term_lists"] = (system.t_ang.tolist(), system.t_sl.tolist(), list(r), list(cd), cd)
     return out
 
@@ -71,6 +72,12 @@ def per_row(system: LoopSystem, r: np.ndarray, cd: np.ndarray) -> LoopSystem:
 def is_per_row(system: LoopSystem) -> bool:
     """Whether the system's term constants are per row (:func:`per_row`)."""
     return bool(system.cache.get("per_row"))
+
+
+def rows_of(system: LoopSystem, x: complex | np.ndarray) -> complex | np.ndarray:
+    """A constant built from per-variant values (last axis: variants) spread over each variant's rows; a number
+    (no term gave it) as it is."""
+    return np.repeat(x, system.cache["per_row"], axis=-1) if np.ndim(x) else x
 
 
 def at_rows(x: complex | np.ndarray, k: slice | np.ndarray) -> complex | np.ndarray:
@@ -86,7 +93,7 @@ def nonzero(x: complex | np.ndarray) -> bool:
 FEW_ENTRIES = 128  # a sum of more entries and columns than this is evaluated by the dense product (Sum.by_column)
 
 
-@dataclass(frozen=True)
+@dataclass
 class Entries:
     """A sum Σ_t M[t, :]·z_t entry by entry: output column i gets g·(the turning vectors of angle column a) for
     each (i, a, g) in ``rigid``, the constant ``const[i]`` (ground vectors, positions only) and h·(slider column
@@ -96,14 +103,22 @@ class Entries:
     rigid: list[tuple[int, int, complex]]
     const: list[complex]
     lines: list[tuple[int, int, complex]]
-    per_row: bool = False  # coefficients one per row (variants: :func:`per_row`), taken at the rows evaluated
+    spread: Callable | None = None  # coefficients one per variant: how they spread over the rows (rows_of)
 
     @classmethod
     def of(
-        cls, acols: Iterable[int], G: list, scols: Iterable[int], H: list, na: int, c0: list, per_row: bool = False
+        cls,
+        acols: Iterable[int],
+        G: list,
+        scols: Iterable[int],
+        H: list,
+        na: int,
+        c0: list,
+        rows: Callable | None = None,
     ) -> Entries:
         """From G's rows (for angle columns ``acols``; the padding column na: the ground) and H's rows (for slider
-        columns ``scols``); ``c0``: ground vectors given apart."""
+        columns ``scols``); ``c0``: ground vectors given apart. ``rows``: how per-variant coefficients spread
+        over the rows (:func:`rows_of`; None: one number each)."""
         const = list(c0)
         rigid = []
         for a, row in zip(acols, G, strict=True):
@@ -113,17 +128,29 @@ class Entries:
                 elif nonzero(g):
                     rigid.append((i, a, g))
         lines = [(i, c, h) for c, row in zip(scols, H, strict=True) for i, h in enumerate(row) if nonzero(h)]
-        return cls(sorted({a for _, a, _ in rigid}), rigid, const, lines, per_row)
+        return cls(sorted({a for _, a, _ in rigid}), rigid, const, lines, rows)
 
-    def at(self, k: slice | np.ndarray) -> Entries:
-        """The entries with their coefficients at rows ``k`` (themselves unless one per row)."""
-        if not self.per_row:
-            return self
+    @cached_property
+    def _rows(self) -> Entries:
+        """The entries with their per-variant coefficients spread over the rows (made on first use)."""
+        spread = self.spread
         return Entries(
             self.angles,
-            [(i, a, g[k]) for i, a, g in self.rigid],
-            [at_rows(c, k) for c in self.const],
-            [(i, c, h[k]) for i, c, h in self.lines],
+            [(i, a, spread(g)) for i, a, g in self.rigid],
+            [spread(c) for c in self.const],
+            [(i, c, spread(h)) for i, c, h in self.lines],
+        )
+
+    def at(self, k: slice | np.ndarray) -> Entries:
+        """The entries with their coefficients at rows ``k`` (themselves unless one per variant)."""
+        if self.spread is None:
+            return self
+        e = self._rows
+        return Entries(
+            e.angles,
+            [(i, a, g[k]) for i, a, g in e.rigid],
+            [at_rows(c, k) for c in e.const],
+            [(i, c, h[k]) for i, c, h in e.lines],
         )
 
     def pay(self) -> Entries | None:
@@ -133,7 +160,11 @@ class Entries:
         48,000 samples: entry by entry the faster for each, the dense product 1.5–8.6× their time in total per
         mechanism). A larger sum's Python loop would cost more than its dense product saves. Coefficients one
         per row have no dense product: entry by entry always."""
-        return self if self.per_row or len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES else None
+        return (
+            self
+            if self.spread is not None or len(self.rigid) + len(self.lines) + len(self.const) <= FEW_ENTRIES
+            else None
+        )
 
 
 @dataclass
@@ -397,11 +428,13 @@ def build_sums(system: LoopSystem, specs: list[tuple[list[int], list[list[float]
         if moving:
             s_ang, s_sl = np.array([t_ang[t] for t, _ in moving], int), np.array([t_sl[t] for t, _ in moving], int)
             s_r, s_cd = np.array([t_r[t] for t, _ in moving], float), np.array([t_cd[t] for t, _ in moving], complex)
-            # (one per row: (terms, rows))
+            if is_per_row(system):  # one per row: (terms, rows)
+                s_r, s_cd = rows_of(system, s_r), rows_of(system, s_cd)
             Ms = np.array([row for _, row in moving], complex).reshape(len(moving), K)
         acols = range(system.n_angles + 1) if acol is None else acol.tolist()
         scols = range(len(system.slider_names) + 1) if scol is None else scol.tolist()
-        entries = Entries.of(acols, G, scols, Hp, system.n_angles, c0 or [0j] * K, is_per_row(system)).pay()
+        spread = (lambda x: rows_of(system, x)) if is_per_row(system) else None
+        entries = Entries.of(acols, G, scols, Hp, system.n_angles, c0 or [0j] * K, spread).pay()
         out.append(Sum(acol, scol, s_ang, s_sl, s_r, s_cd, Ms, entries, (G, Hp, c0, K)))
     return out
 
