@@ -1,5 +1,4 @@
-"""The compiler's fast paths give exactly what the straightforward computations give (issue 15, "compile once,
-cheaply"): networkx's traversals and matching, numpy's loop residuals and Jacobians, np.add.at sums, the SVD rank
+"""The compiler's fast paths give exactly what the straightforward computations give: networkx's traversals and matching, numpy's loop residuals and Jacobians, np.add.at sums, the SVD rank
 test and the drivers' arrays at t = 0 — compared bit for bit on every catalog mechanism and on generated ones.
 The t = 0 checks still refuse what they refused, with the same messages."""
 

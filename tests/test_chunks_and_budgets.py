@@ -1,4 +1,6 @@
-"""The fast paths keep every guarantee: vectorized Newton blocks, chunked runs, streamed output, memory budget.
+"""Long runs solved in chunks give the run in one piece, streamed outputs and memory budgets hold, and the
+solver's faster evaluations give the direct ones: sums entry by entry or by products, condition numbers
+against the SVD, Newton blocks on change points, parallelograms and redundant loops, the grid by one bound.
 
 References are independent of vloop's loop equations: hand closed forms written out here or in
 validators/analytic_*.py, and the run solved in one piece (a chunk border must change nothing).

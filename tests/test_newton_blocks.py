@@ -1,5 +1,5 @@
 """The batched linear algebra behind the fast Newton path, against numpy's LAPACK references, and the Newton
-path itself against the hand closed forms and against the SVD rule for flags and refusals (issue 15)."""
+path itself against the hand closed forms and against the SVD rule for flags and refusals."""
 
 from __future__ import annotations
 
@@ -170,7 +170,7 @@ def test_newton_path_matches_the_closed_form(name, steps):
 
 
 def _svd_condition(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
-    """The rule before issue 15: Frobenius bound, replaced by numpy's SVD where it reaches the level."""
+    """The SVD rule: the Frobenius bound, replaced by numpy's SVD where it reaches the level."""
     Js = (J * colscale[:, None]).transpose(2, 0, 1)
     Xs = (X / colscale[:, None, None]).transpose(2, 0, 1)
     with np.errstate(invalid="ignore", over="ignore"):
