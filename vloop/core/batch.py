@@ -283,7 +283,7 @@ def _dyad_block(
     may pass, health and rates."""
     V, n, na = state.variants, state.samples, system.n_angles
     rows = slice(0, V * n)
-    ok, h = closed_form(plan, state, rows, na, np.full(V * n, plan.block.sigma))
+    ok, h = closed_form(plan, state, rows, np.full(V * n, plan.block.sigma))
     ok = ok.reshape(V, n)
     flags.refuse(~ok[:, 0], f"cannot assemble at t = 0: {_where(system, plan)} cannot close (its links cannot reach)")
     flags.doubt(~ok.all(axis=1))  # a limit: the single run locates it
@@ -330,7 +330,7 @@ def _probe_dyads(batch: _Batch, d: Designs, times: np.ndarray, upto: int) -> tup
     _impose(batch, state, d, times, checked=False)
     ok = np.ones(C * p, bool)
     for plan in block_plans(probes)[: upto + 1]:
-        closes, h = closed_form(plan, state, slice(0, C * p), system.n_angles, np.full(C * p, plan.block.sigma))
+        closes, h = closed_form(plan, state, slice(0, C * p), np.full(C * p, plan.block.sigma))
         ok &= closes
     return h.reshape(C, p), ok.reshape(C, p).all(axis=1)
 
@@ -399,7 +399,7 @@ def _assemble_at(batch: _Batch, d: Designs, start: np.ndarray, flags: _Flags) ->
     for i, plan in enumerate(block_plans(_constants(system, d, 1))):
         where = _where(system, plan)
         if plan.block.kind != "newton":
-            ok, _ = closed_form(plan, state, slice(0, V), na, np.full(V, plan.block.sigma))
+            ok, _ = closed_form(plan, state, slice(0, V), np.full(V, plan.block.sigma))
             flags.refuse(~ok, f"cannot assemble at t = 0: {where} cannot close (its links cannot reach)")
             continue
         block = newton.NewtonBlock(plan, na, batch.scale)

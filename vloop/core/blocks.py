@@ -83,10 +83,9 @@ def _toggle_reason(cond: float, rtol: float) -> str:
 
 def dyad_positions(run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, out: Solved) -> np.ndarray:
     """Solve block ``i``'s positions on rows 0..out.n_ok-1 (finding change points on the main run)."""
-    na = run.system.n_angles
     k = slice(0, out.n_ok)
     sigma = run.sigma(i, t_grid[k])
-    ok, h = closed_form(plan, state, k, na, sigma)
+    ok, h = closed_form(plan, state, k, sigma)
     if run.detect and plan.block.kind != "PP":
         n_lim = int(np.argmin(ok)) if not ok.all() else out.n_ok
         try:
@@ -96,7 +95,7 @@ def dyad_positions(run: Run, state: State, t_grid: np.ndarray, i: int, plan: Pla
             fail(out, f)
         if found:
             sigma = run.sigma(i, t_grid[k])
-            ok, h = closed_form(plan, state, k, na, sigma)
+            ok, h = closed_form(plan, state, k, sigma)
     if not ok[: out.n_ok].all():
         bad = int(np.argmin(ok))
         fail(out, Failure(bad, plan.block.loops[0], "the loop cannot close: the input is past a limit position"))

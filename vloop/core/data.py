@@ -76,17 +76,17 @@ class State:
         e = cd * self.e[k][:, ang]
         return (r + self.s[k][:, sl]) * e, e
 
-    def set_angle(self, k: slice, a: int, E: np.ndarray) -> None:
+    def set_angle(self, k: slice, a: int, cis: np.ndarray) -> None:
         """Store e^{jθ} and the unwrapped θ = φ + 2π·n for rows ``k`` (row k.start keeps its turn count; several
         variants: ``k`` all rows, each variant's first row keeps its own).
 
-        φ is the principal angle of E, n the whole turns counted by continuity from the first row:
-        the stored θ is then exactly φ + 2πn whatever the sampling before it, so a run that starts
+        φ is the principal angle of ``cis`` (e^{jθ} up to its length), n the whole turns counted by continuity from
+        the first row: the stored θ is then exactly φ + 2πn whatever the sampling before it, so a run that starts
         late gives the same numbers as one from t = 0.
         """
-        E = E / np.abs(E)
-        self.e[k, a] = E
-        phi = np.arctan2(E.imag, E.real)
+        cis = cis / np.abs(cis)
+        self.e[k, a] = cis
+        phi = np.arctan2(cis.imag, cis.real)
         if self.variants > 1:
             self.theta[k, a] = self._unwrap_variants(phi, a)
             return

@@ -42,72 +42,83 @@ def _rows_of(x: np.ndarray | complex, n: int) -> np.ndarray:
     return np.broadcast_to(x, (n,))
 
 
-def closed_form(plan: Plan, state: State, k: slice, na: int, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closed-form positions of a one-loop dyad for rows ``k`` on branches ``sigma`` (±1 per row).
+def closed_form(plan: Plan, state: State, k: slice, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form positions of a one-loop dyad for rows ``k`` on branches ``sigma`` (±1 per row), stored in the
+    state (the kind's function in CLOSED_FORMS).
 
     Returns the mask of assemblable rows and the discriminant h [length²]: the dyad's two
     assembly solutions lie 2·√h apart (h < 0: no solution, the input is past a limit position;
     h = 0: the two branches meet — a toggle, or a change point where they cross).
     """
-    b = plan.block
-    X = plan.known_sum.by_column(state, k, "p")[0]
-    if b.kind == "RRR":
-        # W1·E1 + W2·E2 = X: |W1|, |W2|, |X| form a triangle (law of cosines)
-        W1, W2 = _turning_vector(plan, state, k, plan.unk_ang[0]), _turning_vector(plan, state, k, plan.unk_ang[1])
-        A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
-        D2 = X.real**2 + X.imag**2
-        k1 = 0.5 * (A2 + D2 - B2)
-        h2 = _round_off_zero(
-            A2 * D2 - k1 * k1,
-            A2 * D2 + k1 * k1,
-            lambda m: (
-                (np.broadcast_to(A2, k1.shape)[m] + np.abs(k1[m]))
-                * np.sqrt(D2[m])
-                * plan.known_magnitude(state, _sub_rows(k, m))
-            ),
-        )
-        ok = (h2 >= 0) & (D2 > 0)
-        Dd = np.where(D2 > 0, D2, 1.0)
-        P = X * (k1 + 1j * sigma * np.sqrt(np.where(ok, h2, 0.0))) / Dd
-        state.set_angle(k, plan.unk_ang[0], P / W1)
-        state.set_angle(k, plan.unk_ang[1], (X - P) / W2)
-        return ok, h2 / Dd
-    if b.kind == "RRP":
-        # W1·E1 + s·U = X with U a known unit direction: project on U's normal
-        i = plan.unk_sl[0]
-        Uc = np.conj(_slider_direction(plan, state, k, i))
-        W1 = _turning_vector(plan, state, k, plan.unk_ang[0])
-        XU, WU = X * Uc, W1 * Uc
-        y = XU.imag
-        A2 = np.abs(W1) ** 2  # |W1|², per row or one for all
-        h = _round_off_zero(A2 - y * y, A2, lambda m: np.abs(y[m]) * plan.known_magnitude(state, _sub_rows(k, m)))
-        ok = h >= 0
-        c = sigma * np.sqrt(np.where(ok, h, 0.0))
-        E = np.empty(len(y), complex)
-        E.real, E.imag = c, y
-        rigid = not plan.w_sl[plan.unk_ang[0]] and plan.u_dir[i][0] < 0  # W1·Ū one number per variant
-        state.set_angle(k, plan.unk_ang[0], E * (1.0 / WU) if rigid else E / WU)
-        state.s[k, i] = XU.real - c
-        return ok, h
-    if b.kind == "RPR":
-        # (W + s·c)·E = X with c a unit direction fixed to the same link: |W + s·c| = |X|
-        i, a = plan.unk_sl[0], plan.unk_ang[0]
-        cdir = plan.at(plan.u_dir[i][1], k)
-        W = _turning_vector(plan, state, k, a, skip=i)
-        bb = (W * np.conj(cdir)).real
-        D2 = X.real**2 + X.imag**2
-        disc = _round_off_zero(
-            bb * bb - np.abs(W) ** 2 + D2,
-            bb * bb + np.abs(W) ** 2 + D2,
-            lambda m: np.sqrt(D2[m]) * plan.known_magnitude(state, _sub_rows(k, m)),
-        )
-        s = -bb + sigma * np.sqrt(np.where(disc >= 0, disc, 0.0))
-        den = W + s * cdir
-        ok = (disc >= 0) & (np.abs(den) > 0)
-        state.s[k, i] = s
-        state.set_angle(k, a, X / np.where(ok, den, 1.0))
-        return ok, disc
-    # PP: s1·U1 + s2·U2 = X (linear: one solution, no branches)
+    X = plan.known_sum.by_column(state, k, "p")[0]  # what the two unknown vectors add up to
+    return CLOSED_FORMS[plan.block.kind](plan, state, k, X, sigma)
+
+
+def _rrr(plan: Plan, state: State, k: slice, X: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two links: W1·E1 + W2·E2 = X, so |W1|, |W2|, |X| form a triangle (the law of cosines)."""
+    W1, W2 = _turning_vector(plan, state, k, plan.unk_ang[0]), _turning_vector(plan, state, k, plan.unk_ang[1])
+    A2, B2 = np.abs(W1) ** 2, np.abs(W2) ** 2
+    D2 = X.real**2 + X.imag**2
+    k1 = 0.5 * (A2 + D2 - B2)
+    h2 = _round_off_zero(
+        A2 * D2 - k1 * k1,
+        A2 * D2 + k1 * k1,
+        lambda m: (
+            (np.broadcast_to(A2, k1.shape)[m] + np.abs(k1[m]))
+            * np.sqrt(D2[m])
+            * plan.known_magnitude(state, _sub_rows(k, m))
+        ),
+    )
+    ok = (h2 >= 0) & (D2 > 0)
+    Dd = np.where(D2 > 0, D2, 1.0)
+    P = X * (k1 + 1j * sigma * np.sqrt(np.where(ok, h2, 0.0))) / Dd
+    state.set_angle(k, plan.unk_ang[0], P / W1)
+    state.set_angle(k, plan.unk_ang[1], (X - P) / W2)
+    return ok, h2 / Dd
+
+
+def _rrp(plan: Plan, state: State, k: slice, X: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A link and a slider: W1·E1 + s·U = X with U a known unit direction, projected on U's normal."""
+    i = plan.unk_sl[0]
+    Uc = np.conj(_slider_direction(plan, state, k, i))
+    W1 = _turning_vector(plan, state, k, plan.unk_ang[0])
+    XU, WU = X * Uc, W1 * Uc
+    y = XU.imag
+    A2 = np.abs(W1) ** 2  # |W1|², per row or one for all
+    h = _round_off_zero(A2 - y * y, A2, lambda m: np.abs(y[m]) * plan.known_magnitude(state, _sub_rows(k, m)))
+    ok = h >= 0
+    c = sigma * np.sqrt(np.where(ok, h, 0.0))
+    turned = np.empty(len(y), complex)  # W1·E1·Ū
+    turned.real, turned.imag = c, y
+    rigid = not plan.w_sl[plan.unk_ang[0]] and plan.u_dir[i][0] < 0  # W1·Ū one number (per variant)
+    state.set_angle(k, plan.unk_ang[0], turned * (1.0 / WU) if rigid else turned / WU)
+    state.s[k, i] = XU.real - c
+    return ok, h
+
+
+def _rpr(plan: Plan, state: State, k: slice, X: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A slider on a link through a pivot: (W + s·c)·E = X with c a unit direction fixed to the same link, so
+    |W + s·c| = |X|."""
+    i, a = plan.unk_sl[0], plan.unk_ang[0]
+    cdir = plan.at(plan.u_dir[i][1], k)
+    W = _turning_vector(plan, state, k, a, skip=i)
+    bb = (W * np.conj(cdir)).real
+    D2 = X.real**2 + X.imag**2
+    disc = _round_off_zero(
+        bb * bb - np.abs(W) ** 2 + D2,
+        bb * bb + np.abs(W) ** 2 + D2,
+        lambda m: np.sqrt(D2[m]) * plan.known_magnitude(state, _sub_rows(k, m)),
+    )
+    s = -bb + sigma * np.sqrt(np.where(disc >= 0, disc, 0.0))
+    den = W + s * cdir
+    ok = (disc >= 0) & (np.abs(den) > 0)
+    state.s[k, i] = s
+    state.set_angle(k, a, X / np.where(ok, den, 1.0))
+    return ok, disc
+
+
+def _pp(plan: Plan, state: State, k: slice, X: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two sliders: s1·U1 + s2·U2 = X (linear: one solution, no branches, h = ∞)."""
     U1, U2 = (_rows_of(_slider_direction(plan, state, k, i), len(X)) for i in plan.unk_sl[:2])
     det = cross(U1, U2)
     ok = np.abs(det) > 1e-12
@@ -115,6 +126,12 @@ def closed_form(plan: Plan, state: State, k: slice, na: int, sigma: np.ndarray) 
     state.s[k, plan.unk_sl[0]] = cross(X, U2) / dd
     state.s[k, plan.unk_sl[1]] = cross(U1, X) / dd
     return ok, np.full(len(ok), np.inf)
+
+
+# Each closed-form block kind (vloop.method.structure.classify names it) and its positions. A new kind: its
+# function here (positions and discriminant from the known part X); its Jacobian columns follow from its
+# unknowns (jacobian_columns: an angle's j·W·e^{jθ}, a slider's direction), so its rates and health too.
+CLOSED_FORMS = {"RRR": _rrr, "RRP": _rrp, "RPR": _rpr, "PP": _pp}
 
 
 def _round_off_zero(h: np.ndarray, size: np.ndarray | float, carried: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:

@@ -185,9 +185,9 @@ class NewtonBlock:
         where that bound fails (near a singular row) get their determinant computed."""
         if not self.square or len(J) < 2:
             return det_sign(J)
-        E = inv[:-1] @ (J[1:] - J[:-1])
+        step = inv[:-1] @ (J[1:] - J[:-1])
         with np.errstate(invalid="ignore"):
-            close = np.sum(E * E, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
+            close = np.sum(step * step, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
         exact = np.concatenate([[0], np.nonzero(~close)[0] + 1])
         sign = np.full(len(J), np.nan)
         sign[exact] = det_sign(J[exact])
@@ -202,16 +202,16 @@ class _Rows:
 
     def __init__(self, blk: NewtonBlock, state: State, n: int) -> None:
         plan, d = blk.plan, blk.dep
-        E, S = state.e[:n], state.s[:n]
+        cis, lengths = state.e[:n], state.s[:n]
         kn = blk.known
         # batch-last and C-contiguous: arithmetic on a transposed view is several times slower
         self.F0 = np.ascontiguousarray(
-            (((plan.r[kn] + S[:, plan.sl[kn]]) * (plan.cd[kn] * E[:, plan.ang[kn]])) @ plan.Ct[kn]).T
+            (((plan.r[kn] + lengths[:, plan.sl[kn]]) * (plan.cd[kn] * cis[:, plan.ang[kn]])) @ plan.Ct[kn]).T
         )
         ua, us = blk.t_ua[d], blk.t_us[d]
         # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
-        self.direction = np.ascontiguousarray((plan.cd[d] * E[:, np.where(ua >= 0, -1, plan.ang[d])]).T)
-        self.length = np.ascontiguousarray((plan.r[d] + S[:, np.where(us >= 0, -1, plan.sl[d])]).T)
+        self.direction = np.ascontiguousarray((plan.cd[d] * cis[:, np.where(ua >= 0, -1, plan.ang[d])]).T)
+        self.length = np.ascontiguousarray((plan.r[d] + lengths[:, np.where(us >= 0, -1, plan.sl[d])]).T)
         self.ta = np.nonzero(ua >= 0)[0]
         self.ta_u = np.searchsorted(blk.ia, ua[self.ta])  # which unknown angle turns each of those terms
         self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]

@@ -176,7 +176,7 @@ class Sum:
     vectors per link), else by a few dense real matrix products (pos/vel/acc, (rows, K)) on the interleaved
     [Re, Im] view (_real_reps: half the work of complex ones), whose arrays R, Rj, c0 and H are made on first use.
     A dense sum that reads most angle columns reads whole state rows, the ground vectors on the padding column
-    (E = 1, ω = α = 0); one that reads a few gathers them."""
+    (e^{jθ} = 1, ω = α = 0); one that reads a few gathers them."""
 
     acols: np.ndarray | None  # state angle columns read (None: whole rows, padding included, c0 in R)
     scols: np.ndarray | None  # state slider columns read
@@ -243,14 +243,14 @@ class Sum:
             entries = Entries.of(range(na + 1), G.tolist(), range(ns + 1), H.tolist(), na, [0j] * K).pay()
         return cls(acols, scols, ang[mv], sl[mv], r[mv], cd[mv], M[mv], entries, coef)
 
-    def _rigid(self, E: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
-        """Σ over the rigid vectors as a real (rows, 2K) array: (E·factor) @ G by its representation R."""
+    def _rigid(self, cis: np.ndarray, R: np.ndarray, factor: np.ndarray | None = None) -> np.ndarray:
+        """Σ over the rigid vectors as a real (rows, 2K) array: (e^{jθ}·factor) @ G by its representation R."""
         if self.acols is not None and not len(self.acols):
-            return np.zeros((len(E), R.shape[1]))
-        E = _columns_of(E, self.acols)
+            return np.zeros((len(cis), R.shape[1]))
+        cis = _columns_of(cis, self.acols)
         if factor is not None:
-            E = E * _columns_of(factor, self.acols)
-        return np.ascontiguousarray(E).view(float) @ R
+            cis = cis * _columns_of(factor, self.acols)
+        return np.ascontiguousarray(cis).view(float) @ R
 
     def _on_lines(self, out: np.ndarray, S: np.ndarray) -> np.ndarray:
         """out (real, interleaved) += the slider vectors along ground lines for slider values (or rates) S."""
@@ -268,20 +268,19 @@ class Sum:
         return out
 
     def vel(self, state: State, k: slice | np.ndarray) -> np.ndarray:
-        E = state.e[k]
-        out = self._on_lines(self._rigid(E, self.Rj, state.omega[k]), state.s_dot[k])
+        out = self._on_lines(self._rigid(state.e[k], self.Rj, state.omega[k]), state.s_dot[k])
         if len(self.s_sl):
             out += self._moving(state, k, "v")
         return out
 
     def acc(self, state: State, k: slice | np.ndarray) -> np.ndarray:
-        E, w = state.e[k], state.omega[k]
+        cis, w = state.e[k], state.omega[k]
         wc = _columns_of(w, self.acols)
         f = np.empty(wc.shape, complex)  # (jα − ω²)·e^{jθ}: tangential and normal accelerations in one product
         np.multiply(wc, wc, out=f.real)
         np.negative(f.real, out=f.real)
         f.imag = _columns_of(state.alpha[k], self.acols)
-        f *= _columns_of(E, self.acols)
+        f *= _columns_of(cis, self.acols)
         out = self._on_lines(
             f.view(float) @ self.R if f.shape[1] else np.zeros((len(f), self.R.shape[1])), state.s_ddot[k]
         )
@@ -327,9 +326,9 @@ class Sum:
                 out[i] = c
             elif nonzero(c):
                 out[i] += c
-        S = (state.s if what == "p" else state.s_dot if what == "v" else state.s_ddot)[k]
+        slides = (state.s if what == "p" else state.s_dot if what == "v" else state.s_ddot)[k]
         for i, c, h in e.lines:  # sliders along ground lines
-            _add_line(out[i], S[:, c], h)
+            _add_line(out[i], slides[:, c], h)
         if len(self.s_sl):
             out += self._moving(state, k, what).T
         return out
@@ -354,17 +353,17 @@ def _moving_terms(
 
 def _turning(state: State, k: slice | np.ndarray, a: int, what: str) -> np.ndarray:
     """e^{jθ}, ω·e^{jθ} (times j by the caller) or (jα − ω²)·e^{jθ} of angle column a over rows ``k``."""
-    E = state.e[k, a]
+    cis = state.e[k, a]
     if what == "p":
-        return E
+        return cis
     if what == "v":
-        return E * state.omega[k, a]
+        return cis * state.omega[k, a]
     w = state.omega[k, a]
     f = np.empty(len(w), complex)
     np.multiply(w, w, out=f.real)
     np.negative(f.real, out=f.real)
     f.imag = state.alpha[k, a]
-    f *= E
+    f *= cis
     return f
 
 
