@@ -5,7 +5,7 @@
     out = solve(model, values, grid, ["B.x", "B.y", "l4.theta"])  # columns (variants, samples), a status each
     out.completed, out.reason, out.columns["B.x"]
 
-or, in one call from a Mechanism, :func:`solve_variants`.
+or, in one call from a compiled system, :func:`solve_variants`.
 
 Every variant shares the nominal LoopSystem's structure; its own numbers are per-variant term constants
 (r, e^{jδ}), driver numbers and frame offsets (:class:`vloop.core.variants.Designs`). The variants' samples
