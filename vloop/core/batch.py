@@ -166,7 +166,7 @@ class _Batch:
         if newton_blocks:
             state = State(1, system.n_angles, len(system.slider_names))
             impose_drivers(system, state, *(x[0] for x in _inputs(model, _nominal(model), np.zeros(1))))
-            _put_variables(state, system, system.q0[None, :])
+            _put_variables(state, system, system.q0[None, :], drivers=False)
             for i, plan in newton_blocks:
                 _, J = newton.NewtonBlock(plan, system.n_angles, out.scale).residual_jacobian(state, np.zeros(1, int))
                 out.newton_sign[i] = float(det_sign(J)[0] or 1.0)

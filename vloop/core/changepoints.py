@@ -43,16 +43,24 @@ def candidate_minima(h: np.ndarray, tail: bool = True) -> np.ndarray:
     chunk sees that minimum with both its neighbours).
     """
     n = h.shape[1]
-    found = [np.zeros((0, 3), int)]
+    found = []
     if n > 2:
-        mid, left, right = h[:, 1:-1], h[:, :-2], h[:, 2:]
-        v, c = np.nonzero((mid <= left) & (mid <= right) & (mid < DIP * np.maximum(left, right)))
-        found.append(np.stack([v, c, c + 2], 1))
+        flat = np.ascontiguousarray(h).reshape(-1)  # the variants' rows one after the other
+        m = np.flatnonzero((flat[1:-1] <= flat[:-2]) & (flat[1:-1] <= flat[2:])) + 1  # sampled minima ...
+        if len(h) > 1:
+            m = m[(m % n != 0) & (m % n != n - 1)]  # ... inside a variant's rows
+        m = m[flat[m] < DIP * np.maximum(flat[m - 1], flat[m + 1])]  # those that dip are candidates
+        if len(m):
+            found.append(np.column_stack([m // n, m % n - 1, m % n + 1]))
         v = np.nonzero((h[:, 0] < DIP * h[:, 1]) & (h[:, 1] <= h[:, 2]))[0]  # rising from the first sample
-        found.append(np.stack([v, np.zeros_like(v), np.ones_like(v)], 1))
+        if len(v):
+            found.append(np.column_stack([v, np.zeros_like(v), np.ones_like(v)]))
     if tail and n > 1:  # still falling at the end: a zero may lie before the last sample
         v = np.nonzero(h[:, -1] < DIP * h[:, -2])[0]
-        found.append(np.stack([v, np.full_like(v, n - 2), np.full_like(v, n - 1)], 1))
+        if len(v):
+            found.append(np.column_stack([v, np.full_like(v, n - 2), np.full_like(v, n - 1)]))
+    if len(found) < 2:  # (each part is in order already)
+        return found[0] if found else np.zeros((0, 3), int)
     out = np.concatenate(found)
     return out[np.lexsort((out[:, 2], out[:, 1], out[:, 0]))]
 

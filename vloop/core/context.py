@@ -34,7 +34,7 @@ class Inputs:
 
     From ``t_first`` on: the file's drivers. Before it, a path in input space x0 + u·R with
     u = (t − lead_from)/span: the lead-in of a run that starts late (from the inputs at t = 0
-    to those at ``t_first`` less their whole crank turns, see :func:`_lead_in`), or the one-turn
+    to those at ``t_first`` less their whole crank turns, see :mod:`vloop.core.solver`), or the one-turn
     probe that measures winding numbers (``t_first`` = ∞).
     """
 

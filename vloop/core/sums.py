@@ -310,6 +310,7 @@ class Sum:
                 (self.pos if what == "p" else self.vel if what == "v" else self.acc)(state, k).T
             )
         n = len(state.e[k]) if isinstance(k, slice) else len(k)
+        adds = nonzero if e.spread is not None else bool  # whether a constant adds anything
         e = e.at(k)
         turning = {a: _turning(state, k, a, what) for a in e.angles}
         out = np.empty((len(e.const), n), complex)
@@ -324,7 +325,7 @@ class Sum:
         for i, c in enumerate(e.const if what == "p" else [0j] * len(out)):
             if not started[i]:
                 out[i] = c
-            elif nonzero(c):
+            elif adds(c):
                 out[i] += c
         slides = (state.s if what == "p" else state.s_dot if what == "v" else state.s_ddot)[k]
         for i, c, h in e.lines:  # sliders along ground lines
@@ -371,17 +372,18 @@ def _add_line(col: np.ndarray, s: np.ndarray, h: complex | np.ndarray) -> None:
     """col += h·s for real s: on the real or imaginary part alone for a line along an axis (without the product
     for a unit coefficient, the usual one: x or y). ``h`` one number, or one per row (the same choice where
     every row allows it)."""
-    part, c = (col.real, h.real) if _all(h.imag == 0) else (col.imag, h.imag) if _all(h.real == 0) else (col, h)
-    if _all(c == 1):
+    if isinstance(h, np.ndarray):
+        part, c = (col.real, h.real) if np.all(h.imag == 0) else (col.imag, h.imag) if np.all(h.real == 0) else (col, h)
+        one, minus_one = np.all(c == 1), np.all(c == -1)
+    else:
+        part, c = (col.real, h.real) if h.imag == 0 else (col.imag, h.imag) if h.real == 0 else (col, h)
+        one, minus_one = c == 1, c == -1
+    if one:
         np.add(part, s, out=part)
-    elif _all(c == -1):
+    elif minus_one:
         np.subtract(part, s, out=part)
     else:
         part += s * c
-
-
-def _all(condition: bool | np.ndarray) -> bool:
-    return bool(condition) if np.ndim(condition) == 0 else bool(np.all(condition))
 
 
 def _sum_parts(system: LoopSystem, terms: list[int], rows: list[list[float]], K: int) -> tuple:
