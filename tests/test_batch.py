@@ -122,3 +122,31 @@ def test_the_state_is_one_structure_over_variants_and_samples():
     own = state.rows(slice(14, 21))  # variant 2 as a state of its own, writing through
     own.omega[5, 1] = -3.0
     assert state.per_variant("omega")[2, 5, 1] == -3.0 and np.all(state.e[:, -1] == 1.0)
+
+
+def _dips_of_one(h: np.ndarray, tail: bool) -> list[tuple[int, int]]:
+    """The single run's brackets, written out for one variant: sampled minima below 0.9 of their larger
+    neighbour, a rise from the first sample, a fall into the last."""
+    n, out = len(h), []
+    for c in range(1, n - 1):
+        if h[c] <= h[c - 1] and h[c] <= h[c + 1] and h[c] < 0.9 * max(h[c - 1], h[c + 1]):
+            out.append((c - 1, c + 1))
+    if n > 2 and h[0] < 0.9 * h[1] and h[1] <= h[2]:
+        out.insert(0, (0, 1))
+    if tail and n > 1 and h[-1] < 0.9 * h[-2]:
+        out.append((n - 2, n - 1))
+    return out
+
+
+def test_candidate_minima_of_many_variants_are_each_ones_own():
+    from vloop.core.changepoints import DIP, candidate_minima
+
+    assert DIP == 0.9
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        V, n = int(rng.integers(1, 6)), int(rng.integers(2, 12))
+        h = rng.random((V, n))
+        h[rng.random((V, n)) < 0.1] = np.nan  # NaN compares false, as in the single run
+        for tail in (True, False):
+            want = [[v, lo, hi] for v in range(V) for lo, hi in _dips_of_one(h[v], tail)]
+            assert candidate_minima(h, tail).tolist() == want
