@@ -23,10 +23,11 @@ from .plans import Plan
 
 def _turning_vector(plan: Plan, state: State, k: slice, a: int, skip: int = -2) -> np.ndarray | complex:
     """W_a: the block's vectors turning with unknown angle a, before rotation (slider ``skip`` left out)."""
-    w: np.ndarray | complex = plan.at(plan.w_const[a], k)
+    rows = plan.per_row  # constants one per row: taken at rows k
+    w: np.ndarray | complex = plan.w_const[a][k] if rows else plan.w_const[a]
     for i, coef in plan.w_sl[a]:
         if i != skip:
-            w = w + plan.at(coef, k) * state.s[k, i]
+            w = w + (coef[k] if rows else coef) * state.s[k, i]
     return w
 
 

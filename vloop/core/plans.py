@@ -162,7 +162,7 @@ def _plan_data(system: LoopSystem, b: Block) -> tuple[tuple, list, int]:
 
 def _number(system: LoopSystem, x: complex | np.ndarray) -> complex | np.ndarray:
     """A constant as a Python complex number (one per variant: spread over the rows, :func:`sums.rows_of`)."""
-    return complex(x) if np.ndim(x) == 0 else rows_of(system, x)
+    return rows_of(system, x) if isinstance(x, np.ndarray) else complex(x)
 
 
 def _rows_where(keep: list[bool], terms: list[int], rows: list[list[float]]) -> tuple[list[int], list[list[float]]]:

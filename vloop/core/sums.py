@@ -9,6 +9,7 @@ and slider vectors on moving guides. It is evaluated for positions, velocities o
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import cached_property
@@ -77,17 +78,21 @@ def is_per_row(system: LoopSystem) -> bool:
 def rows_of(system: LoopSystem, x: complex | np.ndarray) -> complex | np.ndarray:
     """A constant built from per-variant values (last axis: variants) spread over each variant's rows; a number
     (no term gave it) as it is."""
-    return np.repeat(x, system.cache["per_row"], axis=-1) if np.ndim(x) else x
+    return _spread(system.cache["per_row"], x)
+
+
+def _spread(samples: int, x: complex | np.ndarray) -> complex | np.ndarray:
+    return np.repeat(x, samples, axis=-1) if isinstance(x, np.ndarray) else x
 
 
 def at_rows(x: complex | np.ndarray, k: slice | np.ndarray) -> complex | np.ndarray:
     """A coefficient at rows ``k``: itself where it is one number for every row, else its rows k."""
-    return x if np.ndim(x) == 0 else x[k]
+    return x[k] if isinstance(x, np.ndarray) else x
 
 
 def nonzero(x: complex | np.ndarray) -> bool:
     """Whether a coefficient adds anything (one per row: unless it is zero on every row)."""
-    return bool(x) if np.ndim(x) == 0 else bool(np.any(x))
+    return bool(np.any(x)) if isinstance(x, np.ndarray) else bool(x)
 
 
 FEW_ENTRIES = 128  # a sum of more entries and columns than this is evaluated by the dense product (Sum.by_column)
@@ -123,11 +128,18 @@ class Entries:
         rigid = []
         for a, row in zip(acols, G, strict=True):
             for i, g in enumerate(row):
-                if nonzero(g) and a == na:
+                if not (g if rows is None else nonzero(g)):
+                    continue
+                if a == na:
                     const[i] += g
-                elif nonzero(g):
+                else:
                     rigid.append((i, a, g))
-        lines = [(i, c, h) for c, row in zip(scols, H, strict=True) for i, h in enumerate(row) if nonzero(h)]
+        lines = [
+            (i, c, h)
+            for c, row in zip(scols, H, strict=True)
+            for i, h in enumerate(row)
+            if (h if rows is None else nonzero(h))
+        ]
         return cls(sorted({a for _, a, _ in rigid}), rigid, const, lines, rows)
 
     @cached_property
@@ -434,7 +446,7 @@ def build_sums(system: LoopSystem, specs: list[tuple[list[int], list[list[float]
             Ms = np.array([row for _, row in moving], complex).reshape(len(moving), K)
         acols = range(system.n_angles + 1) if acol is None else acol.tolist()
         scols = range(len(system.slider_names) + 1) if scol is None else scol.tolist()
-        spread = (lambda x: rows_of(system, x)) if is_per_row(system) else None
+        spread = functools.partial(_spread, system.cache["per_row"]) if is_per_row(system) else None  # (no cycle)
         entries = Entries.of(acols, G, scols, Hp, system.n_angles, c0 or [0j] * K, spread).pay()
         out.append(Sum(acol, scol, s_ang, s_sl, s_r, s_cd, Ms, entries, (G, Hp, c0, K)))
     return out
