@@ -430,3 +430,24 @@ def test_run_extras_info_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert "Kennedy's theorem reaches all 15 pairs" in text
     assert vloop_main(["run", str(path), "--out", str(tmp_path / "bad"), "--ma", "l6,zz"]) == 2
     assert "unknown output 'zz'" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
+def test_plain_import_reaches_the_teaching_subpackage_on_first_use() -> None:
+    """README: ``import vloop`` then ``vloop.teaching.cycle(mech)``, in a fresh interpreter; ``import vloop`` alone
+    does not import the teaching subpackage (it stays light)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, vloop\n"
+        "light = not any(m.startswith('vloop.teaching') for m in sys.modules)\n"
+        f"mech = vloop.load({str(MECH / 'slider_crank_offset.toml')!r})\n"
+        "print(light, repr(vloop.teaching.cycle(mech).outputs['l4'].time_ratio))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    r, ell, e = 2.0, 6.0, 1.0  # the offset slider-crank's closed form (test_offset_slider_crank_stroke_and_time_ratio)
+    beta = math.asin(e / (ell - r)) - math.asin(e / (ell + r))
+    assert out[0] == "True"
+    assert abs(float(out[1]) - (math.pi + beta) / (math.pi - beta)) <= 1e-9
+    with pytest.raises(AttributeError, match="no attribute 'no_such_part'"):
+        vloop.no_such_part  # noqa: B018
