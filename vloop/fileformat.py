@@ -525,17 +525,24 @@ def _read_csv(spec: str, entry: str, ctx: _Context, probs: Problems) -> dict[str
 
 
 def _profile_path(spec: str, entry: str, ctx: _Context, probs: Problems) -> Path | None:
+    """The profile's path: ``spec`` relative to the mechanism file's folder, or absolute. Without
+    ``allow_external_profiles`` it must lie inside that folder once both are resolved the same way (symbolic
+    links and ``..`` followed): an absolute path into the folder is read, a link out of it is refused."""
     if "\x00" in spec or not spec.strip():
         probs.add(entry, f"profile path {show(spec)} is not a file name")
         return None
-    path = ctx.base / spec
+    path = ctx.base / spec  # an absolute spec replaces the base
     if not ctx.allow_external_profiles:
-        outside = Path(spec).is_absolute() or not path.resolve().is_relative_to(ctx.base.resolve())
+        try:
+            outside = not Path(os.path.realpath(path)).is_relative_to(os.path.realpath(ctx.base))
+        except (OSError, ValueError):  # a path the system cannot resolve (too long, a link loop)
+            outside = True
         if outside:
             probs.add(
                 entry,
-                f"profile {show(spec)} is outside the mechanism file's folder: vloop reads only files beside it "
-                "(allow others with --allow-external-profiles, or load(..., allow_external_profiles=True))",
+                f"profile {show(spec)} is outside the mechanism file's folder {show(str(ctx.base))}: vloop reads only "
+                "files inside it (allow others with --allow-external-profiles, or load(..., "
+                "allow_external_profiles=True))",
             )
             return None
     return path
