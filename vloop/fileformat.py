@@ -608,10 +608,25 @@ def read_time(raw: Any, drivers: list[Driver], probs: Problems) -> np.ndarray:
         probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {why}")
         return np.zeros(1)
     n = math.floor(count + 1e-9) + 1  # up to and including stop, never past it
-    t = start + step * np.arange(n)
+    t = time_grid(start, step, n)
     if n > 1 and np.any(np.diff(t) <= 0):
         probs.add("time", f"step {step:g} is too small to separate samples near t = {start:g}")
     return t
+
+
+def time_grid(start: float, step: float, n: int) -> np.ndarray:
+    """The samples start + k·step, k = 0 … n − 1 [s], each the double nearest the decimal value the file's
+    numbers state (start and step read as their shortest decimal text: 7 × 0.05 gives 0.35, where the floating
+    product is 0.35000000000000003). Exact by integer arithmetic where the numerators and the common
+    denominator are exact doubles (one correctly rounded division); otherwise start + k·step in floating point."""
+    from fractions import Fraction
+
+    a, b = Fraction(repr(float(start))), Fraction(repr(float(step)))
+    den = math.lcm(a.denominator, b.denominator)
+    first, inc = a.numerator * (den // a.denominator), b.numerator * (den // b.denominator)
+    if den < 2**1000 and float(den) == den and max(abs(first), abs(first + inc * (n - 1))) < 2**53:
+        return (first + inc * np.arange(n, dtype=np.int64)).astype(float) / den
+    return start + step * np.arange(n)
 
 
 def _explicit_times(ts: Any, probs: Problems) -> np.ndarray:

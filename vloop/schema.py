@@ -143,7 +143,8 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "time",
         "[time]",
-        "the samples: start + k·step up to and including stop, or an explicit list",
+        "the samples: start + k·step up to and including stop (the decimals as written: 7 × 0.05 is 0.35), "
+        "or an explicit list",
         (
             Key("start", "number", "0", "s", "first sample", 0.0),
             Key("stop", "number", "required", "s", "last sample (within half a step)", 1.0),

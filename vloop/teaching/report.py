@@ -71,16 +71,16 @@ def _check_finite(mech: Mechanism, result: Result, cols: dict[str, np.ndarray]) 
 def write_extras(
     mech: Mechanism, result: Result, folder: str | Path, outputs: list[str] | None = None, system: Any = None
 ) -> Path:
-    """Write ``folder/extras.csv`` atomically (through vloop.output); every value must be finite."""
+    """Write ``folder/extras.csv`` atomically (through vloop.output; numbers as :func:`vloop.result.write_csv`
+    writes them); every value must be finite."""
     from ..output import atomic_write
+    from ..result import write_csv
 
     cols = extras(mech, result, outputs, system)
     _check_finite(mech, result, cols)
     path = Path(folder) / "extras.csv"
-    names = ["t", *cols]
-    data = np.column_stack([result.t, *cols.values()]) if len(result.t) else np.zeros((0, len(names)))
-    with atomic_write(path) as fh:
-        np.savetxt(fh, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    with atomic_write(path, "wb") as fh:
+        write_csv(fh, ["t", *cols], [result.t, *(np.asarray(c, float) for c in cols.values())])
     return path
 
 
