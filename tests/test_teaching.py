@@ -451,3 +451,44 @@ def test_plain_import_reaches_the_teaching_subpackage_on_first_use() -> None:
     assert abs(float(out[1]) - (math.pi + beta) / (math.pi - beta)) <= 1e-9
     with pytest.raises(AttributeError, match="no attribute 'no_such_part'"):
         vloop.no_such_part  # noqa: B018
+
+
+ANGLE_PRINTED = r"(-?\d+(?:\.\d+)?(?:e[-+]?\d+)?) rad \((-?\d+\.\d+)°\)"
+
+
+def test_every_angle_the_command_line_prints_is_in_zero_to_360(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Angles are printed in [0°, 360°) (rad in [0, 2π)), whatever turn the input starts or ends on: the textbook
+    four-bar starts at θ2 = 40°, so its dead centres are found at 40° + travel (the extended one at 384.1468° before
+    wrapping); a run past the limit names the input; ``run --sweep`` prints the limits of the rocking input."""
+    import re
+
+    mech = load("fourbar_textbook_example")
+    a, b, c, d = 40.0, 120.0, 80.0, 100.0  # crank and coupler in line, extended: |O2B| = a + b, B above O2O4
+    extended = math.acos((d * d + (a + b) ** 2 - c * c) / (2 * d * (a + b)))
+    texts = []
+    for args in (
+        ["info", str(MECH / "fourbar_textbook_example.toml")],
+        ["info", str(MECH / "fourbar_nongrashof_past_limit.toml")],
+        ["run", "--sweep", str(MECH / "fourbar_nongrashof_past_limit.toml"), "--out", str(tmp_path / "sweep")],
+        ["run", str(MECH / "fourbar_nongrashof_past_limit.toml"), "--out", str(tmp_path / "past")],
+    ):
+        vloop_main(args)
+        captured = capsys.readouterr()
+        texts.append(captured.out + captured.err)
+    printed = [(r, float(g)) for text in texts for r, g in re.findall(ANGLE_PRINTED, text)]
+    assert len(printed) >= 20
+    for text, deg in printed:
+        rad = float(text)
+        assert 0.0 <= rad < TWO_PI and 0.0 <= deg < 360.0, (rad, deg)
+        digits = len(text.split("e")[0].replace(".", "").lstrip("0")) or 1  # rad: half a unit of its last digit
+        last = 0.5 * 10.0 ** (math.floor(math.log10(rad)) - digits + 1) if rad else 0.0
+        assert abs(math.degrees(rad) - deg) <= 0.5e-4 + math.degrees(last), text  # one angle, printed twice
+    rests = re.findall(r"dead centre at θ_l2 = (\S+) rad \((\S+)°\): l4 at rest", texts[0])
+    rest = [r for r in rests if abs(float(r[0]) - extended) <= 1e-9]  # 24.1468°, was 384.1468°
+    assert len(rests) == 2 and len(rest) == 1 and rest[0][1] == "24.1468"
+    assert mech.drivers[0].value_text(2 * math.pi + extended, "mm") == f"θ_l2 = {rest[0][0]} rad (24.1468°)"
+    lim = math.acos((3.0**2 + 6.0**2 - 8.5**2) / (2 * 3.0 * 6.0))  # the non-Grashof input's limits, ±139.1956°
+    assert f"from {TWO_PI - lim:.10g} rad (220.8044°) counter-clockwise to {lim:.10g} rad (139.1956°)" in texts[2]
+    assert vloop.model.angle_text(-1e-12) == "0 rad (0.0000°)"  # within the printed precision of a full turn
