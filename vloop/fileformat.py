@@ -21,6 +21,7 @@ import numpy as np
 from .errors import MechanismError
 from .model import (
     LENGTH_UNITS,
+    Body,
     Driver,
     Link,
     Load,
@@ -721,10 +722,15 @@ def read_dynamics(data: dict, m: Mechanism, ctx: _Context, probs: Problems) -> d
 
 
 def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProperties]:
-    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks."""
+    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks.
+
+    Without ``com`` the centre of mass is the mean of the body's joints as the body is assembled — in its own
+    frame, where a stated ``length`` places the second joint (the typed coordinates may be rounded) — stored, as
+    a stated ``com`` is, in world coordinates at t = 0 through the body's frame."""
     out: dict[str, MassProperties] = {}
     tables = [("links", n, v) for n, v in (data.get("links") or {}).items() if n in m.links]
     tables += [("sliders", n, v) for n, v in (data.get("sliders") or {}).items() if n in m.sliders]
+    bodies = m.bodies() if tables else {}
     for section, name, val in tables:
         if not isinstance(val, dict) or not {"mass", "inertia", "com"} & set(val):
             continue
@@ -735,14 +741,22 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
         mass = real(val.get("mass", 0.0), "mass", entry, probs)
         inertia = real(val.get("inertia", 0.0), "inertia", entry, probs)
         joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
-        mean = (sum(m.joints[j][0] for j in joints) / len(joints), sum(m.joints[j][1] for j in joints) / len(joints))
-        com = pair(val["com"], "com", entry, probs) if "com" in val else mean
+        com = pair(val["com"], "com", entry, probs) if "com" in val else _joint_mean(bodies[name], joints)
         for what, x in (("mass", mass), ("inertia", inertia)):
             if x is not None and x < 0:
                 probs.add(entry, f"'{what}' must not be negative, got {x:g}")
         if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
             out[name] = MassProperties(mass, inertia, com)
     return out
+
+
+def _joint_mean(body: Body, joints: tuple[str, ...]) -> tuple[float, float]:
+    """The mean of ``joints`` in the body's frame (as assembled: rigid, its stated length applied), in world
+    coordinates through the frame at t = 0."""
+    lx = sum(body.local[j][0] for j in joints) / len(joints)
+    ly = sum(body.local[j][1] for j in joints) / len(joints)
+    c, s = math.cos(body.theta0), math.sin(body.theta0)
+    return (body.origin[0] + c * lx - s * ly, body.origin[1] + s * lx + c * ly)
 
 
 def read_loads(raw: Any, m: Mechanism, ctx: _Context, probs: Problems) -> list[Load]:

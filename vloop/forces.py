@@ -80,8 +80,9 @@ def reaction_names(mech: Mechanism) -> list[tuple[str, str, str]]:
 
 
 def body_com(mech: Mechanism, body: str) -> tuple[float, float]:
-    """Centre of mass in the body frame [file units]: the file's ``com`` (world, t = 0) carried into
-    the frame, or the mean of the body's joints in the frame for a massless body."""
+    """Centre of mass in the body frame [file units]: the file's ``com`` (world, t = 0) carried into the frame
+    (unstated: the mean of the body's joints as assembled, :class:`vloop.model.MassProperties`), or the mean of
+    the body's joints in the frame for a massless body."""
     b = mech.bodies()[body]
     mp = mech.masses.get(body)
     if mp is None:

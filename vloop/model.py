@@ -138,7 +138,9 @@ class Body:
 @dataclass(frozen=True)
 class MassProperties:
     """Mass [kg], inertia [kg·m²] about the centre of mass, and the centre of mass (x, y) in world
-    coordinates at t = 0 [the file's length units]."""
+    coordinates at t = 0 [the file's length units], carried into the body's frame by the frame the coordinates
+    give. Unstated, it is the mean of the body's joints as the body is assembled (in its frame, a stated link
+    length applied), not of the typed coordinates."""
 
     mass: float
     inertia: float
