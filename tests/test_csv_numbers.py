@@ -79,3 +79,4 @@ def test_the_time_grid_is_the_decimal_one_the_file_states():
     third = 1 / 3  # no short decimal: start + k·step in floating point
     assert time_grid(0.0, third, 4).tolist() == [0.0, third, 2 * third, 3 * third]
     assert time_grid(0.0, 5e-324, 3).tolist() == [0.0, 5e-324, 1e-323]
+    assert time_grid(0.0, 1e308, 1).tolist() == [0.0] and time_grid(1.0, 1e20, 2).tolist() == [1.0, 1e20]

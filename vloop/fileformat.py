@@ -625,7 +625,7 @@ def time_grid(start: float, step: float, n: int) -> np.ndarray:
     a, b = Fraction(repr(float(start))), Fraction(repr(float(step)))
     den = math.lcm(a.denominator, b.denominator)
     first, inc = a.numerator * (den // a.denominator), b.numerator * (den // b.denominator)
-    if den < 2**1000 and float(den) == den and max(abs(first), abs(first + inc * (n - 1))) < 2**53:
+    if den < 2**1000 and float(den) == den and max(abs(first), abs(inc), abs(first + inc * (n - 1))) < 2**53:
         return (first + inc * np.arange(n, dtype=np.int64)).astype(float) / den
     return start + step * np.arange(n)
 
