@@ -258,7 +258,7 @@ def cmd_loops(args: argparse.Namespace) -> int:
     from .compiler import compile_system
     from .equations import describe
 
-    print(describe(compile_system(_load(args)), latex=args.latex))
+    print(describe(compile_system(_load(args)), latex=args.latex, exact=args.exact))
     return 0
 
 
@@ -746,6 +746,11 @@ def _parser_loops(sub: Any) -> None:
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     _add_file(lo)
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
+    lo.add_argument(
+        "--exact",
+        action="store_true",
+        help="every number to full precision (the shortest text that reads back to the same double)",
+    )
     lo.set_defaults(func=cmd_loops)
 
 
