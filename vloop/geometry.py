@@ -21,24 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from .equations import Vector
 from .model import Mechanism
 from .result import Result
-
-
-@dataclass(frozen=True)
-class LoopVector:
-    """One vector of a loop, (r + s)·e^{j(θ_link + δ)}, the loop's sign folded into δ (−v = v·e^{jπ}).
-
-    ``link``: the link whose θ turns it (None: fixed to the ground). ``slider``: the slider whose
-    s adds to its magnitude (None: a rigid vector). ``r`` [length], ``delta`` [rad].
-    ``letter``: its symbol in the loop equation (``vloop loops``), e.g. ``"a"``.
-    """
-
-    letter: str
-    link: str | None
-    slider: str | None
-    r: float
-    delta: float
 
 
 @dataclass(frozen=True)
@@ -55,7 +40,7 @@ class LoopChain:
     index: int
     label: str
     equation: str
-    vectors: tuple[LoopVector, ...]
+    vectors: tuple[Vector, ...]
     start: str | None
     joints: tuple[tuple[int, str], ...]
     vertices: np.ndarray
@@ -95,7 +80,7 @@ def loop_chains(system: Any, result: Result) -> list[LoopChain]:
     for lp in system.loops:
         eq = equations[lp.index]
         equation = f"{equation_text(eq)} = 0"
-        vectors = tuple(LoopVector(v.letter, v.link, v.slider, v.r, v.delta) for v in eq.vectors)
+        vectors = eq.vectors
         start = lp.nodes[0][1]
         start_name = start if start in mech.tracked_points else _origin_joint(system)
         z = np.zeros((len(result), len(vectors) + 1), complex)
@@ -110,7 +95,7 @@ def loop_chains(system: Any, result: Result) -> list[LoopChain]:
     return chains
 
 
-def _joints_on_chain(system: Any, lp: Any, vectors: tuple[LoopVector, ...]) -> tuple[tuple[int, str], ...]:
+def _joints_on_chain(system: Any, lp: Any, vectors: tuple[Vector, ...]) -> tuple[tuple[int, str], ...]:
     """Which chain vertex each joint of the loop is, found once on the t = 0 assembly ``system.q0``.
 
     The loop's corners are visited in order; each joint is the first vertex at or after the previous
@@ -153,7 +138,7 @@ def _origin_joint(system: Any) -> str | None:
     return None
 
 
-def _value(v: LoopVector, q: np.ndarray, system: Any) -> complex:
+def _value(v: Vector, q: np.ndarray, system: Any) -> complex:
     na = len(system.angle_links)
     th = q[system.angle_links.index(v.link)] if v.link is not None else 0.0
     s = q[na + system.slider_names.index(v.slider)] if v.slider is not None else 0.0
