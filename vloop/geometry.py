@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .equations import Vector
+from .equations import Vector, equation_text, legend_text, vector_loops
 from .model import Mechanism
 from .result import Result
 
@@ -70,8 +70,6 @@ def loop_chains(system: Any, result: Result) -> list[LoopChain]:
     ``SLIDER.s`` columns [length, rad]; a chain starts at its first joint's position in the Result
     (or at the world origin).
     """
-    from .equations import equation_text, vector_loops
-
     mech = system.mechanism
     equations = {eq.number - 1: eq for eq in vector_loops(system)[0]}
     theta = {name: result[f"{name}.theta"] for name in system.angle_links}
@@ -147,6 +145,4 @@ def _value(v: Vector, q: np.ndarray, system: Any) -> complex:
 
 def equation_legend(system: Any) -> list[str]:
     """The lines after ``where`` in ``vloop loops``: what each letter stands for."""
-    from .equations import legend_text, vector_loops
-
     return [legend_text(item) for item in vector_loops(system)[1]]
