@@ -19,7 +19,7 @@ import pytest
 import vloop
 from tests.conftest import MECHANISMS
 from vloop.cli import main
-from vloop.fileformat import time_grid
+from vloop.files.fileformat import time_grid
 
 
 def significant(text: str) -> int:

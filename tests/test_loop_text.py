@@ -242,9 +242,9 @@ def test_loops_do_not_depend_on_where_the_origin_is(stem: str) -> None:
     texts = set()
     for dx, dy in OFFSETS:
         system = compile_system(translated(mech, dx, dy))
-        text = vloop.equations.describe(system)
+        text = vloop.method.equations.describe(system)
         texts.add(text.split("\n", 1)[1])  # the heading names the file
-        assert vloop.loops.branch_name(system, system.q0, system.loops[0]) == "open"
+        assert vloop.method.loops.branch_name(system, system.q0, system.loops[0]) == "open"
     assert len(texts) == 1, texts
     assert "O2→O4 (ground)" in texts.pop()
 
@@ -264,7 +264,7 @@ def test_translated_four_bar_takes_branch_names() -> None:
     watt = translated(vloop.load(MECHANISMS / "sixbar_watt2.toml"), dx, dy, {"2": "crossed"})
     system = compile_system(watt)
     assert system.loops[1].label == "O4–C–D–O6"
-    assert vloop.loops.branch_name(system, system.q0, system.loops[1]) == "crossed"
+    assert vloop.method.loops.branch_name(system, system.q0, system.loops[1]) == "crossed"
 
 
 def test_sliders_keep_measuring_from_the_world_origin() -> None:

@@ -61,7 +61,7 @@ def __getattr__(name: str) -> Any:
     if name in _TEACHING:
         return getattr(importlib.import_module(".teaching", __name__), name)
     if name == "study":
-        return importlib.import_module(".studies", __name__).study
+        return importlib.import_module(".studies.study", __name__).study
     if name.isidentifier() and not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}"):
         return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")
@@ -83,11 +83,11 @@ def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options
     ``mechanism`` may be a Mechanism (compiled on the first solve, then kept with it) or a LoopSystem.
     Options: ``method="auto"|"newton"`` (a LoopSystem compiled otherwise keeps its variant), ``tol``,
     ``max_iter``, ``rtol``, ``memory_budget`` (bytes or "2G": a run whose results would not fit is refused,
-    see vloop.budget). Raises MotionError (with ``.partial``) if the motion cannot be completed.
+    see vloop.files.budget). Raises MotionError (with ``.partial``) if the motion cannot be completed.
     """
     from .compiler import compile_system
-    from .loops import LoopSystem
-    from .solver import solve as solve_system
+    from .core.solver import solve as solve_system
+    from .method.loops import LoopSystem
 
     method = options.pop("method", None)
     unknown = set(options) - {"tol", "max_iter", "rtol", "memory_budget"}

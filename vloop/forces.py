@@ -503,7 +503,7 @@ class ForceResult:
     def to_csv(self, path: str | Path) -> Path:
         """Write ``t`` and every column atomically, each number the shortest text that reads back to the same
         double (:func:`vloop.result.write_csv`); only finite numbers (else ForceError)."""
-        from .output import atomic_write
+        from .files.output import atomic_write
         from .result import write_csv
 
         self.check_finite()

@@ -1,6 +1,6 @@
 """Drawing geometry from a solved run: body poses and the vector loops head to tail.
 
-Everything here is a pure function of a compiled :class:`~vloop.loops.LoopSystem` (its public
+Everything here is a pure function of a compiled :class:`~vloop.method.loops.LoopSystem` (its public
 attributes only) and a :class:`~vloop.result.Result`, vectorized over samples:
 
 * :func:`body_poses` — the pose (x, y, θ) of every body's frame per sample, the frame of
@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from .equations import Vector, equation_text, legend_text, vector_loops
-from .model import Mechanism
-from .result import Result
+from ..method.equations import Vector, equation_text, legend_text, vector_loops
+from ..model import Mechanism
+from ..result import Result
 
 
 @dataclass(frozen=True)
