@@ -349,11 +349,9 @@ def _assembly_time(mech: Mechanism) -> float:
 
 
 def _driver_text(mech: Mechanism, t: float) -> str:
-    """The drivers' input values at ``t``, e.g. "θ_l2 = 2.4312 rad"."""
+    """The drivers' input values at ``t``, e.g. "θ_l2 = 2.4312 rad (139.2974°)" (angles in [0°, 360°))."""
     x, _, _ = evaluate_all(mech, np.array([t]))
-    return ", ".join(
-        f"{d.symbol} = {x[0, i]:.6g} {'rad' if d.kind == 'crank' else mech.units}" for i, d in enumerate(mech.drivers)
-    )
+    return ", ".join(d.value_text(x[0, i], mech.units, 6) for i, d in enumerate(mech.drivers))
 
 
 def _assemble(kin: _Kinematics, mech: Mechanism, t0: float, engine: str, times: np.ndarray) -> _State:

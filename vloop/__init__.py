@@ -52,14 +52,18 @@ _TEACHING = (
 
 
 def __getattr__(name: str) -> Any:
+    """The teaching functions, ``vloop.study`` and every submodule (``vloop.teaching.cycle`` after a plain
+    ``import vloop``), imported on first use so that ``import vloop`` stays light. Imported by name: modules
+    that import the package for vloop.solve must not look as if they depended on what is built on them."""
+    import importlib
+    import importlib.util
+
     if name in _TEACHING:
-        from . import teaching
-
-        return getattr(teaching, name)
-    if name == "study":  # design studies, imported on first use (by name: modules that import the package
-        import importlib  # for vloop.solve must not look as if they depended on the studies built on them)
-
+        return getattr(importlib.import_module(".teaching", __name__), name)
+    if name == "study":
         return importlib.import_module(".studies.study", __name__).study
+    if name.isidentifier() and not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}"):
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")
 
 

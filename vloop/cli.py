@@ -17,6 +17,7 @@ import numpy as np
 
 from . import __version__
 from .errors import MotionError, VloopError
+from .model import angle_text
 from .result import Result
 
 INFO_SOLVE_LIMIT = 200_000  # vloop info solves the file's motion up to this many samples
@@ -129,7 +130,7 @@ def _rocking(mech: Any) -> Any:
     mech = rocking(mech)
     lo, hi = mech.options.get("sweep", (None, None))
     if lo is not None:
-        print(f"{mech.name}: {mech.drivers[0].symbol} rocks between its limits {lo:.10g} and {hi:.10g}")
+        print(f"{mech.name}: rocks between the limits of {mech.drivers[0].range_text(lo, hi, mech.units)}")
     return mech
 
 
@@ -173,7 +174,9 @@ def health_notes(result: Result, redundancy: bool = True) -> list[str]:
     if redundancy and "redundancy" in result.meta:
         lines.append("  " + result.meta["redundancy"])
     for cp in result.meta.get("change_points", []):
-        inputs = ", ".join(f"{k} = {v:.10g}" for k, v in cp["inputs"].items())
+        inputs = ", ".join(
+            f"{k} = {angle_text(v) if k.startswith('θ_') else f'{v:.10g}'}" for k, v in cp["inputs"].items()
+        )
         if cp.get("kind") == "singular":
             lines.append(
                 f"  singular configuration passed: loop {cp['loop']} ({cp['label']}) at t = {cp['time']:.10g} s, "
@@ -255,7 +258,7 @@ def cmd_loops(args: argparse.Namespace) -> int:
     from .compiler import compile_system
     from .method.equations import describe
 
-    print(describe(compile_system(_load(args)), latex=args.latex))
+    print(describe(compile_system(_load(args)), latex=args.latex, exact=args.exact))
     return 0
 
 
@@ -302,8 +305,9 @@ def _info_parts(mech: Any) -> list[str]:
         if d.profile is not None:
             lines.append(f"  {d.symbol}: profile {d.profile.source} ({len(d.profile.t)} rows)")
         else:
+            x0 = angle_text(d.x0, 6) if d.kind == "crank" else f"{d.x0:.6g} {mech.units}"
             unit = "rad" if d.kind == "crank" else mech.units
-            lines.append(f"  {d.symbol}(t) = {d.x0:.6g} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}]")
+            lines.append(f"  {d.symbol}(t) = {x0} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}, t in s]")
     return lines
 
 
@@ -743,6 +747,11 @@ def _parser_loops(sub: Any) -> None:
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     _add_file(lo)
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
+    lo.add_argument(
+        "--exact",
+        action="store_true",
+        help="every number to full precision (the shortest text that reads back to the same double)",
+    )
     lo.set_defaults(func=cmd_loops)
 
 

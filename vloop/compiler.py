@@ -74,7 +74,7 @@ def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray, 
     return LoopSystem(
         mech, mg.angle_links, mg.slider_names, ang, sl, r, delta, tuple(mg.terms.label), loops, C,
         mech.tracked_points, point_paths(mg.adj, mech, len(r), mg.forest), link_outputs, driven, unknowns, (), coords_q,
-        coords_q, mg.parts,
+        coords_q, mg.parts, chords=tuple(mg.terms.parts.items()),
     )  # fmt: skip
 
 

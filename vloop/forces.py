@@ -80,8 +80,9 @@ def reaction_names(mech: Mechanism) -> list[tuple[str, str, str]]:
 
 
 def body_com(mech: Mechanism, body: str) -> tuple[float, float]:
-    """Centre of mass in the body frame [file units]: the file's ``com`` (world, t = 0) carried into
-    the frame, or the mean of the body's joints in the frame for a massless body."""
+    """Centre of mass in the body frame [file units]: the file's ``com`` (world, t = 0) carried into the frame
+    (unstated: the mean of the body's joints as assembled, :class:`vloop.model.MassProperties`), or the mean of
+    the body's joints in the frame for a massless body."""
     b = mech.bodies()[body]
     mp = mech.masses.get(body)
     if mp is None:
@@ -500,14 +501,14 @@ class ForceResult:
                 )
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write ``t`` and every column (``%.17g``) atomically; only finite numbers (else ForceError)."""
+        """Write ``t`` and every column atomically, each number the shortest text that reads back to the same
+        double (:func:`vloop.result.write_csv`); only finite numbers (else ForceError)."""
         from .files.output import atomic_write
+        from .result import write_csv
 
         self.check_finite()
-        names = ["t", *self.columns]
-        arr = np.column_stack([self.t, *self.columns.values()]) if len(self.t) else np.zeros((0, len(names)))
-        with atomic_write(path) as fh:
-            np.savetxt(fh, arr, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        with atomic_write(path, "wb") as fh:
+            write_csv(fh, ["t", *self.columns], [self.t, *self.columns.values()])
         return Path(path)
 
     def to_dataframe(self) -> Any:

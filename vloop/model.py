@@ -89,6 +89,30 @@ class Driver:
     def symbol(self) -> str:
         return f"θ_{self.target}" if self.kind == "crank" else f"s_{self.target}"
 
+    def value_text(self, x: float, units: str, digits: int = 10) -> str:
+        """``symbol = value``: a crank's angle as :func:`angle_text` prints it, a slider's s in ``units``."""
+        return f"{self.symbol} = {angle_text(x, digits) if self.kind == 'crank' else f'{x:.{digits}g} {units}'}"
+
+    def range_text(self, lo: float, hi: float, units: str) -> str:
+        """The input's range from ``lo`` to ``hi`` (lo <= hi): a crank's as two angles in [0°, 360°) and the
+        counter-clockwise travel between them, a slider's as an interval in ``units``."""
+        if self.kind != "crank":
+            return f"{self.symbol} from {lo:.10g} to {hi:.10g} {units}"
+        return (
+            f"{self.symbol} from {angle_text(lo)} counter-clockwise to {angle_text(hi)}, a travel of "
+            f"{math.degrees(hi - lo):.4f}°"
+        )
+
+
+def angle_text(x: float, digits: int = 10) -> str:
+    """An angle as vloop prints it: rad (``digits`` significant) and degrees (4 decimals), wrapped into
+    [0, 2π) = [0°, 360°) — an unwrapped θ of 384.1468° prints as 24.1468°; one within the printed precision
+    of a full turn prints as 0."""
+    w = float(x) % (2 * math.pi)
+    if round(math.degrees(w), 4) >= 360.0:
+        w = 0.0
+    return f"{w:.{digits}g} rad ({math.degrees(w):.4f}°)"
+
 
 @dataclass(frozen=True)
 class Body:
@@ -114,7 +138,9 @@ class Body:
 @dataclass(frozen=True)
 class MassProperties:
     """Mass [kg], inertia [kg·m²] about the centre of mass, and the centre of mass (x, y) in world
-    coordinates at t = 0 [the file's length units]."""
+    coordinates at t = 0 [the file's length units], carried into the body's frame by the frame the coordinates
+    give. Unstated, it is the mean of the body's joints as the body is assembled (in its frame, a stated link
+    length applied), not of the typed coordinates."""
 
     mass: float
     inertia: float

@@ -11,13 +11,57 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
 LINK_FIELDS = ("theta", "omega", "alpha")
 POINT_FIELDS = ("x", "y", "vx", "vy", "ax", "ay")
 SLIDER_FIELDS = ("s", "v", "a")
+CSV_BLOCK = 65536  # rows formatted at a time by the fallback writer (bounds its memory)
+
+
+def arrow_array(a: np.ndarray) -> Any:
+    """A numpy column as an Arrow array over the same memory (pa.array would import pandas to inspect it)."""
+    import pyarrow as pa
+
+    a = np.ascontiguousarray(a)
+    kind = {"f8": pa.float64(), "f4": pa.float32(), "i8": pa.int64(), "i1": pa.int8()}[a.dtype.str[1:]]
+    return pa.Array.from_buffers(kind, len(a), [None, pa.py_buffer(a)])
+
+
+def write_csv(fh: IO[bytes], names: list[str] | None, columns: list[np.ndarray]) -> None:
+    """Write a header row (``names``, unless None) and one comma-separated row per sample to a binary file.
+
+    Every number is the shortest text that reads back to the same value (``repr(float)`` semantics: 0.35,
+    never 0.35000000000000003 for the double 0.35): float64 to the same double, float32 to the same float32,
+    integers as integers. pyarrow formats them where installed (fast), else Python's float repr.
+    """
+    if names is not None:
+        fh.write((",".join(names) + "\n").encode())
+    columns = [c if c.dtype.isnative else c.astype(c.dtype.newbyteorder("=")) for c in map(np.asarray, columns)]
+    if not columns or not len(columns[0]):
+        return
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+    except ImportError:
+        for k in range(0, len(columns[0]), CSV_BLOCK):
+            parts = [_texts(c[k : k + CSV_BLOCK]) for c in columns]
+            fh.write(("\n".join(map(",".join, zip(*parts, strict=True))) + "\n").encode())
+        return
+    arrays = [arrow_array(c if c.dtype.str[1:] in ("f8", "f4", "i8", "i1") else c.astype(float)) for c in columns]
+    table = pa.Table.from_arrays(arrays, names=[f"c{i}" for i in range(len(arrays))])
+    pcsv.write_csv(table, fh, pcsv.WriteOptions(include_header=False))
+
+
+def _texts(c: np.ndarray) -> list[str]:
+    """The shortest round-trip text of each value of a column (the fallback of :func:`write_csv`)."""
+    if c.dtype == np.float32:
+        return c.astype(str).tolist()  # numpy's shortest text of a float32
+    if np.issubdtype(c.dtype, np.integer):
+        return list(map(str, c.tolist()))
+    return list(map(repr, c.astype(float).tolist()))
 
 
 @dataclass
@@ -106,16 +150,17 @@ class Result:
 
     # ----- export
     def to_csv(self, path: str | Path, *, health: bool = False) -> None:
-        """Write one row per sample: ``t`` then the columns (``%.17g``, full precision)."""
+        """Write one row per sample: ``t`` then the columns, each number the shortest text that reads back to
+        the same double (:func:`write_csv`)."""
         names = ["t", *self.columns]
         data = [self.t, *self.columns.values()]
         if health:
             names += [f"health.{k}" for k in self.health]
             data += list(self.health.values())
-        arr = np.column_stack(data) if len(self.t) else np.zeros((0, len(names)))
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savetxt(path, arr, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        with open(path, "wb") as fh:
+            write_csv(fh, names, [np.asarray(c, float) for c in data])
 
     def to_dataframe(self) -> Any:
         """A pandas DataFrame indexed by nothing, with a ``t`` column first."""

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import MechanismError
+from ..method.graph import loop_row
 from ..method.loops import LoopSystem
 from ..model import Driver, Link, Mechanism, Point, Slider
 
@@ -431,6 +432,10 @@ class _Geometry:
         delta = np.zeros((self.V, nt))
         lines = {}
         for t, role in enumerate(self.model.roles):
+            if role[0] == "chord":  # after its parts (chords are added to the terms last)
+                z = sum(c * r[:, p] * np.exp(1j * delta[:, p]) for p, c in role[1])
+                r[:, t], delta[:, t] = np.abs(z), np.angle(z)
+                continue
             if role[0] == "body":
                 loc = self.local(role[1], role[2])
                 r[:, t] = np.hypot(loc.real, loc.imag)
@@ -462,7 +467,8 @@ class _Geometry:
 
 
 def _term_roles(mech: Mechanism, sys: LoopSystem) -> list[tuple]:
-    """What each term is: ("body", body, member), ("slider", i) or ("offset", i), read from the graph's edges."""
+    """What each term is: ("body", body, member), ("slider", i) or ("offset", i), read from the graph's edges, or
+    ("chord", parts): a body's vectors that a loop crosses, summed (:func:`vloop.graph.crossings`)."""
     roles: list[tuple | None] = [None] * len(sys.t_r)
     slider_index = {n: i for i, n in enumerate(mech.sliders)}
     for u, v, data in sys.graph.edges(data=True):
@@ -477,6 +483,8 @@ def _term_roles(mech: Mechanism, sys: LoopSystem) -> list[tuple]:
                 roles[tid] = ("slider", i) if sys.t_sl[tid] >= 0 else ("offset", i)
     for t, extra in sys.cache.get("study_offset_terms", {}).items():
         roles[t] = ("offset", extra)
+    for t, parts in sys.chords:
+        roles[t] = ("chord", parts)
     if any(r is None for r in roles):
         raise RuntimeError("vloop.core.variants cannot tell what every vector term is (graph changed?)")
     return roles  # type: ignore[return-value]
@@ -489,12 +497,13 @@ def _with_zero_terms(sys: LoopSystem) -> LoopSystem:
     variables do not change."""
     C = np.zeros_like(sys.C)
     for li, lp in enumerate(sys.loops):
-        cyc = list(lp.nodes)
-        for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
-            data = sys.graph.edges[u, v]
-            sign = 1.0 if data["start"] == u else -1.0
-            for tid, s in data["terms"]:
-                C[li, tid] += sign * s
+        for tid, c, _ in loop_row(sys.graph.adj, list(lp.nodes)):
+            C[li, tid] += c
+    for t, parts in sys.chords:  # a chord stands for its parts in the loops that cross its body that way
+        for li in np.flatnonzero(sys.C[:, t]):
+            for p, c in parts:
+                C[li, p] -= sys.C[li, t] * c
+            C[li, t] += sys.C[li, t]
     restored = (C != sys.C) & (sys.t_r == 0) & (sys.t_sl < 0) & (sys.t_ang < 0)
     if not restored.any():
         return sys

@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..model import (
     LENGTH_UNITS,
+    Body,
     Driver,
     Link,
     Load,
@@ -525,17 +526,24 @@ def _read_csv(spec: str, entry: str, ctx: _Context, probs: Problems) -> dict[str
 
 
 def _profile_path(spec: str, entry: str, ctx: _Context, probs: Problems) -> Path | None:
+    """The profile's path: ``spec`` relative to the mechanism file's folder, or absolute. Without
+    ``allow_external_profiles`` it must lie inside that folder once both are resolved the same way (symbolic
+    links and ``..`` followed): an absolute path into the folder is read, a link out of it is refused."""
     if "\x00" in spec or not spec.strip():
         probs.add(entry, f"profile path {show(spec)} is not a file name")
         return None
-    path = ctx.base / spec
+    path = ctx.base / spec  # an absolute spec replaces the base
     if not ctx.allow_external_profiles:
-        outside = Path(spec).is_absolute() or not path.resolve().is_relative_to(ctx.base.resolve())
+        try:
+            outside = not Path(os.path.realpath(path)).is_relative_to(os.path.realpath(ctx.base))
+        except (OSError, ValueError):  # a path the system cannot resolve (too long, a link loop)
+            outside = True
         if outside:
             probs.add(
                 entry,
-                f"profile {show(spec)} is outside the mechanism file's folder: vloop reads only files beside it "
-                "(allow others with --allow-external-profiles, or load(..., allow_external_profiles=True))",
+                f"profile {show(spec)} is outside the mechanism file's folder {show(str(ctx.base))}: vloop reads only "
+                "files inside it (allow others with --allow-external-profiles, or load(..., "
+                "allow_external_profiles=True))",
             )
             return None
     return path
@@ -601,10 +609,25 @@ def read_time(raw: Any, drivers: list[Driver], probs: Problems) -> np.ndarray:
         probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {why}")
         return np.zeros(1)
     n = math.floor(count + 1e-9) + 1  # up to and including stop, never past it
-    t = start + step * np.arange(n)
+    t = time_grid(start, step, n)
     if n > 1 and np.any(np.diff(t) <= 0):
         probs.add("time", f"step {step:g} is too small to separate samples near t = {start:g}")
     return t
+
+
+def time_grid(start: float, step: float, n: int) -> np.ndarray:
+    """The samples start + k·step, k = 0 … n − 1 [s], each the double nearest the decimal value the file's
+    numbers state (start and step read as their shortest decimal text: 7 × 0.05 gives 0.35, where the floating
+    product is 0.35000000000000003). Exact by integer arithmetic where the numerators and the common
+    denominator are exact doubles (one correctly rounded division); otherwise start + k·step in floating point."""
+    from fractions import Fraction
+
+    a, b = Fraction(repr(float(start))), Fraction(repr(float(step)))
+    den = math.lcm(a.denominator, b.denominator)
+    first, inc = a.numerator * (den // a.denominator), b.numerator * (den // b.denominator)
+    if den < 2**1000 and float(den) == den and max(abs(first), abs(inc), abs(first + inc * (n - 1))) < 2**53:
+        return (first + inc * np.arange(n, dtype=np.int64)).astype(float) / den
+    return start + step * np.arange(n)
 
 
 def _explicit_times(ts: Any, probs: Problems) -> np.ndarray:
@@ -699,10 +722,15 @@ def read_dynamics(data: dict, m: Mechanism, ctx: _Context, probs: Problems) -> d
 
 
 def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProperties]:
-    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks."""
+    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks.
+
+    Without ``com`` the centre of mass is the mean of the body's joints as the body is assembled — in its own
+    frame, where a stated ``length`` places the second joint (the typed coordinates may be rounded) — stored, as
+    a stated ``com`` is, in world coordinates at t = 0 through the body's frame."""
     out: dict[str, MassProperties] = {}
     tables = [("links", n, v) for n, v in (data.get("links") or {}).items() if n in m.links]
     tables += [("sliders", n, v) for n, v in (data.get("sliders") or {}).items() if n in m.sliders]
+    bodies = m.bodies() if tables else {}
     for section, name, val in tables:
         if not isinstance(val, dict) or not {"mass", "inertia", "com"} & set(val):
             continue
@@ -713,14 +741,22 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
         mass = real(val.get("mass", 0.0), "mass", entry, probs)
         inertia = real(val.get("inertia", 0.0), "inertia", entry, probs)
         joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
-        mean = (sum(m.joints[j][0] for j in joints) / len(joints), sum(m.joints[j][1] for j in joints) / len(joints))
-        com = pair(val["com"], "com", entry, probs) if "com" in val else mean
+        com = pair(val["com"], "com", entry, probs) if "com" in val else _joint_mean(bodies[name], joints)
         for what, x in (("mass", mass), ("inertia", inertia)):
             if x is not None and x < 0:
                 probs.add(entry, f"'{what}' must not be negative, got {x:g}")
         if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
             out[name] = MassProperties(mass, inertia, com)
     return out
+
+
+def _joint_mean(body: Body, joints: tuple[str, ...]) -> tuple[float, float]:
+    """The mean of ``joints`` in the body's frame (as assembled: rigid, its stated length applied), in world
+    coordinates through the frame at t = 0."""
+    lx = sum(body.local[j][0] for j in joints) / len(joints)
+    ly = sum(body.local[j][1] for j in joints) / len(joints)
+    c, s = math.cos(body.theta0), math.sin(body.theta0)
+    return (body.origin[0] + c * lx - s * ly, body.origin[1] + s * lx + c * ly)
 
 
 def read_loads(raw: Any, m: Mechanism, ctx: _Context, probs: Problems) -> list[Load]:

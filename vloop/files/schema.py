@@ -47,9 +47,17 @@ class Section:
 
 
 MASS_KEYS = (
-    Key("mass", "number ≥ 0", "0 (massless)", "kg", "mass of the body", 1.5),
+    Key("mass", "number ≥ 0", "0 (massless)", "kg", "mass of the body, at its centre of mass `com`", 1.5),
     Key("inertia", "number ≥ 0", "0", "kg·m²", "moment of inertia about the centre of mass", 0.02),
-    Key("com", "[x, y]", "mean of the body's joints", "length", "centre of mass at t = 0, world frame", [1.0, 1.0]),
+    Key(
+        "com",
+        "[x, y]",
+        "mean of the body's joints as assembled",
+        "length",
+        "centre of mass at t = 0, world frame (default: the mean of the joints in the body as assembled, a stated "
+        "`length` applied, not of the typed coordinates)",
+        [1.0, 1.0],
+    ),
 )
 
 SECTIONS: tuple[Section, ...] = (
@@ -143,7 +151,8 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "time",
         "[time]",
-        "the samples: start + k·step up to and including stop, or an explicit list",
+        "the samples: start + k·step up to and including stop (the decimals as written: 7 × 0.05 is 0.35), "
+        "or an explicit list",
         (
             Key("start", "number", "0", "s", "first sample", 0.0),
             Key("stop", "number", "required", "s", "last sample (within half a step)", 1.0),

@@ -4,8 +4,8 @@ Every file is staged by an :class:`vloop.files.output.OutputSet` and published w
 run ends (complete, or stopped by a limit position with its rows so far): nothing half-written ever
 appears, and Ctrl-C leaves the previous complete set (or nothing).
 
-* ``csv``: one row per sample, ``t`` then the columns, every number to full precision (it reads
-  back to the same double; written by pyarrow when installed, else ``%.17g``).
+* ``csv``: one row per sample, ``t`` then the columns, every number the shortest text that reads back
+  to the same double (:func:`vloop.result.write_csv`; float32 health columns to the same float32).
 * ``parquet`` (needs pyarrow, ``pip install vloop[parquet]``): one row group per chunk, float64
   columns; each field's unit in its metadata (``unit``) and all of them as JSON under the schema
   metadata key ``vloop.units``.
@@ -29,7 +29,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from ..result import Result
+from ..result import Result, arrow_array, write_csv
 from .output import OutputError, OutputSet
 
 FORMATS = ("csv", "parquet", "npz")
@@ -55,15 +55,6 @@ def units(columns: list[str], length: str) -> dict[str, str]:
         "a": f"{length}/s^2",
     }
     return {c: "s" if c == "t" else per.get(c.rsplit(".", 1)[-1], "1") for c in columns}
-
-
-def _arrow(a: np.ndarray) -> object:
-    """A numpy column as an Arrow array over the same memory (pa.array would import pandas to inspect it)."""
-    import pyarrow as pa
-
-    a = np.ascontiguousarray(a)
-    kind = {"f8": pa.float64(), "f4": pa.float32(), "i8": pa.int64(), "i1": pa.int8()}[a.dtype.str[1:]]
-    return pa.Array.from_buffers(kind, len(a), [None, pa.py_buffer(a)])
 
 
 def health_columns(res: Result) -> dict[str, np.ndarray]:
@@ -108,28 +99,13 @@ class _Table:
         self.rows += len(cols["t"])
 
     def _write_csv(self, cols: dict[str, np.ndarray]) -> None:
-        if not len(cols["t"]):
-            return
-        try:
-            import pyarrow as pa
-            import pyarrow.csv as pcsv
-        except ImportError:
-            fmt = [
-                "%.17g"
-                if np.issubdtype(cols[n].dtype, np.float64)
-                else ("%.7g" if cols[n].dtype == np.float32 else "%d")
-                for n in self.names
-            ]
-            np.savetxt(self._fh, np.column_stack([cols[n].astype(float) for n in self.names]), fmt=fmt, delimiter=",")
-            return
-        table = pa.Table.from_arrays([_arrow(cols[n]) for n in self.names], names=self.names)
-        pcsv.write_csv(table, self._fh, pcsv.WriteOptions(include_header=False))
+        write_csv(self._fh, None, [cols[n] for n in self.names])
 
     def _write_parquet(self, cols: dict[str, np.ndarray]) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        arrays = [_arrow(cols[n]) for n in self.names]
+        arrays = [arrow_array(cols[n]) for n in self.names]
         if self._pq is None:
             fields = [
                 pa.field(n, a.type, metadata={"unit": self.units[n]}) for n, a in zip(self.names, arrays, strict=True)
