@@ -44,6 +44,7 @@ WORST_SHOWN = 4  # quantities per engine in the error-vs-time plots
 DPI = 96
 VIEWER_FOLDER = "viewer"  # one interactive page per mechanism, next to report.html
 GIF_DPI = 72
+WEBP_EFFORT = 4  # libwebp's method 0–6: 4 is its default; 6 saves ~2 % more at twice the time
 
 # Each engine keeps one look in every plot, so curves that lie on top of each other stay visible.
 ENGINE_STYLE: dict[str, dict[str, Any]] = {
@@ -89,7 +90,10 @@ def _new_figure(w: float, h: float) -> Figure:
 
 
 def _png(fig: Figure, alt: str, dpi: int = DPI) -> Image:
-    """Render ``fig`` to a palette PNG (a quarter of the RGB size, no visible loss for line art)."""
+    """Render ``fig`` to 256 palette colours (no visible loss for line art), stored as lossless WebP.
+
+    Lossless WebP holds the very pixels a palette PNG would at about three quarters of its bytes (the
+    catalog's report: 2.8 MB of figures → 2.1 MB); every current browser shows it."""
     from PIL import Image as PILImage
 
     buf = io.BytesIO()
@@ -99,8 +103,8 @@ def _png(fig: Figure, alt: str, dpi: int = DPI) -> Image:
     im = PILImage.open(buf).convert("RGB")
     q = im.quantize(colors=256, method=PILImage.Quantize.FASTOCTREE, dither=PILImage.Dither.NONE)
     out = io.BytesIO()
-    q.save(out, format="PNG")
-    return Image("data:image/png;base64," + base64.b64encode(out.getvalue()).decode("ascii"), im.width, im.height, alt)
+    q.convert("RGB").save(out, format="WEBP", lossless=True, quality=100, method=WEBP_EFFORT)
+    return Image("data:image/webp;base64," + base64.b64encode(out.getvalue()).decode("ascii"), im.width, im.height, alt)
 
 
 def _style(engine: str, index: int, n_samples: int, n_engines: int) -> dict[str, Any]:
@@ -834,6 +838,13 @@ def write_viewer_pages(validation: Validation, out_dir: Path) -> list[Path]:
     return pages
 
 
+def _breakable(name: str) -> Any:
+    """A name that may wrap after its underscores (a long mechanism name in a narrow column)."""
+    from markupsafe import Markup, escape
+
+    return Markup(str(escape(name)).replace("_", "_<wbr>"))
+
+
 def render(validation: Validation, summary: dict[str, Any], *, animate: bool = False) -> str:
     """The report's HTML text."""
     import jinja2
@@ -859,6 +870,7 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
         trim_blocks=True,
         lstrip_blocks=True,
     )
+    env.filters["breakable"] = _breakable
     return env.get_template("report.html.j2").render(
         created=created_text,
         passed=bool(summary.get("passed", validation.passed)),
