@@ -235,7 +235,7 @@ def test_figures_are_lossless_webp_of_the_palette_image(built: Built) -> None:
     import base64
     import io
 
-    from reports.html import DPI, _new_figure, _png
+    from reports.html import DPI, _new_figure, _picture
 
     for uri in re.findall(r'src="data:image/webp;base64,([^"]+)"', built.text):
         data = base64.b64decode(uri)
@@ -251,7 +251,7 @@ def test_figures_are_lossless_webp_of_the_palette_image(built: Built) -> None:
         ax.set_title("ten curves, half of them translucent")
         return fig
 
-    image = _png(figure(), "test")
+    image = _picture(figure(), "test")
     got = Image.open(io.BytesIO(base64.b64decode(image.uri.split(",", 1)[1]))).convert("RGB")
     buf = io.BytesIO()
     figure().savefig(buf, format="png", dpi=DPI, bbox_inches="tight", pad_inches=0.08, facecolor="white")
@@ -302,7 +302,7 @@ def test_every_table_cell_fits_at_1400_px(built: Built, tmp_path: Path, monkeypa
             item.checks += [dataclasses.replace(c, engine=e) for c in item.checks if c.engine == "pinocchio"]
     summary = harness.to_summary(wide) | {"engines": [*ENGINES, *extra]}
     blank = report_html.Image("data:image/webp;base64,", 10, 10, "figure")
-    monkeypatch.setattr(report_html, "_png", lambda fig, alt, dpi=0: blank)  # layout only: no figure pixels
+    monkeypatch.setattr(report_html, "_picture", lambda fig, alt, dpi=0: blank)  # layout only: no figure pixels
     text = report_html.render(wide, summary)
     assert text.count('<th class="mono" style="text-align:center">') == 5 and "STOPPED".lower() in text
     page = tmp_path / "wide.html"
