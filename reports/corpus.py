@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .html import _RC, TEMPLATES, _new_figure, _png
+from .html import _RC, TEMPLATES, _new_figure, _picture
 
 WORST_SHOWN = 25
 HIST_BINS = np.arange(-17.0, 4.01, 0.5)  # log10(error / allowed): round-off far left, failures right of 0
@@ -127,7 +127,7 @@ def histogram(mechs: list[dict[str, Any]]) -> Any:
         for ax in list(axes.flat)[len(pairs) :]:
             ax.set_visible(False)
         fig.tight_layout()
-        return _png(fig, "Histograms of the worst error over its allowance, per engine and reference")
+        return _picture(fig, "Histograms of the worst error over its allowance, per engine and reference")
 
 
 def limit_rows(mechs: list[dict[str, Any]]) -> list[dict[str, Any]]:

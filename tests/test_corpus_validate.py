@@ -119,7 +119,7 @@ def test_corpus_page_shows_families_worst_errors_histograms_and_limits(in_proces
     _, summary = in_process
     path = write_corpus_page(summary, tmp_path)
     html = path.read_text()
-    for anchor in ('id="family-table"', 'id="worst-table"', 'id="limit-table"', "data:image/png;base64,"):
+    for anchor in ('id="family-table"', 'id="worst-table"', 'id="limit-table"', "data:image/webp;base64,"):
         assert anchor in html
     families = {f"{m['corpus']['family']}/{m['corpus']['variant']}" for m in summary["mechanisms"]}
     assert all(f in html for f in families)

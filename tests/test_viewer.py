@@ -691,3 +691,175 @@ def test_pages_with_no_loop_or_a_single_sample(open_page, tmp_path: Path) -> Non
 def test_readme_screenshot_is_committed() -> None:
     shot = Path(__file__).resolve().parents[1] / "docs" / "viewer.png"
     assert shot.is_file() and shot.stat().st_size < 200_000
+
+
+# ------------------------------------------------------------------ what the picture shows
+
+
+def _screen(page, x: float, y: float) -> tuple[float, float]:
+    """A model point's position on the page [CSS px], through the drawing's own transform."""
+    return tuple(
+        page.evaluate(
+            "([x, y]) => { const p = new DOMPoint(x, -y).matrixTransform(document.getElementById('view').getScreenCTM());"
+            " return [p.x, p.y]; }",
+            [x, y],
+        )
+    )
+
+
+def _segment_distance(p: complex, a: complex, b: complex) -> float:
+    ab = b - a
+    s = 0.0 if ab == 0 else min(1.0, max(0.0, ((p - a) * ab.conjugate()).real / abs(ab) ** 2))
+    return abs(p - (a + s * ab))
+
+
+def _path_point_inside_a_plate(mech, result, clearance: float) -> tuple[int, str, complex]:
+    """(sample shown, plate, a sample of some point's path) with the path sample inside the plate drawn at
+    the shown sample, ``clearance`` away from the plate's edges, every other link's bar and every joint."""
+    z = {p: result[f"{p}.x"] + 1j * result[f"{p}.y"] for p in mech.tracked_points}
+    plates = [n for n, lk in mech.links.items() if not lk.ground and len(lk.joints) == 3]
+    for i in range(0, len(result), 10):
+        for plate in plates:
+            a, b, c = (z[j][i] for j in mech.links[plate].joints)
+            bars = [[z[j][i] for j in lk.joints] for n, lk in mech.links.items() if not lk.ground and n != plate]
+            for path in z.values():
+                for q in path:
+                    w = np.array([((b - a) * (q - a).conjugate()).imag, ((c - b) * (q - b).conjugate()).imag,
+                                  ((a - c) * (q - c).conjugate()).imag])  # fmt: skip
+                    inside = np.all(w > 0) or np.all(w < 0)
+                    edges = min(_segment_distance(q, u, v) for u, v in ((a, b), (b, c), (c, a)))
+                    others = min(_segment_distance(q, s[0], s[-1]) for s in bars)
+                    joints = min(abs(q - zz[i]) for zz in z.values())
+                    if inside and min(edges, others, joints) > clearance:
+                        return i, plate, q
+    raise AssertionError("no path sample lies inside a plate")
+
+
+def test_paths_are_drawn_over_the_plates(open_page, tmp_path: Path) -> None:
+    """Stephenson III: the coupler curves run across the ternary coupler l3 (in the catalog's Watt II they
+    stay outside its rocker plate); a path's pixels inside the plate are the path's colour (#009E73 at
+    75 % over the plate), not the plate's (#c9d6e8)."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    mech = vloop.load(MECHANISMS / "sixbar_stephenson3.toml")
+    result = vloop.solve(mech)
+    o = open_page(write_view(mech, result, tmp_path / "stephenson3.html"))
+    page = o.page
+    for layer in ("loops", "labels"):  # nothing else over the paths
+        page.click(f'[data-overlay="{layer}"]')
+    page.click('[data-overlay="paths"]')
+    order = page.evaluate("[...document.querySelectorAll('#view > g')].map((g) => g.dataset.layer)")
+    assert order.index("paths") > max(order.index("bodies"), order.index("blocks"))
+    assert order.index("paths") < order.index("pins")
+    upp = page.evaluate("vloopViewer.unitsPerPixel")
+    i, plate, q = _path_point_inside_a_plate(mech, result, clearance=14 * upp)
+    page.evaluate(f"vloopViewer.setIndex({i})")
+    x, y = _screen(page, q.real, q.imag)
+    shot = Image.open(BytesIO(page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 5, "height": 5})))
+    px = np.asarray(shot.convert("RGB"), float).reshape(-1, 3)
+    greenest = px[np.argmax(px[:, 1] - px[:, 0])]
+    assert greenest[1] - greenest[0] > 80 and greenest[0] < 120, f"{plate} hides the path at {q}: {greenest}"
+    assert o.requests == [] and o.problems == []
+
+
+def _overlap(a: dict, b: dict) -> bool:
+    return (
+        a["x"] < b["x"] + b["width"]
+        and b["x"] < a["x"] + a["width"]
+        and a["y"] < b["y"] + b["height"]
+        and b["y"] < a["y"] + a["height"]
+    )
+
+
+def test_scale_legend_never_covers_the_drawing(open_page, eightbar_page) -> None:
+    o = open_page(eightbar_page)
+    page = o.page
+    for layer in ("vel", "acc", "forces"):
+        page.click(f'[data-overlay="{layer}"]')
+    for large in (False, True):
+        if large:
+            page.click("#large")
+        page.wait_for_timeout(100)  # the resize observer's frame
+        legend = page.locator("#scale-legend").bounding_box()
+        view = page.locator("#view").bounding_box()
+        wrap = page.locator("#view-wrap").bounding_box()
+        assert page.locator("#scale-legend .row").count() == 3
+        assert not _overlap(legend, view), (large, legend, view)
+        assert wrap["y"] <= legend["y"] and legend["y"] + legend["height"] <= wrap["y"] + wrap["height"] + 0.5
+        for layer in ("bodies", "pins", "vel", "acc", "forces", "labels"):  # the drawing, as rendered
+            box = page.locator(f'g[data-layer="{layer}"]').bounding_box()
+            assert box is not None and not _overlap(legend, box), (large, layer)
+        # the sizes meant to stay constant on screen follow the drawing's new size
+        upp = page.evaluate("vloopViewer.unitsPerPixel")
+        vb = [float(v) for v in page.locator("#view").get_attribute("viewBox").split()]
+        assert upp == pytest.approx(max(vb[2] / view["width"], vb[3] / view["height"]), rel=1e-3)
+    assert o.requests == [] and o.problems == []
+
+
+def _kind(col: str) -> str:
+    q = col.rsplit(".", 1)[-1]
+    return {"x": "length", "y": "length", "s": "length", "vx": "velocity", "vy": "velocity", "v": "velocity",
+            "ax": "acceleration", "ay": "acceleration", "a": "acceleration"}.get(q, q)  # fmt: skip
+
+
+def test_numbers_read_against_their_scale_on_one_line(open_page, eightbar_page, eightbar) -> None:
+    """Every value: within 1e-6 of its kind's peak over the run (7 digits), round-off (≤ 1e-12 of that peak)
+    shown as 0, at most 7 significant digits, no exponent for a value above 1e-6 of the peak, one line.
+    At t = 0 the paper's eight-bar has θ2 = 90°: A = (0, 3) exactly, A moves along x, and the coupler l3
+    translates (A and B both move along x), so A.x, A.vy, A.ax and ω3 are 0 by hand."""
+    result = eightbar[1]
+    peaks: dict[str, float] = {}
+    for col, v in result.columns.items():
+        peaks[_kind(col)] = max(peaks.get(_kind(col), 0.0), float(np.abs(v).max()))
+    o = open_page(eightbar_page)
+    page = o.page
+    for large in (False, True):
+        if large:
+            page.click("#large")
+        for k in (0, 17, 33):
+            page.evaluate(f"vloopViewer.setIndex({k})")
+            cells = page.evaluate(
+                """() => [...document.querySelectorAll('#numbers td.num')].map((td) => {
+                  const r = document.createRange(); r.selectNodeContents(td);
+                  return {col: td.dataset.col, text: td.textContent, value: +td.dataset.value, lines: r.getClientRects().length,
+                          overflow: td.scrollWidth - td.clientWidth};
+                })"""
+            )
+            for c in cells:
+                assert c["lines"] == 1 and c["overflow"] <= 0, c
+                col = c["col"]
+                if col.startswith(("force:", "health.")):
+                    continue
+                shown, value = float(c["text"]), c["value"]
+                degrees = value != float(result[col][k])  # the θ [°] column: the same column in degrees
+                peak = peaks[_kind(col)] * (180 / math.pi if degrees else 1.0)
+                assert abs(shown - value) <= 1e-6 * peak, c
+                if abs(value) <= 1e-12 * peak:
+                    assert c["text"] == "0", c
+                digits = re.sub(r"e.*$", "", c["text"]).lstrip("-").replace(".", "").lstrip("0")
+                assert len(digits) <= 7, c
+                if abs(value) > 1e-6 * peak:
+                    assert "e" not in c["text"], c
+    page.evaluate("vloopViewer.setIndex(0)")
+    for col in ("A.x", "A.vy", "A.ax", "l3.omega"):
+        assert abs(result[col][0]) < 1e-13 * peaks[_kind(col)]  # round-off, not a value
+        assert page.locator(f'td[data-col="{col}"]').first.text_content() == "0", col
+    assert o.requests == [] and o.problems == []
+
+
+def test_coincident_plot_series_are_dashed_and_named(open_page, eightbar_page, eightbar) -> None:
+    result = eightbar[1]
+    assert np.abs(result["l6.s"] - result["l8.s"]).max() < 1e-9  # mirror images (paper, Fig. 1)
+    o = open_page(eightbar_page)
+    page = o.page
+    toggle = page.locator('[data-series-toggle="l8"]')
+    assert toggle.get_attribute("data-coincides") == "l6" and "l8 (= l6)" in toggle.text_content()
+    assert page.locator('[data-series-toggle="l4"]').get_attribute("data-coincides") is None
+    for q in ("s", "v", "a"):
+        plot = page.locator(f'[data-plot="Sliders:{q}"]')
+        dash = {n: plot.locator(f'path[data-series="{n}"]').get_attribute("stroke-dasharray") for n in ("l6", "l8")}
+        assert dash["l6"] is None and dash["l8"], dash
+    assert page.locator('[data-series-toggle="l7"]').get_attribute("data-coincides") is None  # θ7 ≠ θ5
+    assert o.requests == [] and o.problems == []

@@ -80,7 +80,19 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def _band(res: Any, o: Any, folder: Path) -> Path | None:
+    fig = band_figure(res, o)
+    return None if fig is None else _save(fig, folder / f"band_{_safe(o.name)}.png")
+
+
+def band_figure(res: Any, o: Any) -> Any:
+    """A series output's band picture (module docstring) as a pyplot figure; None without bands.
+
+    Curves that coincide (the base designs of a grid parameter the output does not depend on, the
+    Monte-Carlo percentiles of an output the tolerances do not move) are told apart by line style and
+    named in the legend (:mod:`vloop.views.curves`)."""
     import matplotlib.pyplot as plt
+
+    from ..views.curves import distinguish
 
     b = res.bands
     if not len(b):
@@ -98,29 +110,22 @@ def _band(res: Any, o: Any, folder: Path) -> Path | None:
             s = 1.96 * rows["linearized_sigma"].to_numpy() * k
             axes[1].fill_between(t, -s, s, color=f"C{i}", alpha=0.25, lw=0, label=f"linearized ±1.96σ{label}")
         if "mc_p2.5" in rows:
+            names = {
+                "mc_p2.5": "Monte-Carlo 2.5–97.5 %",
+                "mc_p97.5": "_Monte-Carlo 97.5 %",
+                "mc_p50": "Monte-Carlo median",
+            }
             for q, ls in (("mc_p2.5", "--"), ("mc_p97.5", "--"), ("mc_p50", ":")):
-                axes[1].plot(
-                    t,
-                    rows[q].to_numpy() * k - nom,
-                    ls,
-                    color=f"C{i}",
-                    lw=1.2,
-                    label=(
-                        f"Monte-Carlo 2.5–97.5 %{label}"
-                        if q == "mc_p2.5"
-                        else f"Monte-Carlo median{label}"
-                        if q == "mc_p50"
-                        else None
-                    ),
-                )
+                axes[1].plot(t, rows[q].to_numpy() * k - nom, ls, color=f"C{i}", lw=1.2, label=names[q] + label)
     axes[0].set_ylabel(f"{o.quantity} [{unit}]")
     axes[1].set_ylabel(f"deviation from nominal [{unit}]")
     axes[1].set_xlabel("t [s]")
     for ax in axes:
         ax.grid(True, alpha=0.3)
+        distinguish(ax)
         ax.legend(loc="best", fontsize=8)
     axes[0].set_title(f"{res.spec.mechanism.name}: {o.name} over the motion", fontsize=10)
-    return _save(fig, folder / f"band_{_safe(o.name)}.png")
+    return fig
 
 
 def _curves(res: Any, o: Any, grid_params: list, folder: Path) -> Path:

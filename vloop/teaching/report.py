@@ -118,19 +118,20 @@ def run_files(
     return files
 
 
-def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) -> Path | None:
-    """Figure of every dyad's folded transmission angle [deg] over time; None when there is no dyad."""
-    from ..files.output import atomic_write
+def transmission_figure(mech: Mechanism, result: Result) -> Any:
+    """Figure of every dyad's folded transmission angle [deg] over time; None when there is no dyad.
+
+    Dyads whose angles coincide (mirror images: the eight-bar's C and D) are told apart by line style
+    and named in the legend (``μ at D (= μ at C)``)."""
+    from matplotlib.figure import Figure
+
+    from ..views.curves import distinguish
 
     angles = transmission_angles(mech, result)
     if not angles or not len(result.t):
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig = Figure(figsize=(7.5, 4.5))
+    ax = fig.add_subplot()
     for ta in angles:
         ax.plot(result.t, np.degrees(ta.folded), lw=1.6, label=f"μ at {ta.dyad.label} ({ta.dyad.kind})")
     ax.axhline(40.0, color="0.4", ls="--", lw=1, label="40°: a common lower limit")
@@ -140,11 +141,21 @@ def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) 
     ax.set_ylabel("transmission angle μ [deg] (pressure angle = 90° − μ)")
     ax.set_title(f"{mech.title or mech.name}\ntransmission angle of each dyad (folded to 0–90°)", fontsize=10)
     ax.grid(True, alpha=0.3)
+    distinguish(ax)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
+    return fig
+
+
+def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) -> Path | None:
+    """Write :func:`transmission_figure` as a PNG at ``path``; None (nothing written) when there is no dyad."""
+    from ..files.output import atomic_write
+
+    fig = transmission_figure(mech, result)
+    if fig is None:
+        return None
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=110)
-    plt.close(fig)
     return Path(path)
 
 
