@@ -223,18 +223,20 @@ def _view_page(mech: Any, result: Any, folder: Path, error: str | None = None, f
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped)."""
+    """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped). The page
+    is bounded by its bytes: a long run's page carries every k-th sample (and says so)."""
     from .files.output import OutputSet
     from .views.view import solve_for_view
 
     mech = _load(args)
-    result, error = solve_for_view(mech)
-    out = _out_folder(args, mech)
-    with OutputSet(out) as files:
+    with OutputSet(_out_folder(args, mech)) as files:
+        result, error = solve_for_view(mech)
         forces = _solve_forces(mech, result)
         _view_page(mech, result, files.stage, error, forces)
     (page,) = files.published
-    print(f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
+    shown = result.meta.get("page")
+    samples = f"{shown['of']} samples (the page carries {len(result)})" if shown else f"{len(result)} samples"
+    print(f"{mech.name}: {samples}, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
     if args.open:
         import webbrowser
 
