@@ -155,11 +155,10 @@ def _check_something_to_compare(items: list[Any], engines: tuple[str, ...]) -> N
         applies = [e for e in engines if harness.engine_applies(e, it.mechanism)]
         if any((a, b) in TOLERANCES for a in applies for b in applies if b in harness.REFERENCES):
             return
-    pairs = ", ".join(sorted({f"{a},{b}" for a, b in TOLERANCES}))
     raise VloopError(
-        f"validate: nothing to compare: --engines {','.join(engines)} gives no comparison on "
-        f"{'this file' if len(items) == 1 else f'these {len(items)} files'} (pairs with a tolerance: {pairs}; "
-        "analytic only where a closed form exists)",
+        f"validate: nothing to compare: --engines {','.join(engines)} makes no comparison on "
+        f"{'this file' if len(items) == 1 else f'these {len(items)} files'} (every comparison is of an engine against "
+        "vloop or analytic, and analytic needs a closed form: e.g. --engines vloop,pinocchio)",
         entry="engines",
     )
 

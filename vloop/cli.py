@@ -20,6 +20,7 @@ from . import __version__
 from .errors import MotionError, VloopError
 from .result import Result
 
+RUN_TABLES = ("results.csv", "results.parquet", "results.npz", "health.csv", "health.parquet", "health.npz")
 INFO_SOLVE_LIMIT = 200_000  # vloop info solves the file's motion up to this many samples
 
 
@@ -88,7 +89,7 @@ def _run_streamed(args: argparse.Namespace, mech: Any, system: Any, out: Path, o
     keep = bool(args.plot or args.html or args.extras or outputs is not None or has_forces(mech))
     n = len(mech.times)
     budget.check(system, n, not keep, CHUNK_ROWS, args.memory_budget)
-    with OutputSet(out) as files:
+    with OutputSet(out, owns=RUN_TABLES) as files:  # a results.csv never stays beside a new results.parquet
         writers.check_disk(files.folder, n, budget.columns(system), args.format)
         chunks = solve_iter(system, memory_budget=args.memory_budget)
         with Progress(n, mech.name) as progress:
