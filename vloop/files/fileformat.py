@@ -146,12 +146,16 @@ def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
     if st.st_size > limit:
         raise MechanismError(f"{path}: {st.st_size:,} bytes, more than the {limit:,} vloop reads", entry=entry)
     try:
-        with open(path, "rb") as fh:
-            raw = fh.read(limit + 1)
+        with open(path, "rb") as fh:  # a buffer of the file's size, not of the limit (64 MB for every small file)
+            raw = fh.read(st.st_size + 1)
+            if len(raw) > st.st_size:  # it grew since: read on, up to the limit
+                raw += fh.read(limit + 1 - len(raw))
     except OSError as exc:
         raise MechanismError(
             f"{path}: cannot read {what} ({(exc.strerror or str(exc)).lower()})", entry=entry
         ) from None
+    if len(raw) > limit:
+        raise MechanismError(f"{path}: more than the {limit:,} bytes vloop reads", entry=entry)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
