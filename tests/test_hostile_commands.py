@@ -375,7 +375,7 @@ def _fuzz_case(tmp_path: Path, command: str, option: str | None, value: str) -> 
         one_line(err)
     if code == 1:
         assert command == "validate" and "FAILED in" in out, (argv, out, err)
-    no_non_finite(out.replace("inf.", "").replace("information", ""))
+    no_non_finite(out.replace(value, "") if value.strip() else out)  # a folder may be called "nan"
 
 
 @pytest.fixture
@@ -622,9 +622,10 @@ def test_a_centre_of_mass_far_but_inside_the_limit_still_balances_the_power(tmp_
 # ---------------------------------------------------------------- 21. Ctrl-C and output sets
 
 
-def _ctrl_c(argv: list[str], delay: float, cwd: Path) -> subprocess.CompletedProcess:
-    """Run ``vloop ARGV`` in its own process group and send SIGINT to the whole group after ``delay`` seconds,
-    as a terminal does on Ctrl-C."""
+def _ctrl_c(argv: list[str], delay: float, cwd: Path, out: Path) -> subprocess.CompletedProcess:
+    """Run ``vloop ARGV`` in its own process group and, ``delay`` seconds after the command has started its work
+    (its staging folder appeared in ``out``: Python and vloop are imported, the options parsed), send SIGINT to the
+    whole group, as a terminal does on Ctrl-C."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "vloop.cli", *map(str, argv)],
         cwd=cwd,
@@ -633,6 +634,9 @@ def _ctrl_c(argv: list[str], delay: float, cwd: Path) -> subprocess.CompletedPro
         text=True,
         start_new_session=True,
     )
+    deadline = time.monotonic() + 60
+    while proc.poll() is None and time.monotonic() < deadline and not list(out.glob(".vloop-stage-*")):
+        time.sleep(0.02)
     time.sleep(delay)
     with contextlib.suppress(ProcessLookupError):
         os.killpg(proc.pid, signal.SIGINT)
@@ -644,7 +648,7 @@ def _interrupted_study(tmp_path: Path, delays: list[float]) -> None:
     f = tolerance_study(tmp_path, 200_000)
     for k, delay in enumerate(delays):
         out = tmp_path / f"o{k}"
-        r = _ctrl_c(["study", f, "--out", out, "--workers", "2"], delay, tmp_path)
+        r = _ctrl_c(["study", f, "--out", out, "--workers", "2"], delay, tmp_path, out)
         assert r.returncode == 130, (delay, r.stderr[-3000:])
         assert r.stderr.strip() == "vloop: interrupted (nothing half-written was left behind)", (delay, r.stderr)
         assert not out.exists() or [p.name for p in out.iterdir()] == []
@@ -652,12 +656,12 @@ def _interrupted_study(tmp_path: Path, delays: list[float]) -> None:
 
 def test_ctrl_c_during_a_study_on_two_workers_is_one_line(tmp_path):
     """SIGINT to the process group while the Dask workers start and run: no traceback from any worker process."""
-    _interrupted_study(tmp_path, [8.0])
+    _interrupted_study(tmp_path, [6.0])
 
 
 @pytest.mark.slow
 def test_ctrl_c_during_a_study_on_two_workers_many_times(tmp_path):
-    _interrupted_study(tmp_path, [2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 5.0, 7.0, 9.0, 11.0])
+    _interrupted_study(tmp_path, [0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5, 9.0, 11.0])
 
 
 def _names(folder: Path) -> tuple[set, set, set]:
@@ -682,8 +686,10 @@ def _interrupted_validation(tmp_path: Path, delays: list[float]) -> None:
     new_file = MECHANISMS / "slider_crank_offset.toml"
     seen = set()
     for delay in delays:
-        r = _ctrl_c([*base, new_file], delay, tmp_path)
-        assert r.returncode in (0, 130), r.stderr[-2000:]
+        r = _ctrl_c([*base, new_file], delay, tmp_path, out)
+        # -2: the signal came after main() returned, as Python shuts down (a shell reports 128 + 2 = 130 too)
+        assert r.returncode in (0, 130, -signal.SIGINT), r.stderr[-2000:]
+        assert "Traceback" not in r.stderr, r.stderr
         if r.returncode == 130:
             assert r.stderr.strip().splitlines()[-1].startswith("vloop: interrupted"), r.stderr
             assert "Traceback" not in r.stderr, r.stderr
@@ -697,12 +703,12 @@ def _interrupted_validation(tmp_path: Path, delays: list[float]) -> None:
 
 
 def test_ctrl_c_while_validate_writes_leaves_one_complete_set(tmp_path):
-    _interrupted_validation(tmp_path, [1.5, 3.0])
+    _interrupted_validation(tmp_path, [0.5, 2.0])
 
 
 @pytest.mark.slow
 def test_ctrl_c_while_validate_writes_many_times(tmp_path):
-    _interrupted_validation(tmp_path, [0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 4.0, 4.5, 5.0, 6.0])
+    _interrupted_validation(tmp_path, [0.0, 0.2, 0.4, 0.6, 0.8, 1.0, 1.3, 1.6, 2.0, 2.5, 3.0, 4.0])
 
 
 def test_ctrl_c_during_publishing_is_held_until_the_set_is_complete(tmp_path, monkeypatch):

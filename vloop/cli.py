@@ -702,6 +702,11 @@ def _add_corpus_options(p: argparse.ArgumentParser) -> None:
     )  # fmt: skip
 
 
+def _interrupted() -> int:
+    print("vloop: interrupted (nothing half-written was left behind)", file=sys.stderr)
+    return 130
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; every failure a user can cause ends in one line on stderr and its exit code."""
     started = time.perf_counter()
@@ -709,6 +714,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a bad option (one line already printed)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    except KeyboardInterrupt:  # while an option's parser imported what it checks against
+        return _interrupted()
     args.started = started
     try:
         from .files.options import check_environment
@@ -719,8 +726,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except VloopError as exc:
         return _fail(str(exc))
     except KeyboardInterrupt:
-        print("vloop: interrupted (nothing half-written was left behind)", file=sys.stderr)
-        return 130
+        return _interrupted()
     except BrokenPipeError:  # the reader went away (vloop ... | head): nothing left to say
         sys.stderr.close()
         return 0

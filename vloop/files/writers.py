@@ -209,16 +209,24 @@ def write_table(
 
 
 def finite_or_null(df: Any) -> Any:
-    """A copy of ``df`` whose non-finite numbers (nan, ±inf; in list cells too) are nulls."""
-    df = df.copy()
+    """``df`` with its non-finite numbers (nan, ±inf; in list cells too) as nulls: ``df`` itself when it has none
+    besides nulls already, else a copy (the caller's table is never changed)."""
+    fixed: dict[str, Any] = {}
     for col in df.columns:
         kind = df[col].dtype.kind
         if kind == "f":
             v = df[col].to_numpy(dtype=float, na_value=np.nan)
-            if not np.all(np.isfinite(v)):
-                df[col] = np.where(np.isfinite(v), v, np.nan)
+            if np.any(np.isinf(v)):
+                fixed[col] = np.where(np.isfinite(v), v, np.nan)
         elif kind == "O":
-            df[col] = [_finite_cell(x) for x in df[col]]
+            cells = [_finite_cell(x) for x in df[col]]
+            if any(a is not b for a, b in zip(cells, df[col], strict=True)):
+                fixed[col] = cells
+    if not fixed:
+        return df
+    df = df.copy()
+    for col, values in fixed.items():
+        df[col] = values
     return df
 
 

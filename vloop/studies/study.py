@@ -54,6 +54,7 @@ from ..core.batch import Outcomes
 from ..core.variants import ParamRef, VariantModel, resolve
 from ..errors import MechanismError, VloopError
 from ..files.schema import Problems
+from ..files.writers import finite_or_null
 from ..model import Mechanism
 from ..result import Result
 from .studyfile import OutputSpec, StudySpec, from_dict, output_unit, quantity_kind
@@ -722,8 +723,7 @@ def _gather(
     summary = _summary(spec, p, values, sens, st)
     sensitivity = _sensitivity_table(spec, p, model, sens)
     bands = _bands(spec, p, values, sens, st, t)
-    for df in (table, summary, sensitivity, bands):
-        _null_non_finite(df)
+    table, summary, sensitivity, bands = map(finite_or_null, (table, summary, sensitivity, bands))
     stopped = int(np.sum(st.assembled[:n] & ~st.completed[:n]))
     counts = {
         "variants": n,
@@ -734,17 +734,6 @@ def _gather(
         "single_runs": sum(s == "single" for s in st.solver),
     }
     return StudyResult(table, summary, sensitivity, bands, t, spec, seconds, counts, model, st, p.values)
-
-
-def _null_non_finite(df: Any) -> None:
-    """A number too large for a float (an absurd design's output or its spread) is null, never inf, in the tables."""
-    for col in df.columns:
-        if df[col].dtype.kind == "f":
-            v = df[col].to_numpy()
-            if not np.all(np.isfinite(v) | np.isnan(v)):
-                df[col] = np.where(np.isinf(v), np.nan, v)
-        elif df[col].dtype == object and len(df) and isinstance(df[col].iloc[0], list):
-            df[col] = [None if r is None or not np.all(np.isfinite(r)) else r for r in df[col]]
 
 
 def _scalar_outputs(spec: StudySpec) -> list[OutputSpec]:
