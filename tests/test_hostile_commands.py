@@ -28,31 +28,10 @@ import vloop
 from vloop.cli import main
 
 from .conftest import MECHANISMS
+from .test_bad_input import FOURBAR
 
 ROOT = Path(__file__).resolve().parents[1]
 TEXTBOOK = MECHANISMS / "fourbar_textbook_example.toml"
-FOURBAR = """
-name = "fb"
-units = "m"
-[joints]
-O2 = [0.0, 0.0]
-A = [0.0, 2.0]
-B = [5.0, 4.0]
-O4 = [7.0, 0.0]
-[links]
-ground = { joints = ["O2", "O4"], ground = true }
-crank = { joints = ["O2", "A"] }
-coupler = { joints = ["A", "B"] }
-rocker = { joints = ["O4", "B"] }
-[[drivers]]
-link = "crank"
-pivot = "O2"
-omega = 1.0
-[time]
-start = 0.0
-stop = 1.0
-step = 0.1
-"""
 TOLERANCE_STUDY = """
 mechanism = "{mechanism}"
 samples = {samples}

@@ -658,30 +658,24 @@ def _parser_study(sub: Any) -> None:
         help="the tables: parquet (default; needs pyarrow) or csv (a units row under the header)",
     )  # fmt: skip
     _add_memory_budget(st, "study")
-    where = st.add_mutually_exclusive_group()
-    where.add_argument(
-        "--scheduler",
-        type=_type("scheduler"),
-        metavar="ADDRESS",
-        help="run the chunks on this Dask scheduler (tcp://host:8786)",
-    )
-    where.add_argument(
-        "--workers", type=_type("workers"), metavar="N", help="run the chunks on a local Dask cluster of N processes"
-    )
+    _add_where(st, "chunks")
     st.set_defaults(func=cmd_study)
 
 
-def _add_runner_options(p: argparse.ArgumentParser) -> None:
+def _add_where(p: argparse.ArgumentParser, what: str) -> None:
+    """--scheduler ADDRESS | --workers N: where the tasks (validate) or chunks (study) run (vloop.runner)."""
     where = p.add_mutually_exclusive_group()
     where.add_argument(
-        "--scheduler",
-        type=_type("scheduler"),
-        metavar="ADDRESS",
-        help="run the tasks on this Dask scheduler (tcp://host:8786)",
-    )
+        "--scheduler", type=_type("scheduler"), metavar="ADDRESS",
+        help=f"run the {what} on this Dask scheduler (tcp://host:8786)",
+    )  # fmt: skip
     where.add_argument(
-        "--workers", type=_type("workers"), metavar="N", help="run the tasks on a local Dask cluster of N processes"
+        "--workers", type=_type("workers"), metavar="N", help=f"run the {what} on a local Dask cluster of N processes"
     )
+
+
+def _add_runner_options(p: argparse.ArgumentParser) -> None:
+    _add_where(p, "tasks")
     p.add_argument(
         "--timeout", type=_type("timeout"), default=600.0, metavar="S",
         help="seconds per task before it counts as hung (600)",

@@ -26,16 +26,17 @@ class OptionError(VloopError, ValueError):
     """An option's value is not one it accepts (the message names the option and what it accepts)."""
 
 
-def _show(value: Any, limit: int = 40) -> str:
+def show(value: Any, limit: int = 60) -> str:
+    """A short, safe repr of a user value for a message (deep nesting, huge strings, control characters)."""
     try:
         text = repr(value)
     except (RecursionError, ValueError):
-        text = f"<{type(value).__name__}>"
+        text = f"<{type(value).__name__} nested too deeply>"
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _refuse(where: str, what: str, value: Any) -> OptionError:
-    return OptionError(f"{where}: must be {what}, got {_show(value)}", entry=where.lstrip("-").replace("-", "_"))
+    return OptionError(f"{where}: must be {what}, got {show(value, 40)}", entry=where.lstrip("-").replace("-", "_"))
 
 
 # ---------------------------------------------------------------- sizes
@@ -123,7 +124,7 @@ def choice_list(value: Any, where: str, choices: Sequence[str]) -> tuple[str, ..
         raise _refuse(where, what + " (none may be empty)", value)
     unknown = [n for n in names if n not in choices]
     if unknown:
-        raise OptionError(f"{where}: unknown {_show(unknown[0])} (known: {', '.join(choices)})", entry=where)
+        raise OptionError(f"{where}: unknown {show(unknown[0], 40)} (known: {', '.join(choices)})", entry=where)
     if len(set(names)) != len(names):
         raise _refuse(where, what + " (each once)", value)
     return tuple(names)
