@@ -282,6 +282,19 @@ def test_a_scheduler_without_port_or_unreachable_is_one_quick_line(tmp_path, com
     assert not (tmp_path / "o").exists()
 
 
+def test_a_port_that_is_not_a_dask_scheduler_is_refused_quickly(tmp_path):
+    """A server that accepts the connection and says nothing (Dask's client waited for its handshake forever)."""
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        port = server.getsockname()[1]
+        t0 = time.perf_counter()
+        code, _, err = cli("study", tolerance_study(tmp_path, 20), "--out", tmp_path / "o", "--scheduler",
+                           f"127.0.0.1:{port}")  # fmt: skip
+    assert code == 2 and "accepts connections but is not a Dask scheduler (no handshake within 3 s)" in one_line(err)
+    assert time.perf_counter() - t0 < 10.0
+
+
 @pytest.mark.parametrize(
     ("engines", "what"),
     [

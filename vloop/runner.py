@@ -101,13 +101,14 @@ def parse_address(value: Any, where: str = "--scheduler") -> str:
 
 
 def check_scheduler(address: str, timeout: float = REACH_TIMEOUT) -> None:
-    """Refuse (RunnerError, one line) a scheduler address that does not parse or whose port does not accept a
-    connection within ``timeout`` seconds — before any work, instead of Dask's long wait and its traceback."""
+    """Refuse (RunnerError, one line) a scheduler address that does not parse, whose port does not accept a
+    connection within ``timeout`` seconds, or (tcp) that sends no Dask handshake in that time — before any work,
+    instead of Dask's wait (forever, for a server that is not a scheduler) and its traceback."""
     addr = parse_address(address)
-    host, port = addr.split("://", 1)[1].rsplit(":", 1)
+    scheme, rest = addr.split("://", 1)
+    host, port = rest.rsplit(":", 1)
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
-            pass
+        conn = socket.create_connection((host.strip("[]"), int(port)), timeout=timeout)
     except OSError as exc:
         why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc)).lower()
         raise RunnerError(
@@ -115,6 +116,17 @@ def check_scheduler(address: str, timeout: float = REACH_TIMEOUT) -> None:
             "start one (dask scheduler) or use --workers N",
             entry="scheduler",
         ) from None
+    with conn:
+        try:
+            greeted = scheme != "tcp" or bool(conn.recv(1))  # a Dask scheduler sends its handshake at once
+        except OSError:
+            greeted = False
+    if not greeted:
+        raise RunnerError(
+            f"--scheduler {address}: {addr} accepts connections but is not a Dask scheduler (no handshake within "
+            f"{timeout:g} s)",
+            entry="scheduler",
+        )
 
 
 def local_worker_name() -> str:
