@@ -215,11 +215,11 @@ def test_cli_corpus_writes_the_files_and_refuses_bad_arguments(tmp_path, capsys)
     assert {corpus.read_sidecar(f)["family"] for f in files} <= {"watt2", "fourbar"}
     assert "wrote 4 mechanisms (seed 3" in capsys.readouterr().out
     for bad, what in [
-        (["--n", "0"], "--n/--corpus must be between 1"),
-        (["--n", "2", "--seed", "-1"], "--seed must be a non-negative"),
+        (["--n", "0"], "argument --n: must be an integer from 1 to 1,000,000"),
+        (["--n", "2", "--seed", "-1"], "argument --seed: must be an integer from 0 to"),
         (["--n", "2", "--families", "fourbar/hexagon"], "unknown corpus family 'fourbar/hexagon'"),
-        (["--n", "2", "--limit-fraction", "nan"], "--limit-fraction must be between 0 and 1"),
-        (["--n", "2", "--start", "-3"], "--start must be between"),
+        (["--n", "2", "--limit-fraction", "nan"], "argument --limit-fraction: must be a number from 0 to 1"),
+        (["--n", "2", "--start", "-3"], "argument --start/--corpus-start: must be an integer from 0 to"),
     ]:
         assert main(["corpus", *bad, "--out", str(tmp_path / "x")]) == 2
         err = capsys.readouterr().err

@@ -228,10 +228,10 @@ def test_validate_a_folder_checks_the_sidecar_expectations(tmp_path, capsys):
 def test_validate_refuses_bad_runner_options(tmp_path, capsys):
     f = str(Path(__file__).resolve().parents[1] / "mechanisms" / "eightbar.toml")
     for extra, what in [
-        (["--workers", "0"], "workers must be a positive integer"),
-        (["--timeout", "-1"], "timeout must be a positive number"),
-        (["--timeout", "inf"], "timeout must be a positive number"),
-        (["--corpus", "0"], "--n/--corpus must be between 1"),
+        (["--workers", "0"], "argument --workers: must be an integer from 1 to 256, got 0"),
+        (["--timeout", "-1"], "argument --timeout: must be a number above 0 and at most 604800, got '-1'"),
+        (["--timeout", "inf"], "argument --timeout: must be a number above 0 and at most 604800, got 'inf'"),
+        (["--corpus", "0"], "argument --corpus: must be an integer from 1 to 1,000,000, got 0"),
     ]:
         assert main(["validate", f, "--engines", "vloop", "--out", str(tmp_path), "--no-report", *extra]) == 2
         err = capsys.readouterr().err

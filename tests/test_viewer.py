@@ -281,18 +281,61 @@ def test_view_command_opens_the_browser_only_when_asked(tmp_path: Path, monkeypa
     assert opened == [(tmp_path / "eightbar.html").resolve().as_uri()]
 
 
-def test_too_many_samples_refused_before_solving(tmp_path: Path, capsys) -> None:
-    from vloop.views.view import MAX_SAMPLES
+def _chain(tmp_path: Path, dyads: int, samples: int) -> Path:
+    """A chain of ``dyads`` RRR dyads on a crank (benchmarks/bench_compile.py) over ``samples`` samples."""
+    import sys as _sys
 
-    text = EIGHTBAR.read_text(encoding="utf-8").replace("step = 0.05", f"step = {2.35 / (MAX_SAMPLES + 5)!r}")
-    big = tmp_path / "big.toml"
-    big.write_text(text, encoding="utf-8")
-    assert main(["view", str(big), "--out", str(tmp_path)]) == 2
-    assert f"the viewer takes at most {MAX_SAMPLES}" in capsys.readouterr().err
-    mech = vloop.load(EIGHTBAR)
-    many = vloop.Result("eightbar", "vloop", np.zeros(MAX_SAMPLES + 1), {})
-    with pytest.raises(ViewError, match="samples; the viewer takes at most"):
-        build_payload(mech, many)
+    _sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from bench_compile import dyad_chain
+
+    data = vloop.mechanism.to_dict(dyad_chain(dyads))
+    data["time"] = {"start": 0.0, "stop": 1.0, "step": 1.0 / (samples - 1)}
+    path = tmp_path / "chain.toml"
+    vloop.save(vloop.from_dict(data), path)
+    return path
+
+
+def test_a_long_runs_page_is_bounded_by_its_bytes(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A page holds at most MAX_PAGE_BYTES of sample data (worst case 8·4/3 bytes a value): a longer run is solved
+    at every sample and the page carries every k-th one and the last, with the exact values of those samples
+    (a direct solve at the same instants agrees to 1e-12 of each column's peak) and a note that says so."""
+    from vloop.views import view
+
+    monkeypatch.setattr(view, "MAX_PAGE_BYTES", 1 << 20)
+    f = _chain(tmp_path, 5, 20_001)
+    assert main(["view", str(f), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    page = tmp_path / "o" / "chain5.html"
+    data = _data_of(page)
+    thin = data["thinned"]
+    n_cols = len(data["data"]["columns"])
+    assert thin["of"] == 20_001 and thin["every"] > 1
+    assert thin["shown"] * n_cols * view.VALUE_BYTES <= 1 << 20  # the bound, from the estimate's own terms
+    assert f"20001 samples (the page carries {thin['shown']})" in out
+    cols = unpack(data["data"])
+    rows = view.page_rows(20_001, thin["every"])
+    assert len(cols["t"]) == thin["shown"] == len(rows) and rows[-1] == 20_000
+    mech = vloop.load(f)
+    assert np.array_equal(cols["t"], mech.times[rows])
+    direct = vloop.solve(mech, times=mech.times[rows])
+    for name, ref in direct.columns.items():
+        assert np.max(np.abs(cols[name] - ref)) <= 1e-12 * max(np.max(np.abs(ref)), 1.0), name
+    assert "carries" in (Path(view.__file__).parent / "viewer" / "viewer.js").read_text()
+    small = view.build_payload(vloop.load(EIGHTBAR), vloop.solve(vloop.load(EIGHTBAR)))
+    assert small["thinned"] is None  # a page that fits carries every sample
+
+
+@pytest.mark.slow
+def test_a_41_link_chain_at_100000_samples_gives_a_bounded_page(tmp_path: Path, capsys) -> None:
+    """The case that wrote a 137 MiB page: now at most MAX_PAGE_BYTES of data plus the page's fixed part."""
+    from vloop.views import view
+
+    f = _chain(tmp_path, 20, 100_000)
+    assert len(vloop.load(f).links) == 42  # 41 moving links and the ground
+    assert main(["view", str(f), "--out", str(tmp_path / "o")]) == 0
+    size = (tmp_path / "o" / "chain20.html").stat().st_size
+    assert size <= view.MAX_PAGE_BYTES + (2 << 20), size
+    assert _data_of(tmp_path / "o" / "chain20.html")["thinned"]["of"] == 100_000
 
 
 def _data_of(path: Path) -> dict:

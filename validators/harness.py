@@ -323,6 +323,7 @@ def run(
     timeout: float | None = None,
     bar: bool | None = None,
     keep_results: bool = False,
+    items: list[MechanismValidation] | None = None,
 ) -> Validation:
     """Validate every mechanism file with every engine, each (mechanism, engine) one task of vloop.runner.
 
@@ -330,7 +331,8 @@ def run(
     on a running one. A task that fails, crashes its worker or passes ``timeout`` [s] is that engine's
     error. ``progress`` gets one line per finished task; ``bar`` as :func:`vloop.runner.run_tasks`'s
     ``progress``. Results of generated files that pass are dropped once compared (``keep_results=False``)
-    so that a corpus of thousands fits in memory; the summary keeps their numbers.
+    so that a corpus of thousands fits in memory; the summary keeps their numbers. ``items``: the files already
+    loaded by :func:`load_items` (``paths`` is then not read again).
     """
     from vloop.runner import run_tasks
 
@@ -340,7 +342,7 @@ def run(
             raise MechanismError(f"unknown engine '{e}' (known: {', '.join(ENGINES)})", entry="engines")
     started = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     t0 = time.perf_counter()
-    items = load_items(paths)
+    items = load_items(paths) if items is None else items
     tasks = [(k, e) for k, it in enumerate(items) if it.mechanism is not None for e in engines]
     waiting = {k: len(engines) for k, _ in tasks}
 
@@ -561,16 +563,16 @@ def comparison_table(summary: dict[str, Any]) -> Any:
     return df
 
 
+def write_table(summary: dict[str, Any], path: str | Path, fmt: str = "parquet") -> Path:
+    """Write the comparison table as ``fmt`` ("parquet" or "csv", vloop.files.writers.write_table): errors in the
+    quantity's unit (see summary.json), times in s, ratios unitless; a non-finite error is a null."""
+    from vloop.files.writers import write_table as write
+
+    units = {"engine_seconds": "s", "t_at_max": "s", "max_rel": "1", "ratio": "1"}
+    units.update(dict.fromkeys(("max_abs", "rms", "peak", "allowed"), "the quantity's"))
+    return write(comparison_table(summary), path, fmt, units, {"schema": SCHEMA})
+
+
 def write_parquet(summary: dict[str, Any], path: str | Path) -> Path:
-    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``) through vloop.files.output."""
-    import io
-
-    from vloop.files.output import write_bytes
-
-    try:
-        import pyarrow  # noqa: F401
-    except ImportError as exc:
-        raise VloopError(f"writing {path} needs pyarrow: pip install 'vloop[parquet]' ({exc})", entry="out") from None
-    buf = io.BytesIO()
-    comparison_table(summary).to_parquet(buf, index=False, engine="pyarrow")
-    return write_bytes(path, buf.getvalue())
+    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``)."""
+    return write_table(summary, path, "parquet")

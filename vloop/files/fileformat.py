@@ -55,6 +55,8 @@ def _time_limit(n: float) -> str | None:
 MAX_FILE_BYTES = 64 * 2**20  # a mechanism file larger than this is refused before reading
 MAX_PROFILE_BYTES = 2**30  # a profile CSV larger than this is refused before reading
 MAX_PROFILE_ROWS = 10_000_000
+FAR = 1e5  # a coordinate or length this many times the joints' span from them is a typing error (see check_extent)
+MAX_ANGLE = 1e6  # rad: a larger angle's floating-point spacing (≥ 1.2e-10 rad) nears the solver's rtol
 COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
 BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
 CHANGE_POINT_CHOICES = ("smooth", "other")
@@ -111,6 +113,8 @@ def from_dict(
     points = read_points(data.get("points", {}), joints, links, sliders, probs)
     probs.raise_if_any()
     proto = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    check_extent(proto, probs)
+    probs.raise_if_any()
     check_topology(proto, probs)
     probs.raise_if_any()
     drivers = read_drivers(data.get("drivers"), proto, ctx, probs)
@@ -143,12 +147,16 @@ def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
     if st.st_size > limit:
         raise MechanismError(f"{path}: {st.st_size:,} bytes, more than the {limit:,} vloop reads", entry=entry)
     try:
-        with open(path, "rb") as fh:
-            raw = fh.read(limit + 1)
+        with open(path, "rb") as fh:  # a buffer of the file's size, not of the limit (64 MB for every small file)
+            raw = fh.read(st.st_size + 1)
+            if len(raw) > st.st_size:  # it grew since: read on, up to the limit
+                raw += fh.read(limit + 1 - len(raw))
     except OSError as exc:
         raise MechanismError(
             f"{path}: cannot read {what} ({(exc.strerror or str(exc)).lower()})", entry=entry
         ) from None
+    if len(raw) > limit:
+        raise MechanismError(f"{path}: more than the {limit:,} bytes vloop reads", entry=entry)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -320,6 +328,47 @@ def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Probl
     return points
 
 
+def joint_span(m: Mechanism) -> tuple[float, tuple[float, float]]:
+    """(diagonal of the joints' bounding box [file units], its centre): the linkage's own size, which tracer
+    points, centres of mass and stated lengths are measured against."""
+    xs, ys = [x for x, _ in m.joints.values()], [y for _, y in m.joints.values()]
+    span = math.hypot(max(xs) - min(xs), max(ys) - min(ys)) if xs else 0.0
+    return span, ((max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2) if xs else (0.0, 0.0)
+
+
+def far_problem(m: Mechanism, what: str, value: float | tuple[float, float]) -> str:
+    """Why a tracer point, centre of mass (a pair, world) or length (a number) is refused ("" if it is fine): it lies
+    more than FAR times the joints' span from them. Every relative tolerance (coincident joints, closure, the
+    force balance's rank) is taken of the mechanism's size, and the force balance loses digits as
+    ε·(distance/size)² (measured: a centre of mass 1.2e5 sizes away balances the power to 2e-11 of peak, 1.2e7
+    sizes away to 2e-8, 1.2e15 sizes away not at all) — such a number is a typing error, not a design."""
+    span, (cx, cy) = joint_span(m)
+    if span <= 0:
+        return ""
+    dist = abs(value) if isinstance(value, float) else max(abs(value[0] - cx), abs(value[1] - cy))
+    if dist <= FAR * span:
+        return ""
+    length = isinstance(value, float)
+    shown = f"{value:.6g}" if length else f"[{value[0]:.6g}, {value[1]:.6g}]"
+    return (
+        f"'{what}' = {shown} {'is' if length else 'lies'} {dist / span:.2g} times the linkage's size "
+        f"{'' if length else 'away from it '}({span:.6g} {m.units}, the span of its joints): at most {FAR:g} times "
+        "(a typing error?)"
+    )
+
+
+def check_extent(m: Mechanism, probs: Problems) -> None:
+    """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`)."""
+    for p in m.points.values():
+        problem = far_problem(m, "at", p.at)
+        if problem:
+            probs.add(f"points.{p.name}", problem)
+    for lk in m.links.values():
+        problem = far_problem(m, "length", lk.length) if lk.length is not None else ""
+        if problem:
+            probs.add(f"links.{lk.name}", problem)
+
+
 def check_topology(m: Mechanism, probs: Problems) -> None:
     """Joints named by nobody, coincident joints on a link, single-joint moving links, disconnected parts."""
     scale = m.scale
@@ -461,6 +510,9 @@ def _motion(
 ) -> tuple[float, float, float, Profile | None]:
     """A driver's x0 (default: from the coordinates), rate and acceleration, or its profile."""
     x0 = number(d, keys[0], entry, probs, x_coords)
+    if keys[0] == "theta0" and abs(x0) > MAX_ANGLE:
+        probs.add(entry, f"'theta0' = {x0:.6g} rad cannot be resolved: beyond ±{MAX_ANGLE:g} rad an angle's "
+                  f"floating-point spacing is {math.ulp(x0):.2g} rad (give the angle modulo 2π)")  # fmt: skip
     v0 = number(d, keys[1], entry, probs, 0.0)
     a0 = number(d, keys[2], entry, probs, 0.0)
     prof = None
@@ -549,6 +601,20 @@ def _profile_path(spec: str, entry: str, ctx: _Context, probs: Problems) -> Path
     return path
 
 
+def _column_ok(table: dict[str, np.ndarray], k: str, n: int, entry: str, probs: Problems, source: str) -> bool:
+    """A profile column as long as its time column and finite; else a problem naming the file, column and row."""
+    col = table[k]
+    where = f"profile {show(source)} column '{k}'" if source != "inline" else f"profile column '{k}'"
+    if len(col) != n:
+        probs.add(entry, f"{where} has {len(col)} values for {n} times")
+        return False
+    bad = np.flatnonzero(~np.isfinite(col))
+    if len(bad):
+        probs.add(entry, f"{where} has a missing or non-finite value at data row {int(bad[0]) + 1}")
+        return False
+    return True
+
+
 def _profile(
     table: dict[str, np.ndarray], cols: tuple[str, ...], entry: str, probs: Problems, source: str = "inline"
 ) -> Profile | None:
@@ -560,8 +626,7 @@ def _profile(
     t = table[tcol]
     n = len(t)
     for k in (tcol, xcol, vcol, acol):
-        if k in table and (len(table[k]) != n or not np.all(np.isfinite(table[k]))):
-            probs.add(entry, f"profile column '{k}' has missing or non-finite values")
+        if k in table and not _column_ok(table, k, n, entry, probs, source):
             return None
     if n < 2:
         probs.add(entry, "profile needs at least two rows")
@@ -742,6 +807,10 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
         inertia = real(val.get("inertia", 0.0), "inertia", entry, probs)
         joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
         com = pair(val["com"], "com", entry, probs) if "com" in val else _joint_mean(bodies[name], joints)
+        far = far_problem(m, "com", com) if com is not None else ""
+        if far:
+            probs.add(entry, far)
+            continue
         for what, x in (("mass", mass), ("inertia", inertia)):
             if x is not None and x < 0:
                 probs.add(entry, f"'{what}' must not be negative, got {x:g}")
@@ -844,13 +913,11 @@ def _load_profile(
     if any(c not in table for c in columns):
         probs.add(entry, "a force profile needs columns 't', 'fx' and 'fy'")
         return None
-    prof = _profile({"t": table["t"], "x": table[columns[0]]}, ("t", "x", "", ""), entry, probs)
-    if prof is None or any(len(table[c]) != len(prof.t) or not np.all(np.isfinite(table[c])) for c in columns):
-        if prof is not None:
-            probs.add(entry, f"profile columns {', '.join(columns)} have missing or non-finite values")
+    source = spec if isinstance(spec, str) else "inline"
+    prof = _profile({"t": table["t"], columns[0]: table[columns[0]]}, ("t", columns[0], "", ""), entry, probs, source)
+    if prof is None or not all(_column_ok(table, c, len(prof.t), entry, probs, source) for c in columns):
         return None
     values = np.column_stack([table[c] for c in columns])
-    source = spec if isinstance(spec, str) else "inline"
     return Load(kind, body, None, point, LoadProfile(prof.t, values, columns, source), entry)
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import MechanismError
+from .options import show
 
 NAME_MAX = 64
 _NAME = re.compile(r"[^\W_][\w-]*|_[\w-]*")  # letters, digits, '_' and '-' (Unicode letters and digits too)
@@ -254,15 +255,6 @@ class Problems:
             text = "; ".join(f"[{e}] {m}" for e, m in self.items[:8])
             more = f" (and {len(self.items) - 8} more)" if len(self.items) > 8 else ""
             raise MechanismError(f"{self.where}: {text}{more}", entry=entry)
-
-
-def show(value: Any, limit: int = 60) -> str:
-    """A short, safe repr of a user value for a message (deep nesting, huge strings, control characters)."""
-    try:
-        text = repr(value)
-    except (RecursionError, ValueError):
-        text = f"<{type(value).__name__} nested too deeply>"
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def check_keys(table: dict, section: str, entry: str, probs: Problems, extra: set[str] | None = None) -> None:

@@ -61,13 +61,17 @@ def _safe(name: str) -> str:
 
 def _unit(res: Any, name: str) -> tuple[float, str]:
     """(factor, unit) to draw an output in: radians become degrees."""
-    from .studyfile import output_unit
+    from .studyfile import display_unit
 
     o = next(o for o in res.spec.outputs if name.startswith(o.name))
-    u = output_unit(res.spec.mechanism, o)
-    if u.startswith("rad"):
-        return 180.0 / math.pi, "deg" + u[3:]
-    return 1.0, u
+    return display_unit(res.spec.mechanism, o)
+
+
+def _axis(res: Any, name: str) -> str:
+    """A parameter's axis label: its name and unit (the file's; angles of a parameter stay in rad)."""
+    from ..core.variants import resolve
+
+    return f"{name} [{resolve(res.spec.mechanism, name, 'parameters').unit or '1'}]"
 
 
 def _save(fig: Any, path: Path) -> Path:
@@ -144,7 +148,7 @@ def _curves(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
         c = cmap((row[first] - lo) / (hi - lo) if hi > lo else 0.5)
         ax.plot(res.t, np.asarray(row[o.name]) * k, color=c, lw=0.8)
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(lo, hi))
-    fig.colorbar(sm, ax=ax, label=first)
+    fig.colorbar(sm, ax=ax, label=_axis(res, first))
     ax.set_xlabel("t [s]")
     ax.set_ylabel(f"{o.quantity} [{unit}]")
     ax.grid(True, alpha=0.3)
@@ -198,7 +202,7 @@ def _line(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
     stopped = t[~t["completed"]]
     for x in stopped[p]:
         ax.axvline(x, color="0.8", lw=3, zorder=0)
-    ax.set_xlabel(p)
+    ax.set_xlabel(_axis(res, p))
     ax.set_ylabel(f"{o.name} [{unit}]")
     ax.grid(True, alpha=0.3)
     ax.set_title(f"{res.spec.mechanism.name}: {o.name} (grey: motion not completed)", fontsize=10)
@@ -238,8 +242,8 @@ def _map(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
     )
     m = ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_invalid(z), cmap="viridis", shading="flat")
     fig.colorbar(m, ax=ax, label=f"{o.name} [{unit}]")
-    ax.set_xlabel(grid_params[0].name)
-    ax.set_ylabel(grid_params[1].name)
+    ax.set_xlabel(_axis(res, grid_params[0].name))
+    ax.set_ylabel(_axis(res, grid_params[1].name))
     ax.set_title(f"{res.spec.mechanism.name}: {o.name} (grey: motion not completed)", fontsize=10)
     return _save(fig, folder / f"map_{_safe(o.name)}.png")
 
@@ -275,7 +279,7 @@ def _class_map(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
             ax.clabel(cs, fmt="%.0f°", fontsize=8)
             handles.append(Patch(facecolor="none", edgecolor="k", label=f"{mu.name} [deg] (completed motions)"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    ax.set_xlabel(grid_params[0].name)
-    ax.set_ylabel(grid_params[1].name)
+    ax.set_xlabel(_axis(res, grid_params[0].name))
+    ax.set_ylabel(_axis(res, grid_params[1].name))
     ax.set_title(f"{res.spec.mechanism.name}: Grashof class", fontsize=10)
     return _save(fig, folder / f"map_{_safe(o.name)}.png")

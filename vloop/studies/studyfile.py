@@ -481,6 +481,15 @@ def output_unit(mech: Mechanism, o: OutputSpec) -> str:
     return units.get(fld, "")
 
 
+def display_unit(mech: Mechanism, o: OutputSpec) -> tuple[float, str]:
+    """(factor, unit) an output is shown in — plots and the printed summary: radians become degrees (the tables
+    keep the output's own unit, :func:`output_unit`)."""
+    u = output_unit(mech, o)
+    if u.startswith("rad"):
+        return 180.0 / math.pi, "deg" + u[3:]
+    return 1.0, u or "1"
+
+
 def _quantity_help(mech: Mechanism) -> str:
     link = next(iter(mech.moving_links), "LINK")
     point = next(iter(mech.tracked_points), "POINT")

@@ -816,7 +816,7 @@
   }
 
   function updateNumbers(i) {
-    $("numbers-time").textContent = `t = ${fmt(T[i])} s · sample ${i + 1} of ${N}`;
+    $("numbers-time").textContent = `t = ${fmt(T[i])} s · sample ${sampleNo(i)} of ${D.thinned ? D.thinned.of : N}`;
     for (const c of cells) {
       const v = c.values[i];
       c.td.textContent = c.format(c.f(v));
@@ -960,6 +960,12 @@
 
   // ------------------------------------------------------------------ start
 
+  // the run's own sample number (1-based) of page sample i (a thinned page carries every k-th and the last)
+  function sampleNo(i) {
+    if (!D.thinned) return i + 1;
+    return i === N - 1 ? D.thinned.of : i * D.thinned.every + 1;
+  }
+
   async function main() {
     if (typeof DecompressionStream === "undefined") throw new Error("this browser has no DecompressionStream: use a current Firefox, Chrome, Edge or Safari");
     C = await decode(D.data);
@@ -976,7 +982,12 @@
     if (D.error) {
       const box = $("error");
       box.hidden = false;
-      box.textContent = `The motion stopped: ${D.error}\nThe drawing shows the last assembled instant, t = ${fmt(T[N - 1])} s (sample ${N}).`;
+      box.textContent = `The motion stopped: ${D.error}\nThe drawing shows the last assembled instant, t = ${fmt(T[N - 1])} s (sample ${sampleNo(N - 1)}).`;
+    }
+    if (D.thinned) {
+      const note = $("note");
+      note.hidden = false;
+      note.textContent = `This page carries ${D.thinned.shown.toLocaleString()} of the run's ${D.thinned.of.toLocaleString()} samples (one in every ${D.thinned.every}, and the last), to keep the page small; each value shown is that sample's exact value. vloop run writes every sample.`;
     }
     S.i = start;
     fit();
