@@ -37,7 +37,7 @@ from vloop.result import Result
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velocity", "acceleration")
-GROUPS += ("force", "moment")  # kinetostatics, for mechanisms with masses (validators/forces_engines.py)
+GROUPS += ("force", "moment")  # kinetostatics, for mechanisms with masses (validators/engines.py)
 MAX_FRAMES = 40  # animated GIF frames per mechanism
 LINKS_PER_FIGURE = 6  # more rotating links than this are spread over several history figures
 WORST_SHOWN = 4  # quantities per engine in the error-vs-time plots

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import vloop
+from tests.conftest import plant
 from validators import corpus, harness, shrink
 from vloop.cli import main
 
@@ -131,22 +132,13 @@ def test_corpus_page_shows_families_worst_errors_histograms_and_limits(in_proces
 def broken_analytic(monkeypatch):
     """Inject a bug: the closed form's rocker angle is off by 1e-6 rad whenever a four-bar's crank is
     longer than 0.1 (file units) — a failure that survives shrinking, as a real one would."""
-    real = harness._engine_fn
 
-    def engine(name):
-        fn = real(name)
-        if name != "analytic":
-            return fn
+    def wrong(mech, res):
+        if "rocker.theta" in res.columns and mech.links["crank"].length > 0.1:
+            res.columns["rocker.theta"] = res.columns["rocker.theta"] + 1e-6
+        return res
 
-        def wrong(mech):
-            res = fn(mech)
-            if "rocker.theta" in res.columns and mech.links["crank"].length > 0.1:
-                res.columns["rocker.theta"] = res.columns["rocker.theta"] + 1e-6
-            return res
-
-        return wrong
-
-    monkeypatch.setattr(harness, "_engine_fn", engine)
+    plant(monkeypatch, "analytic", wrong)
 
 
 def test_nightly_corpus_reproduces_and_minimizes_a_failure(tmp_path, broken_analytic, capsys):

@@ -29,40 +29,18 @@ from vloop.errors import MechanismError, MotionError, VloopError
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .forces_engines import with_forces
+from .engines import ENGINES as REGISTRY
+from .engines import engine
 from .tolerances import TOLERANCES, tolerance
 
 SCHEMA = "vloop-validation-summary/1"
-ENGINES = ("vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic")
+ENGINES = tuple(REGISTRY)  # the registered engines' names (validators/engines.py), in the order reports show them
 REFERENCES = ("vloop", "analytic")
-
-
-def _engine_fn(name: str) -> Callable[[Mechanism], Result]:
-    if name == "vloop":
-        return lambda m: vloop.solve(m)
-    if name == "analytic":
-        from . import analytic
-
-        return lambda m: analytic.solve(m)
-    if name == "pinocchio":
-        from . import pinocchio
-
-        return lambda m: pinocchio.solve(m)
-    if name in ("exudyn-kinematic", "exudyn-dynamic"):
-        from . import exudyn
-
-        mode = name.split("-", 1)[1]
-        return lambda m: exudyn.solve(m, mode=mode)
-    raise ValueError(f"unknown engine '{name}' (known: {', '.join(ENGINES)})")
 
 
 def engine_applies(name: str, mech: Mechanism) -> bool:
     """Whether an engine has anything to say about ``mech`` (closed forms exist for some only)."""
-    if name == "analytic":
-        from . import analytic
-
-        return analytic.available(mech)
-    return True
+    return engine(name).applies(mech)
 
 
 @dataclass
@@ -157,7 +135,7 @@ def run_engine(name: str, mech: Mechanism) -> EngineRun:
         return EngineRun(name, "skipped", message="no closed form for this structure")
     t0 = time.perf_counter()
     try:
-        res = with_forces(name, _engine_fn(name))(mech)
+        res = engine(name).run(mech)
         return EngineRun(name, "ok", res, seconds=time.perf_counter() - t0)
     except MotionError as exc:
         return EngineRun(name, "stopped", exc.partial, str(exc), time.perf_counter() - t0)
