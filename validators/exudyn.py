@@ -72,6 +72,11 @@ ENGINES = {"kinematic": "exudyn-kinematic", "dynamic": "exudyn-dynamic"}
 _FD_OFFSETS = (1, 2, 3)
 _FD_WEIGHTS = (3 / 4, -3 / 20, 1 / 60)
 FD_TURN = 0.01  # rad: largest body rotation within the difference stencil's unit step
+# kinematic continuation: largest predicted move of any coordinate per step (rad, or fraction of the mechanism
+# size); the Taylor predictor is then within ~0.25³/6 ≈ 3e-3 of the solution, well inside Newton's basin
+MAX_MOVE = 0.25
+JUMP_RATIO = 0.1  # largest Newton correction of a continuation step, as a fraction of the predicted move
+JUMP_FLOOR = 1e-9  # ... plus this (rad, fraction of the size): a mechanism at rest moves by round-off only
 
 # dynamic mode: step from an accuracy target (see dynamic_step)
 DEFAULT_ACCURACY = 1e-5  # relative acceleration error aimed at by the default step
@@ -309,16 +314,34 @@ class _Kinematics:
         return _State(t, q, qd, qdd, cond, iters)
 
     def step(self, s: _State, t: float, jump_tol: float = 0.1) -> _State | None:
-        """From state ``s`` to time ``t`` by Taylor predictor + Newton; None if not accepted."""
+        """From state ``s`` to time ``t`` by Taylor predictor + Newton; None if not accepted.
+
+        Not accepted either when the predictor moves any coordinate by more than MAX_MOVE (rad, or
+        that fraction of the mechanism size), or when Newton corrects the predicted position, or the
+        new velocities differ from the predicted ones (q̇ + h·q̈) times h, by more than JUMP_RATIO of the
+        predicted move: on the branch being followed both err by O(h³) against a move of O(h), while
+        a landing on another branch (next to a toggle or a change point, where branches come close or
+        meet and a follower can turn many times faster than the input) differs by about the move
+        itself, in the velocities even where the positions of the two branches are close. The step is
+        then halved until the predictor is that good, so the motion continues from Exudyn's own
+        previous state on its own branch.
+        """
         dt = t - s.t
         pred = s.q + dt * s.qd + 0.5 * dt * dt * s.qdd
+        move = float(np.max(np.abs(self.w * (pred - s.q))))
+        if move > MAX_MOVE:
+            return None
         q, ok, it = self.newton(pred, t)
         if not ok:
             return None
-        if float(np.max(np.abs(self.w * (q - pred)))) > jump_tol:  # a jump, not a continuation
+        correction = float(np.max(np.abs(self.w * (q - pred))))
+        if correction > min(jump_tol, JUMP_RATIO * move + JUMP_FLOOR):  # a jump, not a continuation
             return None
         st = self.state(q, t, it)
         if not np.all(np.isfinite(st.qdd)):
+            return None
+        turned = float(np.max(np.abs(self.w * (st.qd - s.qd - dt * s.qdd)))) * abs(dt)
+        if turned > JUMP_RATIO * move + JUMP_FLOOR:  # the velocities of another branch
             return None
         return st
 

@@ -583,11 +583,22 @@ class _Solver:
         return prev
 
     def advance(self, prev: _State, t: float, inputs: Inputs, depth: int = 0) -> _State:
-        """From ``prev`` to time ``t``: Taylor predictor, then bisect the interval on failure."""
+        """From ``prev`` to time ``t``: Taylor predictor, then bisect the interval on failure.
+
+        The interval is bisected first where the predictor moves any coordinate by more than
+        MAX_CRANK_STEP (rad, or that fraction of its length scale), not only the drivers: next to a
+        change point a follower can turn many times faster than the input (a kite's coupler swings
+        through half a turn while the crank turns a little), and a predictor that far off can land
+        Newton on the other branch, which meets this one there.
+        """
         dt = t - prev.t
         x, xd, xdd = inputs(t)
+        guess = prev.q + dt * prev.v + 0.5 * dt * dt * prev.a
+        far = float(np.max(np.abs(guess - prev.q) / self.pm.q_scale)) > MAX_CRANK_STEP
         try:
-            return self.step(prev, t, x, xd, xdd, prev.q + dt * prev.v + 0.5 * dt * dt * prev.a)
+            if far and depth < self.max_bisect:
+                raise _NoConvergence("predicted move too long")
+            return self.step(prev, t, x, xd, xdd, guess)
         except _NoConvergence:
             if depth >= self.max_bisect:
                 raise
