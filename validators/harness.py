@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import importlib.metadata
+import itertools
 import platform
 import time
 from collections.abc import Callable, Iterable
@@ -29,9 +30,10 @@ from vloop.errors import MechanismError, MotionError, VloopError
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
+from .consensus import Verdict, decide, tally
 from .engines import ENGINES as REGISTRY
 from .engines import engine
-from .tolerances import TOLERANCES, tolerance
+from .tolerances import TOLERANCES, Tolerance, conditioning_floor, pair_tolerance, tolerance
 
 SCHEMA = "vloop-validation-summary/1"
 ENGINES = tuple(REGISTRY)  # the registered engines' names (validators/engines.py), in the order reports show them
@@ -90,6 +92,7 @@ class MechanismValidation:
     error: str = ""  # the file itself is bad
     corpus: dict[str, Any] | None = None  # the generated file's sidecar (validators.corpus): family, seed, expectations
     expectation: dict[str, Any] | None = None  # what the sidecar expected of every engine, and what happened
+    verdict: Verdict | None = None  # who is the odd one out when the engines disagree (validators.consensus)
 
     @property
     def passed(self) -> bool:
@@ -153,11 +156,24 @@ def _extent(r: EngineRun) -> str:
     return f"stopped after {r.samples}" if r.status == "stopped" else f"ran all {r.samples}"
 
 
-def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | None:
-    """Compare run ``a`` against reference run ``b`` under the stated tolerance."""
-    if (a.engine, b.engine) not in TOLERANCES or a.status == "skipped" or b.status == "skipped":
+def conditioning(runs: Iterable[EngineRun]) -> np.ndarray | None:
+    """Per sample, the largest Jacobian condition number any run reports (health "cond"); None if none does."""
+    reported = [r.result.health for r in runs if r.result is not None]
+    conds = [np.asarray(h["cond"], float) for h in reported if "cond" in h]
+    if not conds:
         return None
-    tol = tolerance(a.engine, b.engine)
+    n = max(len(c) for c in conds)
+    return np.max([np.pad(c, (0, n - len(c))) for c in conds], axis=0)
+
+
+def check(
+    a: EngineRun, b: EngineRun, mech_name: str, tol: Tolerance | None = None, kappa: np.ndarray | None = None
+) -> CheckedComparison | None:
+    """Compare run ``a`` against reference run ``b`` under the stated tolerance (or ``tol``), plus the
+    conditioning floor of the samples' condition numbers ``kappa`` (tolerances.conditioning_floor)."""
+    if a.status == "skipped" or b.status == "skipped" or (tol is None and (a.engine, b.engine) not in TOLERANCES):
+        return None
+    tol = tol or tolerance(a.engine, b.engine)
     if a.result is None or b.result is None:
         missing = a if a.result is None else b
         return CheckedComparison(
@@ -175,7 +191,8 @@ def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | Non
         # Approaching a limit position every rate grows without bound and every engine's conditioning
         # with it (a time integrator's most of all): compare the first 90 % of what both solved.
         n = max(int(0.9 * (n - 1)), 0)
-    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor)
+    floor_t = conditioning_floor(kappa[:n]) if kappa is not None and len(kappa) >= n else None
+    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor, floor_t=floor_t)
     if not cmp.passed:
         passed = False
         msg = "; ".join(filter(None, [msg, cmp.message(limit=3).replace("\n", "; ")]))
@@ -184,13 +201,14 @@ def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | Non
 
 def _checks(item: MechanismValidation, engines: tuple[str, ...]) -> None:
     """Compare every engine with every reference run (vloop, then the closed form)."""
+    kappa = conditioning(item.runs.values())
     for ref in REFERENCES:
         if ref not in item.runs:
             continue
         for name in engines:
             if name == ref or name not in item.runs:
                 continue
-            c = check(item.runs[name], item.runs[ref], item.name)
+            c = check(item.runs[name], item.runs[ref], item.name, kappa=kappa)
             if c is not None:
                 item.checks.append(c)
 
@@ -229,10 +247,48 @@ def expectation(item: MechanismValidation) -> dict[str, Any] | None:
     }
 
 
+def _cross_checks(item: MechanismValidation) -> None:
+    """Every pair of engines not compared yet, under the pair's tolerance (tolerances.pair_tolerance)."""
+    done = {frozenset((c.engine, c.reference)) for c in item.checks}
+    names = [e for e in ENGINES if e in item.runs and item.runs[e].status != "skipped"]
+    kappa = conditioning(item.runs.values())
+    for i, ref in enumerate(names):
+        for name in names[i + 1 :]:
+            if frozenset((name, ref)) not in done:
+                c = check(item.runs[name], item.runs[ref], item.name, pair_tolerance(name, ref), kappa)
+                if c is not None:
+                    item.checks.append(c)
+
+
+def verdict(item: MechanismValidation) -> Verdict:
+    """Who is the odd one out (validators.consensus): all engines are compared pairwise once any disagree."""
+    voters = [e for e, r in item.runs.items() if r.status != "skipped"]
+    skipped = [e for e, r in item.runs.items() if r.status == "skipped"]
+    if item.passed:
+        return decide(voters, {}, skipped)
+    _cross_checks(item)
+    against = {(c.engine, c.reference): c.message for c in item.checks if not c.passed}
+    exp = item.expectation
+    if exp is not None and not exp["passed"]:
+        want = exp["stop_sample"] if exp["stop_sample"] is not None else exp["samples"]
+        met = {e: n == want for e, n in exp["observed"].items() if n is not None}
+        for a, b in itertools.combinations(met, 2):
+            if met[a] != met[b]:
+                odd = a if not met[a] else b
+                why = f"{odd} returned {exp['observed'][odd]} samples, the generator expects {want}"
+                against.setdefault((a, b), why)
+        if met and not any(met.values()) and not against:
+            v = decide(voters, {}, skipped)
+            v.status, v.reason = "undecided", f"every engine agrees, but not with the generator: {exp['message']}"
+            return v
+    return decide(voters, against, skipped)
+
+
 def _finalize(item: MechanismValidation, engines: tuple[str, ...], keep_results: bool) -> None:
     item.runs = {e: item.runs[e] for e in engines if e in item.runs}
     _checks(item, engines)
     item.expectation = expectation(item)
+    item.verdict = verdict(item)
     if not keep_results and item.corpus is not None and item.passed:
         for r in item.runs.values():
             r.drop_result()
@@ -419,6 +475,8 @@ def to_summary(v: Validation) -> dict[str, Any]:
         if it.corpus is not None:
             entry["corpus"] = _corpus_entry(it)
         entry["comparisons"] = [_comparison_entry(c) for c in it.checks]
+        if it.verdict is not None:
+            entry["verdict"] = it.verdict.as_dict()
         mechs.append(entry)
     out = {
         "schema": SCHEMA,
@@ -430,6 +488,7 @@ def to_summary(v: Validation) -> dict[str, Any]:
         "tolerances": {f"{a} vs {b}": t.as_dict() for (a, b), t in TOLERANCES.items()},
         "mechanisms": mechs,
     }
+    out["verdicts"] = verdicts(v)
     if v.runner:
         out["runner"] = v.runner
     corpus = [it.corpus for it in v.items if it.corpus is not None]
@@ -441,6 +500,16 @@ def to_summary(v: Validation) -> dict[str, Any]:
             "limit_runs": sum(1 for c in corpus if c["expect"].get("stop_sample") is not None),
         }
     return out
+
+
+def verdicts(v: Validation) -> dict[str, Any]:
+    """Per engine: mechanisms passed, blamed on it, undecided, skipped; the verdicts' counts; where vloop is blamed."""
+    decided = [it for it in v.items if it.verdict is not None]
+    return {
+        "engines": tally((it.verdict for it in decided), v.engines),  # type: ignore[misc]
+        "mechanisms": _count(it.verdict.status for it in decided),  # type: ignore[union-attr]
+        "vloop_blamed": [it.name for it in decided if "vloop" in it.verdict.blamed],  # type: ignore[union-attr]
+    }
 
 
 def _count(keys: Iterable[str]) -> dict[str, int]:

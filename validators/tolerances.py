@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velocity", "acceleration")
 GROUPS += ("force", "moment")  # kinetostatics (vloop.forces): reactions [N], torques and moments [N·m]
 
@@ -90,3 +92,60 @@ TOLERANCES: dict[tuple[str, str], Tolerance] = {
 def tolerance(engine: str, reference: str) -> Tolerance:
     """The tolerance for comparing ``engine`` against ``reference`` (KeyError if none is stated)."""
     return TOLERANCES[(engine, reference)]
+
+
+def pair_tolerance(engine: str, reference: str) -> Tolerance:
+    """The tolerance between two engines, stated or derived through vloop (the common reference).
+
+    Used when the engines disagree and every pair is compared to find the odd one out
+    (validators.consensus). A pair without a stated entry (Exudyn's time integration against
+    Pinocchio, say) gets the sum of the two engines' tolerances against vloop, group by group, for
+    rtol and floor alike: if |a − v| ≤ floor_a·G + rtol_a·P and |b − v| ≤ floor_b·G + rtol_b·P, the
+    triangle inequality gives |a − b| ≤ (floor_a + floor_b)·G + (rtol_a + rtol_b)·P, where P is the
+    quantity's peak and G its group's (the peaks of a, b and v differ by less than the errors, a
+    second-order change of the allowance). Two engines each right within its claim are right within
+    this one; a pair beyond it has at least one engine outside its claim.
+    """
+    stated = TOLERANCES.get((engine, reference)) or TOLERANCES.get((reference, engine))
+    if stated is not None:
+        return stated
+    a, b = tolerance(engine, "vloop").as_dict(), tolerance(reference, "vloop").as_dict()
+    return Tolerance(
+        {g: a["rtol"][g] + b["rtol"][g] for g in GROUPS},
+        f"{engine} vs {reference}: the sum of their tolerances against vloop (triangle inequality)",
+        floor={g: a["floor"][g] + b["floor"][g] for g in GROUPS},
+    )
+
+
+# The rates' round-off next to a singular configuration, from the conditioning the engines report.
+EPS = 2.220446049250313e-16  # double precision's unit round-off (numpy.finfo(float).eps)
+# Linear solves each amplify relative error by the Jacobian's condition number κ (forward error bound
+# |Δx|/|x| ≤ κ·|Δb|/|b| for a perturbation of the data at round-off): the positions come out of Newton
+# (or a closed form) with error κ·ε of their group's peak; the velocities solve J·q̇ = b with J evaluated at
+# those positions, κ·(κ·ε); the accelerations solve J·q̈ = −J̇·q̇ + … with both, κ·(κ²·ε); the forces are one
+# more solve with Jᵀ over the accelerations, κ⁴·ε. Power of κ per group:
+_KAPPA_POWER = {
+    "angle": 1,
+    "position": 1,
+    "angular velocity": 2,
+    "velocity": 2,
+    "angular acceleration": 3,
+    "acceleration": 3,
+    "force": 4,
+    "moment": 4,
+}
+
+
+def conditioning_floor(kappa: np.ndarray) -> dict[str, np.ndarray]:
+    """The floor added per sample to every comparison, as a fraction of each group's peak: κ(t)^p·ε.
+
+    ``kappa``: the largest condition number any engine reports at each sample (vloop's health "cond",
+    Pinocchio's and Exudyn's own constraint Jacobians). Away from singular configurations κ ≲ 10² and this
+    is below 1e-9 (the stated floor) for every group up to accelerations; next to a change point or a
+    toggle it grows as the bound above: at κ = 510 (seed 2026, index 966: two samples from a change
+    point) the accelerations may differ by 510³·ε = 2.9e-8 of their peak, and the closed form, Pinocchio
+    and vloop differ there by 9.4e-9, 5.4e-9 and 4.0e-9 pairwise (each engine within the bound of the
+    others, none near it elsewhere). The claim is this bound at each sample, not a looser tolerance.
+    """
+    kappa = np.nan_to_num(np.asarray(kappa, float), nan=np.inf, posinf=np.inf)
+    return {g: np.minimum(kappa**p * EPS, 1.0) for g, p in _KAPPA_POWER.items()}

@@ -617,15 +617,29 @@ def _table(summary: dict) -> str:
                     ),
                     default=0.0,
                 )
-                mark = "" if all(c["passed"] for c in comps) else " FAIL"
+                own = (m.get("verdict") or {}).get("engines", {}).get(e)
+                mark = {"blamed": " FAIL", "undecided": " ?"}.get(own or "", "")
+                if own is None and not all(c["passed"] for c in comps):
+                    mark = " FAIL"
                 cells.append(f"{worst:.1e} of tol{mark}")
-        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else "FAIL")
+        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else _blame(m))
         lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>17s}" for c in cells) + f"  {verdict}")
     if generated:
         ok = sum(1 for m in generated if m["passed"])
         lines.append(f"generated corpus: {ok} of {len(generated)} mechanisms pass (per family: corpus.html)")
+    odd = (summary.get("verdicts") or {}).get("vloop_blamed") or []
+    if odd:
+        lines.append(f"VLOOP IS THE ODD ONE OUT on {len(odd)} mechanisms: {', '.join(odd[:10])}")
     lines.append(f"{'all passed' if summary['passed'] else 'FAILED'} in {summary['seconds']:.1f} s")
     return "\n".join(lines)
+
+
+def _blame(m: dict) -> str:
+    """FAIL, with the engine the consensus blames (or "undecided")."""
+    v = m.get("verdict") or {}
+    if v.get("status") == "blamed":
+        return f"FAIL: blamed on {', '.join(v['blamed'])}"
+    return "FAIL: undecided" if v.get("status") == "undecided" else "FAIL"
 
 
 # ---------------------------------------------------------------- study

@@ -129,6 +129,7 @@ def compare(
     *,
     floor: float | dict[str, float] = 1e-12,
     columns: list[str] | None = None,
+    floor_t: dict[str, np.ndarray] | None = None,
 ) -> Comparison:
     """Compare ``a`` against reference ``b`` on their shared columns.
 
@@ -136,7 +137,9 @@ def compare(
     ``"acceleration"``, ``"angle"``, ``"angular velocity"``, ``"angular acceleration"``);
     so is ``floor``, the absolute allowance as a fraction of the group's peak (an integrator's
     error on a quantity that is zero in theory is of the order of its group's error, not zero).
-    The sample times must agree (to 1e-9 of the run's length).
+    ``floor_t`` adds a floor per sample and group (arrays as long as the Results, fractions of the
+    group's peak): an allowance that depends on the configuration, such as the conditioning next to a
+    change point. The sample times must agree (to 1e-9 of the run's length).
     """
     if len(a.t) != len(b.t) or (len(a.t) and not np.allclose(a.t, b.t, rtol=0, atol=1e-9 * max(1.0, np.ptp(b.t)))):
         raise ValueError(
@@ -157,12 +160,16 @@ def compare(
         g = _GROUP[_field(c)][0]
         e = error_series(a, b, c)
         e = np.where(np.isfinite(e), e, np.inf)
-        k = int(np.argmax(e)) if len(e) else 0
-        mx = float(e[k]) if len(e) else 0.0
         r = rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol
         f = floor.get(g, 1e-12) if isinstance(floor, dict) else floor
         scale = max(peaks[c], natural.get(g, 0.0))
-        tol = f * max(group_scale[g], natural.get(g, 0.0)) + r * scale
+        tol_t = f * max(group_scale[g], natural.get(g, 0.0)) + r * scale
+        if floor_t is not None and g in floor_t and len(e):
+            tol_t = tol_t + np.asarray(floor_t[g], float)[: len(e)] * max(group_scale[g], natural.get(g, 0.0))
+        # the sample whose error is the largest fraction of its allowance (with one allowance: the largest error)
+        k = int(np.argmax(e / np.maximum(tol_t, 1e-300))) if len(e) else 0
+        mx = float(e[k]) if len(e) else 0.0
+        tol = float(np.broadcast_to(tol_t, e.shape)[k]) if len(e) else float(tol_t)
         # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
         ref = max(scale, ZERO_FLOOR * group_scale[g])
         rel = mx / ref if ref > 0 else (0.0 if mx == 0 else math.inf)
