@@ -54,13 +54,35 @@ def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
 
 
 def _interpolant(p: Profile) -> Any:
-    """The profile's x(t) as a piecewise polynomial (callable as ``xs(t, order)``)."""
-    from scipy.interpolate import BPoly, CubicHermiteSpline, CubicSpline  # only profiles need scipy (slow import)
+    """The profile's x(t) as a piecewise polynomial (callable as ``xs(t, order)``), built once per profile."""
+    hit = _BUILT.get(id(p))
+    if hit is not None and hit[0] is p:
+        return hit[1]
+    from scipy.interpolate import CubicHermiteSpline, CubicSpline, PPoly  # only profiles need scipy (slow import)
 
     if p.a is None:
-        return CubicSpline(p.t, p.x) if p.v is None else CubicHermiteSpline(p.t, p.x, p.v)
-    v = CubicSpline(p.t, p.x)(p.t, 1) if p.v is None else p.v
-    return BPoly.from_derivatives(p.t, np.stack([p.x, v, p.a], axis=1))
+        xs = CubicSpline(p.t, p.x) if p.v is None else CubicHermiteSpline(p.t, p.x, p.v)
+    else:
+        v = CubicSpline(p.t, p.x)(p.t, 1) if p.v is None else p.v
+        xs = PPoly(_quintic_hermite(p.t, p.x, v, p.a), p.t)
+    if len(_BUILT) >= 64:
+        _BUILT.clear()
+    _BUILT[id(p)] = (p, xs)  # the profile is kept alive with it, so its id is not reused
+    return xs
+
+
+_BUILT: dict[int, tuple[Profile, Any]] = {}
+
+
+def _quintic_hermite(t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """PPoly coefficients (highest power first) of the quintic through x, ẋ, ẍ at both ends of every interval."""
+    h = np.diff(t)
+    x0, x1, v0, v1, a0, a1 = x[:-1], x[1:], v[:-1], v[1:], a[:-1], a[1:]
+    dx = x1 - x0
+    c3 = (20 * dx - (8 * v1 + 12 * v0) * h - (3 * a0 - a1) * h**2) / (2 * h**3)
+    c4 = (-30 * dx + (14 * v1 + 16 * v0) * h + (3 * a0 - 2 * a1) * h**2) / (2 * h**4)
+    c5 = (12 * dx - 6 * (v1 + v0) * h - (a0 - a1) * h**2) / (2 * h**5)
+    return np.stack([c5, c4, c3, 0.5 * a0, v0, x0])
 
 
 def evaluate_all(mech: Mechanism, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
