@@ -23,8 +23,8 @@ def eightbar_path() -> Path:
 
 
 def plant(monkeypatch: pytest.MonkeyPatch, name: str, change: Callable[[Any, Any], Any]) -> None:
-    """Replace the registered engine ``name`` (in this process) by one whose every Result passes through
-    ``change(mechanism, result)``: a fault put there on purpose, for the harness to find."""
+    """Replace the registered engine ``name`` (in this process) by one whose every Result (a stopped run's
+    partial one too) passes through ``change(mechanism, result)``: a fault put there on purpose."""
     from validators import engines
 
     class Planted(engines.Engine):
@@ -37,7 +37,13 @@ def plant(monkeypatch: pytest.MonkeyPatch, name: str, change: Callable[[Any, Any
             return change(mech, self.real.solve(mech, times, **options))
 
         def run(self, mech: Any) -> Any:
-            return change(mech, self.real.run(mech))
+            try:
+                res = self.real.run(mech)
+            except Exception as exc:  # a run that stops keeps its samples, changed the same way
+                if getattr(exc, "partial", None) is not None and len(exc.partial):
+                    exc.partial = change(mech, exc.partial)
+                raise
+            return change(mech, res)
 
     Planted.name = name
     monkeypatch.setitem(engines.ENGINES, name, Planted())

@@ -65,6 +65,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from . import exudyn_model as em
+from .tolerances import integrator_roundoff
 
 ENGINES = {"kinematic": "exudyn-kinematic", "dynamic": "exudyn-dynamic"}
 
@@ -409,8 +410,15 @@ def _solve_kinematic(
     kin = _Kinematics(model, tol=tol, max_iter=max_iter)
     for inp in model.driver_inputs:
         inp.prefetch(times)
-    t_asm = _assembly_time(mech)
-    state = _assemble(kin, mech, t_asm, engine, times)
+    state = _assemble(kin, mech, _assembly_time(mech), engine, times)
+    return _track(kin, mech, times, state, engine, max_halvings)
+
+
+def _track(
+    kin: _Kinematics, mech: Mechanism, times: np.ndarray, state: _State, engine: str, max_halvings: int = 14
+) -> Result:
+    """Every sample by continuation from the assembled ``state`` (MotionError with the samples before a failure)."""
+    model = kin.model
     n = kin.n
     Q, QD, QDD = (np.zeros((len(times), n)) for _ in range(3))
     cond = np.zeros(len(times))
@@ -451,21 +459,31 @@ def _commensurate(times: np.ndarray, t_start: float) -> float | None:
     return base
 
 
-def _motion_rate(mech: Mechanism, times: np.ndarray) -> float:
+def _kinematic_pass(
+    mech: Mechanism, times: np.ndarray, kin: _Kinematics | None = None, start: _State | None = None
+) -> Result:
+    """Exudyn's kinematic solution over ``times`` (up to a limit, if the motion stops), on ``kin``'s model if given."""
+    try:
+        if kin is None or start is None:
+            return _solve_kinematic(mech, times)
+        return _track(kin, mech, times, start, ENGINES["kinematic"])
+    except MotionError as exc:
+        return exc.partial
+
+
+def _motion_rate(mech: Mechanism, times: np.ndarray, res: Result | None = None) -> float:
     """Characteristic angular rate Ω [rad/s] of the motion, for choosing the time step.
 
     Ω = max over moving bodies and samples of max(|ω|, sqrt|α|), from a kinematic
-    pass (cheap); the drivers' own rates (θ̇, or ṡ / size for a slider) also count.
+    pass (``res``, else one is run); the drivers' own rates (θ̇, or ṡ / size for a slider) also count.
     """
     size = mech.scale
     _, v, a = evaluate_all(mech, times)
     per_driver = [1.0 if d.kind == "crank" else 1.0 / size for d in mech.drivers]
     rate = max(float(np.max(np.abs(v[:, i]) * f, initial=0.0)) for i, f in enumerate(per_driver))
     rate = max(rate, *(float(np.max(np.sqrt(np.abs(a[:, i]) * f), initial=0.0)) for i, f in enumerate(per_driver)))
-    try:
-        res = _solve_kinematic(mech, times)
-    except MotionError as exc:
-        res = exc.partial
+    if res is None:
+        res = _kinematic_pass(mech, times)
     if res is not None and len(res):
         for name in mech.moving_links:
             lk = res.link(name)
@@ -522,6 +540,44 @@ class _Quiet:
         exu.config.printToConsole = self._was
 
 
+def _plan(
+    kin: _Kinematics, mech: Mechanism, times: np.ndarray, t_asm: float, step: float, start: _State
+) -> tuple[list[tuple[float, float, int, float]], float, _State]:
+    """The integration runs (start, end, steps, sensor period), the step h [s] and the state to start from.
+
+    Samples on a common grid from t_asm: one run whose step h = spacing / m (m from ``step``). The
+    integrator's start-up transient must have died out (MIN_STEPS_TO_SAMPLE steps) by the first sample
+    after the start. With inputs given by formulas (no profile) the run starts that many steps *before*
+    the assembly instant, from Exudyn's own kinematic solution continued backwards (the formulas hold
+    for t < 0 too), so h stays what the accuracy asks; a smaller h would only add the index-3
+    accelerations' round-off (ε·|q|/h²). Otherwise (a profile, or a limit behind the start) h is cut
+    to give those steps before the first sample. Irregular samples: one run per interval.
+    """
+    base = _commensurate(times, t_asm)
+    if base is None:  # irregular samples: one run per interval, each continued from the previous end state
+        edges = np.concatenate([[t_asm], times[times > t_asm]])
+        segments = []
+        for a, b in itertools.pairwise(edges):
+            k = max(MIN_STEPS_TO_SAMPLE, math.ceil((b - a) / step - 1e-9))  # each restart has its transient
+            segments.append((float(a), float(b), k, float(b - a)))
+        return segments, step, start
+    m = max(1, math.ceil(base / step - 1e-9))
+    later = times[times > t_asm + 0.5 * base]
+    first = round((later[0] - t_asm) / base) if later.size else MIN_STEPS_TO_SAMPLE
+    t0 = t_asm
+    if first * m < MIN_STEPS_TO_SAMPLE:
+        periods = math.ceil((MIN_STEPS_TO_SAMPLE - first * m) / m)  # whole sample periods: sensors stay on the grid
+        earlier = None
+        if all(d.profile is None for d in mech.drivers):
+            earlier = kin.advance(start, t_asm - periods * base, max_halvings=14)
+        if earlier is not None:
+            t0, start = t_asm - periods * base, earlier
+        else:
+            m = math.ceil(MIN_STEPS_TO_SAMPLE / first)
+    n_steps = round((times[-1] - t0) / base) * m
+    return [(t0, float(times[-1]), n_steps, base)], base / m, start
+
+
 def _solve_dynamic(
     mech: Mechanism,
     times: np.ndarray,
@@ -531,7 +587,6 @@ def _solve_dynamic(
     newton_tol: float = 1e-10,
 ) -> Result:
     import exudyn as exu
-    from exudyn.itemInterface import SensorNode
 
     engine = ENGINES["dynamic"]
     t_asm = _assembly_time(mech)
@@ -543,56 +598,65 @@ def _solve_dynamic(
     model = em.build(mech)
     kin = _Kinematics(model)
     start = _assemble(kin, mech, t_asm, engine, times)
-    n = kin.n
     mbs = model.mbs
+    for inp in model.driver_inputs:
+        inp.prefetch(times)
+    passed = _kinematic_pass(mech, times, kin, start)  # the step's rate Ω and the conditioning κ
+    if step is None:
+        step = dynamic_step(mech, times, accuracy, rate=_motion_rate(mech, times, passed))
+    segments, h, start = _plan(kin, mech, times, t_asm, step, start)
 
-    # consistent initial state from the assembly at t_asm: positions, velocities (node parameters) ...
+    # consistent initial state from the (pre-rolled) assembly: positions, velocities (node parameters) ...
     for bm in model.moving.values():
         mbs.SetNodeParameter(bm.node, "initialCoordinates", start.q[bm.ode2].tolist())
         mbs.SetNodeParameter(bm.node, "initialVelocities", start.qd[bm.ode2].tolist())
-
-    if step is None:
-        step = dynamic_step(mech, times, accuracy)
-    base = _commensurate(times, t_asm)
-    segments: list[tuple[float, float, int, float]]  # (start, end, steps, sensor period)
-    if base is not None:  # one run on a grid that holds every sample
-        m = max(1, math.ceil(base / step - 1e-9))
-        later = times[times > t_asm + 0.5 * base]
-        if later.size:  # the start-up transient must have died out by the first sample after the start
-            m = max(m, math.ceil(MIN_STEPS_TO_SAMPLE / round((later[0] - t_asm) / base)))
-        n_steps = round((times[-1] - t_asm) / base) * m
-        segments = [(t_asm, float(times[-1]), n_steps, base)]
-        h = base / m
-    else:  # irregular samples: one run per interval, each continued from the previous end state
-        edges = np.concatenate([[t_asm], times[times > t_asm]])
-        segments = []
-        for a, b in itertools.pairwise(edges):
-            k = max(MIN_STEPS_TO_SAMPLE, math.ceil((b - a) / step - 1e-9))  # each restart has its transient
-            segments.append((float(a), float(b), k, float(b - a)))
-        h = step
-
-    sensors = [
-        [
-            int(
-                mbs.AddSensor(
-                    SensorNode(
-                        nodeNumber=bm.node, storeInternal=True, writeToFile=False, fileName="", outputVariableType=ovt
-                    )
-                )
-            )
-            for bm in model.moving.values()
-        ]
-        for ovt in (
-            exu.OutputVariableType.Coordinates,
-            exu.OutputVariableType.Coordinates_t,
-            exu.OutputVariableType.Coordinates_tt,
-        )
-    ]
+    sensors = _sensors(model)
     mbs.Assemble()
     # ... and accelerations, from the same constraint equations (Exudyn's own initial-acceleration solve
     # ignores the time dependence of the driver user functions, i.e. a driver's own acceleration)
     mbs.systemData.SetODE2Coordinates_tt(start.qdd.tolist(), configuration=exu.ConfigurationType.Initial)
+    ss = _dynamic_settings(spectral_radius, newton_tol * mech.scale)
+    grid = np.concatenate([np.linspace(a, b, k + 1) for a, b, k, _ in segments])
+    clock = min(segments[0][0], 0.0)  # Exudyn's time starts at 0 or later: a pre-roll before t = 0 runs on t − clock
+    for inp in model.driver_inputs:
+        inp.prefetch(grid)
+        inp.shift = clock
+    records = _Records(model, sensors, clock)
+    for a, b, k, period in segments:
+        ss.timeIntegration.startTime = a - clock
+        ss.timeIntegration.endTime = b - clock
+        ss.timeIntegration.numberOfSteps = k
+        ss.solution.sensors.writePeriod = period
+        try:
+            with _Quiet():
+                mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
+        except Exception as exc:  # Exudyn raises SolverError (or another ExudynError) when Newton fails
+            records.collect()
+            raise _integration_failed(mech, engine, model, times, records, h, exc) from None
+        records.collect()
 
+    res = _dynamic_result(mech, engine, model, times, records, complete=True)
+    res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
+    res.meta["allowance"] = _roundoff(res, passed, h, spectral_radius)
+    return res
+
+
+def _sensors(model: em.ExudynModel) -> list[list[int]]:
+    """Node sensors kept in memory: coordinates, their rates and accelerations of every moving body."""
+    import exudyn as exu
+    from exudyn.itemInterface import SensorNode
+
+    def sensor(node: int, kind: Any) -> int:
+        item = SensorNode(nodeNumber=node, storeInternal=True, writeToFile=False, fileName="", outputVariableType=kind)
+        return int(model.mbs.AddSensor(item))
+
+    kinds = (exu.OutputVariableType.Coordinates, exu.OutputVariableType.Coordinates_t)
+    kinds += (exu.OutputVariableType.Coordinates_tt,)
+    return [[sensor(bm.node, kind) for bm in model.moving.values()] for kind in kinds]
+
+
+def _dynamic_settings(spectral_radius: float, newton_tol: float) -> Any:
+    """Index-3 generalized-α with a fixed step, Newton on every iteration's Jacobian."""
     ss = _settings()
     ti = ss.timeIntegration
     ti.generalizedAlpha.spectralRadius = spectral_radius
@@ -603,75 +667,73 @@ def _solve_dynamic(
     # residual mixes forces and lengths whose size depends on the file's units (a mm mechanism's
     # residual cannot reach a fixed tolerance), the increment is a length [file units] or an angle
     ti.newton.residualMode = 1
-    ti.newton.relativeTolerance = newton_tol * mech.scale
-    ti.newton.absoluteTolerance = newton_tol * mech.scale
+    ti.newton.relativeTolerance = newton_tol
+    ti.newton.absoluteTolerance = newton_tol
     ti.newton.useModifiedNewton = False
     ti.adaptiveStep = False
     ti.automaticStepSize = False
+    return ss
 
-    grid = np.concatenate([np.linspace(a, b, k + 1) for a, b, k, _ in segments])
-    for inp in model.driver_inputs:
-        inp.prefetch(grid)
 
-    bodies = list(model.moving.values())
-    t_rows: list[np.ndarray] = []
-    rows: list[list[np.ndarray]] = [[], [], []]
+class _Records:
+    """The sensors' rows gathered after each run: times (on vloop's clock) and q, q̇, q̈ of every body."""
 
-    def collect() -> None:
-        data = [[np.asarray(mbs.GetSensorStoredData(s)) for s in group] for group in sensors]
+    def __init__(self, model: em.ExudynModel, sensors: list[list[int]], clock: float) -> None:
+        self.model, self.sensors, self.clock = model, sensors, clock
+        self.t: list[np.ndarray] = []
+        self.rows: list[list[np.ndarray]] = [[], [], []]
+
+    def collect(self) -> None:
+        mbs, bodies, n = self.model.mbs, list(self.model.moving.values()), self.model.n_ode2
+        data = [[np.asarray(mbs.GetSensorStoredData(s)) for s in group] for group in self.sensors]
         if data[0][0].ndim != 2 or data[0][0].shape[0] == 0:
             return
         nr = min(arr.shape[0] for group in data for arr in group)
-        t_rows.append(data[0][0][:nr, 0])
+        self.t.append(data[0][0][:nr, 0] + self.clock)
         for kind, group in enumerate(data):
             block = np.zeros((nr, n))
             for bm, arr in zip(bodies, group, strict=True):
                 block[:, bm.ode2] = arr[:nr, 1:4]
-            rows[kind].append(block)
+            self.rows[kind].append(block)
 
-    for a, b, k, period in segments:
-        ti.startTime = a
-        ti.endTime = b
-        ti.numberOfSteps = k
-        ss.solution.sensors.writePeriod = period
-        try:
-            with _Quiet():
-                mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
-        except Exception as exc:  # Exudyn raises SolverError (or another ExudynError) when Newton fails
-            collect()
-            partial = _dynamic_result(mech, engine, model, times, t_rows, rows, n, complete=False)
-            k_fail = len(partial)
-            t_fail = float(times[min(k_fail, len(times) - 1)])
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise MotionError(
-                f"{mech.name}: {engine}: Exudyn's time integration (h = {h:.3g} s) failed before sample {k_fail} "
-                f"at t = {t_fail:.6g} s ({_driver_text(mech, t_fail)}): {reason}",
-                time=t_fail,
-                sample=k_fail,
-                driver_value=evaluate_all(mech, np.array([t_fail]))[0][0],
-                partial=partial,
-            ) from None
-        collect()
 
-    res = _dynamic_result(mech, engine, model, times, t_rows, rows, n, complete=True)
-    res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
-    return res
+def _integration_failed(
+    mech: Mechanism, engine: str, model: em.ExudynModel, times: np.ndarray, records: _Records, h: float, exc: Exception
+) -> MotionError:
+    """The MotionError of a time integration that stopped, with the samples recorded before it."""
+    partial = _dynamic_result(mech, engine, model, times, records, complete=False)
+    k_fail = len(partial)
+    t_fail = float(times[min(k_fail, len(times) - 1)])
+    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return MotionError(
+        f"{mech.name}: {engine}: Exudyn's time integration (h = {h:.3g} s) failed before sample {k_fail} "
+        f"at t = {t_fail:.6g} s ({_driver_text(mech, t_fail)}): {reason}",
+        time=t_fail,
+        sample=k_fail,
+        driver_value=evaluate_all(mech, np.array([t_fail]))[0][0],
+        partial=partial,
+    )
+
+
+def _roundoff(res: Result, passed: Result, h: float, spectral_radius: float) -> dict[str, np.ndarray]:
+    """The rates' round-off per sample (tolerances.integrator_roundoff) from Exudyn's own conditioning κ."""
+    kappa = np.asarray(passed.health.get("cond", np.zeros(0)), float)
+    kappa = np.pad(kappa, (0, max(0, len(res) - len(kappa))), mode="edge") if len(kappa) else np.zeros(len(res))
+
+    def peak(ends: tuple[str, ...]) -> float:
+        return max((float(np.max(np.abs(res[c]), initial=0.0)) for c in res.columns if c.endswith(ends)), default=0.0)
+
+    return integrator_roundoff(kappa[: len(res)], peak((".x", ".y")), peak((".theta",)), h, spectral_radius)
 
 
 def _dynamic_result(
-    mech: Mechanism,
-    engine: str,
-    model: em.ExudynModel,
-    times: np.ndarray,
-    t_rows: list[np.ndarray],
-    rows: list[list[np.ndarray]],
-    n: int,
-    complete: bool,
+    mech: Mechanism, engine: str, model: em.ExudynModel, times: np.ndarray, records: _Records, complete: bool
 ) -> Result:
     """The samples found in the sensor rows (all of them if ``complete``, else the leading ones recorded)."""
-    if t_rows:
-        t_all = np.concatenate(t_rows)
-        Q, QD, QDD = (np.concatenate(r) for r in rows)
+    n = model.n_ode2
+    if records.t:
+        t_all = np.concatenate(records.t)
+        Q, QD, QDD = (np.concatenate(r) for r in records.rows)
     else:
         t_all = np.zeros(0)
         Q = QD = QDD = np.zeros((0, n))

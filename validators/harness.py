@@ -56,6 +56,7 @@ class EngineRun:
     seconds: float = 0.0
     worker: str = ""  # who ran the task (vloop.runner: "local:HOST:PID" or the Dask worker)
     task_seconds: float = 0.0  # the task's wall time where it ran (engine + its imports), s
+    cpu_seconds: float = 0.0  # the engine's CPU time in the process that ran it, s (not inflated by a busy machine)
     n_samples: int | None = None  # kept when the Result is dropped to save memory
 
     @property
@@ -134,6 +135,13 @@ def versions() -> dict[str, str]:
 
 def run_engine(name: str, mech: Mechanism) -> EngineRun:
     """Run one engine; a MotionError gives status "stopped" with its partial Result."""
+    cpu0 = time.process_time()
+    run = _run_engine(name, mech)
+    run.cpu_seconds = time.process_time() - cpu0
+    return run
+
+
+def _run_engine(name: str, mech: Mechanism) -> EngineRun:
     if not engine_applies(name, mech):
         return EngineRun(name, "skipped", message="no closed form for this structure")
     t0 = time.perf_counter()
@@ -192,11 +200,22 @@ def check(
         # with it (a time integrator's most of all): compare the first 90 % of what both solved.
         n = max(int(0.9 * (n - 1)), 0)
     floor_t = conditioning_floor(kappa[:n]) if kappa is not None and len(kappa) >= n else None
-    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor, floor_t=floor_t)
+    atol_t = _allowances(a.result, b.result, n)
+    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor, floor_t=floor_t, atol_t=atol_t)
     if not cmp.passed:
         passed = False
         msg = "; ".join(filter(None, [msg, cmp.message(limit=3).replace("\n", "; ")]))
     return CheckedComparison(a.engine, b.engine, cmp, n, passed, msg or "within tolerance", tol.rtol)
+
+
+def _allowances(a: Result, b: Result, n: int) -> dict[str, np.ndarray] | None:
+    """The error bounds both engines report per sample and group (Result.meta["allowance"]), added up."""
+    out: dict[str, np.ndarray] = {}
+    for res in (a, b):
+        for g, arr in (res.meta.get("allowance") or {}).items():
+            arr = np.asarray(arr, float)[:n]
+            out[g] = out[g] + arr if g in out else arr
+    return out or None
 
 
 def _checks(item: MechanismValidation, engines: tuple[str, ...]) -> None:
@@ -469,6 +488,7 @@ def to_summary(v: Validation) -> dict[str, Any]:
                 "message": r.message,
                 "worker": r.worker,
                 "task_seconds": r.task_seconds,
+                "cpu_seconds": r.cpu_seconds,
             }
             for name, r in it.runs.items()
         }
