@@ -65,7 +65,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from . import exudyn_model as em
-from .tolerances import integrator_roundoff
+from .tolerances import condition_number, integrator_roundoff
 
 ENGINES = {"kinematic": "exudyn-kinematic", "dynamic": "exudyn-dynamic"}
 
@@ -307,8 +307,7 @@ class _Kinematics:
         for inp, row in zip(self.model.driver_inputs, self.model.driver_rows, strict=True):
             gamma[row] -= inp(t)[2]
         qdd = lin(-gamma)
-        cond = float(np.linalg.cond(jac))
-        return qd, qdd, cond
+        return qd, qdd, condition_number(jac, ~self.rot, self.size)
 
     def state(self, q: np.ndarray, t: float, iters: int) -> _State:
         qd, qdd, cond = self.rates(q, t)
@@ -637,7 +636,7 @@ def _solve_dynamic(
 
     res = _dynamic_result(mech, engine, model, times, records, complete=True)
     res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
-    res.meta["allowance"] = _roundoff(res, passed, h, spectral_radius)
+    res.meta["allowance"] = _roundoff(res, passed, mech.scale, h, spectral_radius)
     return res
 
 
@@ -715,7 +714,7 @@ def _integration_failed(
     )
 
 
-def _roundoff(res: Result, passed: Result, h: float, spectral_radius: float) -> dict[str, np.ndarray]:
+def _roundoff(res: Result, passed: Result, size: float, h: float, spectral_radius: float) -> dict[str, np.ndarray]:
     """The rates' round-off per sample (tolerances.integrator_roundoff) from Exudyn's own conditioning κ."""
     kappa = np.asarray(passed.health.get("cond", np.zeros(0)), float)
     kappa = np.pad(kappa, (0, max(0, len(res) - len(kappa))), mode="edge") if len(kappa) else np.zeros(len(res))
@@ -723,7 +722,8 @@ def _roundoff(res: Result, passed: Result, h: float, spectral_radius: float) -> 
     def peak(ends: tuple[str, ...]) -> float:
         return max((float(np.max(np.abs(res[c]), initial=0.0)) for c in res.columns if c.endswith(ends)), default=0.0)
 
-    return integrator_roundoff(kappa[: len(res)], peak((".x", ".y")), peak((".theta",)), h, spectral_radius)
+    length, angle = peak((".x", ".y")), peak((".theta",))
+    return integrator_roundoff(kappa[: len(res)], length, size, angle, h, spectral_radius)
 
 
 def _dynamic_result(

@@ -51,6 +51,8 @@ from vloop.errors import MechanismError, MotionError
 from vloop.mechanism import Body, Mechanism
 from vloop.result import Result
 
+from .tolerances import condition_number
+
 ENGINE = "pinocchio"
 TWO_PI = 2.0 * math.pi
 
@@ -495,6 +497,10 @@ class _Solver:
         self.pm, self.w = pm, _Work(pm)
         self.tol, self.max_iter, self.max_bisect, self.max_cond = tol, max_iter, max_bisect, max_cond
         self.crossings = 0  # change points passed (det J changed sign on the predicted path)
+        self.lengths = np.zeros(pm.nv, bool)  # the coordinates that are lengths: prismatic joints (others turn)
+        for j in list(pm.model.joints)[1:]:
+            if j.shortname().startswith("JointModelP"):
+                self.lengths[j.idx_v : j.idx_v + j.nv] = True
         crank = np.array([d.kind == "crank" for d in pm.mech.drivers])
         self.max_dx = np.where(crank, MAX_CRANK_STEP, MAX_SLIDER_STEP * pm.mech.scale)
 
@@ -546,6 +552,7 @@ class _Solver:
         cond = float(np.linalg.cond(J))
         if not math.isfinite(cond) or cond > self.max_cond:
             raise _NoConvergence(f"singular position (Jacobian condition number {cond:.3g})")
+        cond = condition_number(J, self.lengths, self.pm.mech.scale)  # the health's: free of the file's units
         rhs = np.zeros(self.pm.n_rows)
         rhs[self.w.drv_index] = xd[self.w.drv_which]
         v = np.linalg.solve(J, rhs)

@@ -139,8 +139,9 @@ _KAPPA_POWER = {
 def conditioning_floor(kappa: np.ndarray) -> dict[str, np.ndarray]:
     """The floor added per sample to every comparison, as a fraction of each group's peak: κ(t)^p·ε.
 
-    ``kappa``: the largest condition number any engine reports at each sample (vloop's health "cond",
-    Pinocchio's and Exudyn's own constraint Jacobians). Away from singular configurations κ ≲ 10² and this
+    ``kappa``: at each sample the largest of the unit-free condition numbers (:func:`condition_number`) the
+    two engines compared report for their own formulations and vloop's for the loops (the configuration's,
+    which a closed form suffers from too). Away from singular configurations κ ≲ 10² and this
     is below 1e-9 (the stated floor) for every group up to accelerations; next to a change point or a
     toggle it grows as the bound above: at κ = 510 (seed 2026, index 966: two samples from a change
     point) the accelerations may differ by 510³·ε = 2.9e-8 of their peak, and the closed form, Pinocchio
@@ -151,31 +152,46 @@ def conditioning_floor(kappa: np.ndarray) -> dict[str, np.ndarray]:
     return {g: np.minimum(kappa**p * EPS, 1.0) for g, p in _KAPPA_POWER.items()}
 
 
+def condition_number(jacobian: np.ndarray, length_columns: np.ndarray, size: float) -> float:
+    """The constraint Jacobian's condition number free of the file's units, as vloop's health reports it.
+
+    A raw Jacobian mixes lengths and angles (∂C/∂x is a number, ∂C/∂θ a length; a driver's row is an
+    angle), so its condition number changes with the units and the mechanism's size (a 30 m mechanism's is
+    ~30× a 1 m one's). Here the angle columns are divided by the mechanism ``size`` (a turn measured as the
+    length it moves a point at that distance) and every row by its largest entry (a row's units cancel).
+    ``length_columns``: which columns are lengths (the others angles). ∞ for a singular Jacobian.
+    """
+    J = np.array(jacobian, float)
+    J[:, ~np.asarray(length_columns, bool)] /= size
+    J /= np.maximum(np.max(np.abs(J), axis=1, keepdims=True), 1e-300)
+    kappa = float(np.linalg.cond(J))
+    return kappa if np.isfinite(kappa) else float("inf")
+
+
 def integrator_roundoff(
-    kappa: np.ndarray, length: float, angle: float, step: float, spectral_radius: float
+    kappa: np.ndarray, length: float, size: float, angle: float, step: float, spectral_radius: float
 ) -> dict[str, np.ndarray]:
     """The round-off of Exudyn's index-3 generalized-α rates, per sample and group, in the file's units.
 
-    The integrator fixes the positions by the constraints, to Newton's round-off: δq ≈ κ·ε·Q, with κ the
-    condition number of Exudyn's own constraint Jacobian at the sample (its kinematic pass, health "cond")
-    and Q the coordinates' magnitude (the largest |x|, |y| for lengths, the largest |θ| for angles, at
-    least 1 rad). Its accelerations are positions differenced twice over the step h: the Newmark update
-    a = (q_{n+1} − q_n − h·v_n − …)/(β·h²) carries 2·δq/(β·h²), and the solution acceleration
-    (1 − α_m)/(1 − α_f) times that; its velocities γ/(β·h) times 2·δq. With ρ∞: α_m = (2ρ∞ − 1)/(ρ∞ + 1),
-    α_f = ρ∞/(ρ∞ + 1), γ = ½ − α_m + α_f, β = ¼·(γ + ½)². A point's rate also carries its body's angular
-    error times its distance from the body's centre (≤ the largest |x|, |y|). At the step the accuracy
-    asks for this is far below the integrator's O(h²) error (ε/(Ωh)² ≈ 1e-10 of the peak for κ ≈ 1); it
-    matters where the samples are much closer than that step (a run of a millisecond) or κ is large
-    next to a toggle: seed 2026, index 363 (samples 6.7 µs apart, κ = 151, L = 5.1 m): errors 0.018 m/s²
-    and 0.016 rad/s² against 0.027 and 0.0039 allowed here; the stated rtol allows 0.003 there.
+    The integrator fixes the positions by the constraints, to Newton's round-off: the residual is known to
+    ε·L (L: the largest |x|, |y| of the run, Exudyn's coordinates being absolute) and an angle to ε·Φ (the
+    largest |θ|), so the coordinates to δx ≈ κ·ε·L and δθ ≈ κ·ε·(L/size + Φ), κ the unit-free condition
+    number of Exudyn's own constraint Jacobian at the sample (its kinematic pass; :func:`condition_number`).
+    The accelerations are positions differenced twice over the step h: the Newmark update
+    a = (q_{n+1} − q_n − h·v_n − …)/(β·h²) carries 2·δq/(β·h²), the solution acceleration (1 − α_m)/(1 − α_f)
+    times that; the velocities γ/(β·h) times 2·δq. With ρ∞: α_m = (2ρ∞ − 1)/(ρ∞ + 1), α_f = ρ∞/(ρ∞ + 1),
+    γ = ½ − α_m + α_f, β = ¼·(γ + ½)². A point also carries its body's angular error times its distance from
+    the body's centre (≤ size): δx is doubled for the points. At the step the accuracy asks for this is far
+    below the integrator's O(h²) error; it matters where the samples are much closer together than that
+    step (a run of a millisecond): seed 2026, index 363 (samples 6.7 µs apart, next to a toggle).
     """
     rho = spectral_radius
     alpha_m, alpha_f = (2 * rho - 1) / (rho + 1), rho / (rho + 1)
     gamma = 0.5 - alpha_m + alpha_f
     beta = 0.25 * (gamma + 0.5) ** 2
-    phi = max(angle, 1.0)
-    dq_len = np.asarray(kappa, float) * EPS * length * (1.0 + phi)  # lengths, and a lever's turn
-    dq_ang = np.asarray(kappa, float) * EPS * phi
+    kappa = np.asarray(kappa, float)
+    dq_len = 2.0 * kappa * EPS * length
+    dq_ang = kappa * EPS * (length / size + max(angle, 1.0))
     acc = 2.0 * (1 - alpha_m) / (1 - alpha_f) / (beta * step * step)
     vel = 2.0 * gamma / (beta * step)
     return {
