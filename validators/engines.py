@@ -30,7 +30,7 @@ from vloop.forces import ForceResult, has_forces, solve_forces
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .tolerances import TOLERANCES, Tolerance
+from .tolerances import DYNAMIC_STEPS, TOLERANCES, Tolerance
 
 
 class Engine:
@@ -119,11 +119,12 @@ class _Exudyn(Engine):
     """Exudyn's multibody model (:mod:`validators.exudyn`) in one of its two modes."""
 
     mode: ClassVar[str] = ""
+    options: ClassVar[dict[str, Any]] = {}  # the harness's settings (given options win)
 
     def solve(self, mech: Mechanism, times: np.ndarray | None = None, **options: Any) -> Result:
         from . import exudyn
 
-        return exudyn.solve(mech, times, mode=self.mode, **options)
+        return exudyn.solve(mech, times, mode=self.mode, **{**self.options, **options})
 
     def with_forces(self, mech: Mechanism) -> Result:
         from . import exudyn_forces
@@ -139,10 +140,12 @@ class ExudynKinematic(_Exudyn):
 
 
 class ExudynDynamic(_Exudyn):
-    """Exudyn's time integration (generalized-α) with the input prescribed."""
+    """Exudyn's time integration (generalized-α) with the input prescribed, compared on the samples its first
+    DYNAMIC_STEPS steps reach (validators/tolerances.py: what the comparison claims)."""
 
     name = "exudyn-dynamic"
     mode = "dynamic"
+    options: ClassVar[dict[str, Any]] = {"max_steps": DYNAMIC_STEPS}
 
 
 ENGINES: dict[str, Engine] = {e.name: e for e in (Vloop(), Analytic(), Pinocchio(), ExudynKinematic(), ExudynDynamic())}

@@ -113,8 +113,11 @@ def solve(
     :func:`dynamic_step`), ``accuracy`` (target acceleration error relative to
     the peak, default 1e-5, not below 1e-6), ``spectral_radius`` (ρ∞, 0.6),
     ``newton_tol`` (Newton increment tolerance relative to the mechanism size,
-    default 1e-10). Samples on a common grid from t = 0 are integrated in one
-    run whose step divides the grid; irregular samples in one run per interval.
+    default 1e-10), ``max_steps`` (integrate at most about that many steps and
+    return the samples reached, whole sample periods; ``meta["budget"]`` says how
+    many of how many; default: all). Samples on a common grid from t = 0 are
+    integrated in one run whose step divides the grid; irregular samples in one
+    run per interval.
 
     Raises :class:`vloop.errors.MotionError` (with ``.partial``) when a sample
     cannot be assembled (kinematic) or the integration fails (dynamic).
@@ -577,6 +580,24 @@ def _plan(
     return [(t0, float(times[-1]), n_steps, base)], base / m, start
 
 
+def _within(segments: list[tuple[float, float, int, float]], max_steps: int) -> list[tuple[float, float, int, float]]:
+    """The runs cut to about ``max_steps`` steps: whole sample periods (at least one past t = 0), or whole runs."""
+    if sum(k for _, _, k, _ in segments) <= max_steps:
+        return segments
+    if len(segments) == 1:  # one run on the sample grid, perhaps started a few periods before t = 0
+        a, b, k, period = segments[0]
+        per_period = k / round((b - a) / period)
+        keep = max(int(max_steps // per_period), round(max(-a, 0.0) / period) + 1)
+        return [(a, a + keep * period, round(keep * per_period), period)]
+    kept, total = [], 0
+    for seg in segments:
+        if kept and total + seg[2] > max_steps:
+            break
+        kept.append(seg)
+        total += seg[2]
+    return kept
+
+
 def _solve_dynamic(
     mech: Mechanism,
     times: np.ndarray,
@@ -584,6 +605,7 @@ def _solve_dynamic(
     accuracy: float = DEFAULT_ACCURACY,
     spectral_radius: float = SPECTRAL_RADIUS,
     newton_tol: float = 1e-10,
+    max_steps: int | None = None,
 ) -> Result:
     import exudyn as exu
 
@@ -601,9 +623,14 @@ def _solve_dynamic(
     for inp in model.driver_inputs:
         inp.prefetch(times)
     passed = _kinematic_pass(mech, times, kin, start)  # the step's rate Ω and the conditioning κ
+    requested = len(times)
     if step is None:
         step = dynamic_step(mech, times, accuracy, rate=_motion_rate(mech, times, passed))
     segments, h, start = _plan(kin, mech, times, t_asm, step, start)
+    planned = sum(k for _, _, k, _ in segments)
+    if max_steps is not None:  # the samples within the first max_steps steps only (the claim says so)
+        segments = _within(segments, max_steps)
+        times = times[times <= segments[-1][1] + 1e-9 * max(float(times[-1] - t_asm), 1.0)]
 
     # consistent initial state from the (pre-rolled) assembly: positions, velocities (node parameters) ...
     for bm in model.moving.values():
@@ -636,6 +663,8 @@ def _solve_dynamic(
 
     res = _dynamic_result(mech, engine, model, times, records, complete=True)
     res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
+    if len(res) < requested:
+        res.meta["budget"] = {"max_steps": max_steps, "planned_steps": planned, "samples": len(res), "of": requested}
     res.meta["allowance"] = _roundoff(res, passed, mech.scale, h, spectral_radius)
     return res
 
