@@ -607,8 +607,6 @@ def _solve_dynamic(
     newton_tol: float = 1e-10,
     max_steps: int | None = None,
 ) -> Result:
-    import exudyn as exu
-
     engine = ENGINES["dynamic"]
     t_asm = _assembly_time(mech)
     if times[0] < t_asm:
@@ -631,16 +629,7 @@ def _solve_dynamic(
     if max_steps is not None:  # the samples within the first max_steps steps only (the claim says so)
         segments = _within(segments, max_steps)
         times = times[times <= segments[-1][1] + 1e-9 * max(float(times[-1] - t_asm), 1.0)]
-
-    # consistent initial state from the (pre-rolled) assembly: positions, velocities (node parameters) ...
-    for bm in model.moving.values():
-        mbs.SetNodeParameter(bm.node, "initialCoordinates", start.q[bm.ode2].tolist())
-        mbs.SetNodeParameter(bm.node, "initialVelocities", start.qd[bm.ode2].tolist())
-    sensors = _sensors(model)
-    mbs.Assemble()
-    # ... and accelerations, from the same constraint equations (Exudyn's own initial-acceleration solve
-    # ignores the time dependence of the driver user functions, i.e. a driver's own acceleration)
-    mbs.systemData.SetODE2Coordinates_tt(start.qdd.tolist(), configuration=exu.ConfigurationType.Initial)
+    sensors = _start_from(model, start)
     ss = _dynamic_settings(spectral_radius, newton_tol * mech.scale)
     grid = np.concatenate([np.linspace(a, b, k + 1) for a, b, k, _ in segments])
     clock = min(segments[0][0], 0.0)  # Exudyn's time starts at 0 or later: a pre-roll before t = 0 runs on t − clock
@@ -667,6 +656,22 @@ def _solve_dynamic(
         res.meta["budget"] = {"max_steps": max_steps, "planned_steps": planned, "samples": len(res), "of": requested}
     res.meta["allowance"] = _roundoff(res, passed, mech.scale, h, spectral_radius)
     return res
+
+
+def _start_from(model: em.ExudynModel, start: _State) -> list[list[int]]:
+    """The initial state from the (pre-rolled) assembly, the sensors, the assembled system; the sensors' ids."""
+    import exudyn as exu
+
+    mbs = model.mbs
+    for bm in model.moving.values():  # positions and velocities are node parameters ...
+        mbs.SetNodeParameter(bm.node, "initialCoordinates", start.q[bm.ode2].tolist())
+        mbs.SetNodeParameter(bm.node, "initialVelocities", start.qd[bm.ode2].tolist())
+    sensors = _sensors(model)
+    mbs.Assemble()
+    # ... the accelerations come from the same constraint equations (Exudyn's own initial-acceleration solve
+    # ignores the time dependence of the driver user functions, i.e. a driver's own acceleration)
+    mbs.systemData.SetODE2Coordinates_tt(start.qdd.tolist(), configuration=exu.ConfigurationType.Initial)
+    return sensors
 
 
 def _sensors(model: em.ExudynModel) -> list[list[int]]:
