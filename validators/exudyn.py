@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -543,17 +544,24 @@ class _Quiet:
 
 
 def _plan(
-    kin: _Kinematics, mech: Mechanism, times: np.ndarray, t_asm: float, step: float, start: _State
+    kin: _Kinematics,
+    mech: Mechanism,
+    times: np.ndarray,
+    t_asm: float,
+    step: float,
+    start: _State,
+    too_fine: Callable[[float], bool],
 ) -> tuple[list[tuple[float, float, int, float]], float, _State]:
     """The integration runs (start, end, steps, sensor period), the step h [s] and the state to start from.
 
     Samples on a common grid from t_asm: one run whose step h = spacing / m (m from ``step``). The
     integrator's start-up transient must have died out (MIN_STEPS_TO_SAMPLE steps) by the first sample
-    after the start. With inputs given by formulas (no profile) the run starts that many steps *before*
-    the assembly instant, from Exudyn's own kinematic solution continued backwards (the formulas hold
-    for t < 0 too), so h stays what the accuracy asks; a smaller h would only add the index-3
-    accelerations' round-off (ε·|q|/h²). Otherwise (a profile, or a limit behind the start) h is cut
-    to give those steps before the first sample. Irregular samples: one run per interval.
+    after the start (the one at t_asm is the assembly itself), so h is cut to give those steps. Where that
+    cut would take h so small that the index-3 accelerations' round-off (∝ 1/h²) swamps them (``too_fine``:
+    samples much closer than the accuracy's step, next to a toggle), the run keeps the accuracy's step and
+    starts that many steps *before* t_asm instead, from Exudyn's own kinematic solution continued backwards
+    (inputs given by formulas hold for t < 0 too; not a profile's); the sample at t_asm is then an integrated
+    one too. Irregular samples: one run per interval.
     """
     base = _commensurate(times, t_asm)
     if base is None:  # irregular samples: one run per interval, each continued from the previous end state
@@ -568,14 +576,15 @@ def _plan(
     first = round((later[0] - t_asm) / base) if later.size else MIN_STEPS_TO_SAMPLE
     t0 = t_asm
     if first * m < MIN_STEPS_TO_SAMPLE:
-        periods = math.ceil((MIN_STEPS_TO_SAMPLE - first * m) / m)  # whole sample periods: sensors stay on the grid
+        cut = math.ceil(MIN_STEPS_TO_SAMPLE / first)
+        periods = math.ceil(MIN_STEPS_TO_SAMPLE / m)  # whole sample periods keep the sensors on the grid
         earlier = None
-        if all(d.profile is None for d in mech.drivers):
+        if too_fine(base / cut) and all(d.profile is None for d in mech.drivers):
             earlier = kin.advance(start, t_asm - periods * base, max_halvings=14)
         if earlier is not None:
             t0, start = t_asm - periods * base, earlier
         else:
-            m = math.ceil(MIN_STEPS_TO_SAMPLE / first)
+            m = cut
     n_steps = round((times[-1] - t0) / base) * m
     return [(t0, float(times[-1]), n_steps, base)], base / m, start
 
@@ -624,7 +633,7 @@ def _solve_dynamic(
     requested = len(times)
     if step is None:
         step = dynamic_step(mech, times, accuracy, rate=_motion_rate(mech, times, passed))
-    segments, h, start = _plan(kin, mech, times, t_asm, step, start)
+    segments, h, start = _plan(kin, mech, times, t_asm, step, start, _too_fine(passed, mech, spectral_radius))
     planned = sum(k for _, _, k, _ in segments)
     if max_steps is not None:  # the samples within the first max_steps steps only (the claim says so)
         segments = _within(segments, max_steps)
@@ -746,6 +755,27 @@ def _integration_failed(
         driver_value=evaluate_all(mech, np.array([t_fail]))[0][0],
         partial=partial,
     )
+
+
+def _too_fine(passed: Result, mech: Mechanism, spectral_radius: float) -> Callable[[float], bool]:
+    """Whether a step h [s] makes the accelerations' round-off bound (tolerances.integrator_roundoff) more than
+    a tenth of what the stated tolerance allows them, judged on the kinematic pass (its peaks and κ)."""
+    from .tolerances import tolerance
+
+    allowed = tolerance(ENGINES["dynamic"], "vloop").rtol
+
+    def fine(h: float) -> bool:
+        bound = _roundoff(passed, passed, mech.scale, h, spectral_radius)
+        for group in ("acceleration", "angular acceleration"):
+            cols = [
+                c for c in passed.columns if c.endswith((".ax", ".ay", ".a") if group == "acceleration" else ".alpha")
+            ]
+            peak = max((float(np.max(np.abs(passed[c]), initial=0.0)) for c in cols), default=0.0)
+            if len(bound[group]) and np.max(bound[group]) > 0.1 * allowed[group] * peak:  # type: ignore[index]
+                return True
+        return False
+
+    return fine
 
 
 def _roundoff(res: Result, passed: Result, size: float, h: float, spectral_radius: float) -> dict[str, np.ndarray]:

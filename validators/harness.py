@@ -206,7 +206,7 @@ def check(
     n = min(a.samples, b.samples)
     msg = ""
     passed = True
-    prefix = (_budgeted(a) and a.samples < b.samples) or (_budgeted(b) and b.samples < a.samples)
+    prefix = (_budgeted(a) and a.samples <= b.samples) or (_budgeted(b) and b.samples <= a.samples)
     if not prefix and (a.status != b.status or abs(a.samples - b.samples) > 1):
         if a.status == "stopped" or b.status == "stopped":
             passed = abs(a.samples - b.samples) <= 1 and a.status == b.status
