@@ -3,6 +3,12 @@
 A comparison passes when, for every shared quantity, max |a − b| ≤ atol + rtol·peak, where
 peak is the quantity's peak magnitude over the run and atol = floor × the peak of its group
 (see :mod:`vloop.compare`; ``floor`` below). ``rtol`` is a number or a dict by quantity group.
+
+Two allowances depend on the run, each derived below from what the engines report, sample by sample:
+the conditioning floor next to a change point or a toggle (:func:`conditioning_floor`, from the unit-free
+condition numbers of :func:`condition_number`), and the round-off of Exudyn's index-3 time integration
+(:func:`integrator_roundoff`, from its step and its conditioning). A pair of engines without a stated
+tolerance (compared only to find the odd one out) gets :func:`pair_tolerance`.
 """
 
 from __future__ import annotations
@@ -52,7 +58,8 @@ _DYNAMIC = Tolerance(
     _DYNAMIC_RTOL,
     "Exudyn SolveDynamic (generalized-alpha, rho = 0.6) at its default step (accuracy target 1e-5): measured "
     "<= 1e-6 velocities and <= 6e-6 accelerations of the group peak on the catalog; allowed 3e-6 / 2e-5, "
-    "as rtol and as floor.",
+    "as rtol and as floor, plus the run's own round-off bound (integrator_roundoff); in vloop validate on "
+    "the samples its first 10,000 steps reach.",
     floor=_DYNAMIC_RTOL,
 )
 
