@@ -170,21 +170,12 @@ def compare(
     E = np.where(np.isfinite(E), E, np.inf)
     scale = np.array([max(pk, natural.get(g, 0.0)) for g, pk in zip(groups, peaks.tolist(), strict=True)])
     gpeak = np.array([max(group_scale[g], natural.get(g, 0.0)) for g in groups])
-    f = np.array([floor.get(g, 1e-12) if isinstance(floor, dict) else floor for g in groups])
-    r = np.array([rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol for g in groups])
-    tol_t = np.broadcast_to((f * gpeak + r * scale)[:, None], E.shape)
-    if floor_t is not None or atol_t is not None:
-        tol_t = tol_t.copy()
-        for row, g in enumerate(groups):
-            if floor_t is not None and g in floor_t:
-                tol_t[row] += np.asarray(floor_t[g], float)[:n] * gpeak[row]
-            if atol_t is not None and g in atol_t:
-                tol_t[row] += np.asarray(atol_t[g], float)[:n]
+    tol_t = _allowed(groups, scale, gpeak, rtol, floor, floor_t, atol_t, n)
     # per column, the sample whose error is the largest fraction of its allowance (one allowance: the largest error)
     k = np.argmax(E / np.maximum(tol_t, 1e-300), axis=1) if n else np.zeros(len(cols), int)
     rows = np.arange(len(cols))
     mx = E[rows, k] if n else np.zeros(len(cols))
-    tol = tol_t[rows, k] if n else tol_t[:, 0] if tol_t.shape[1] else f * gpeak + r * scale
+    tol = tol_t[rows, k] if n else _allowed(groups, scale, gpeak, rtol, floor, None, None, 1)[:, 0]
     rms = np.sqrt(np.mean(E * E, axis=1)) if n else np.zeros(len(cols))
     # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
     ref = np.maximum(scale, ZERO_FLOOR * np.array([group_scale[g] for g in groups]))
@@ -196,6 +187,31 @@ def compare(
         for c, g, m_, pk, re, rm, tt, tl in zip(cols, groups, mx, peaks, rel, rms, t_at, tol, strict=True)
     ]
     return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, errors)
+
+
+def _allowed(
+    groups: list[str],
+    scale: np.ndarray,
+    gpeak: np.ndarray,
+    rtol: float | dict[str, float],
+    floor: float | dict[str, float],
+    floor_t: dict[str, np.ndarray] | None,
+    atol_t: dict[str, np.ndarray] | None,
+    n: int,
+) -> np.ndarray:
+    """(columns, samples): floor·group peak + rtol·scale, plus the per-sample floors and allowances."""
+    f = np.array([floor.get(g, 1e-12) if isinstance(floor, dict) else floor for g in groups])
+    r = np.array([rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol for g in groups])
+    tol_t = np.broadcast_to((f * gpeak + r * scale)[:, None], (len(groups), n))
+    if floor_t is None and atol_t is None:
+        return tol_t
+    tol_t = tol_t.copy()
+    for row, g in enumerate(groups):
+        if floor_t is not None and g in floor_t:
+            tol_t[row] += np.asarray(floor_t[g], float)[:n] * gpeak[row]
+        if atol_t is not None and g in atol_t:
+            tol_t[row] += np.asarray(atol_t[g], float)[:n]
+    return tol_t
 
 
 def assert_histories_close(
