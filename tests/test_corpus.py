@@ -22,7 +22,7 @@ import pytest
 
 import vloop
 from tests.conftest import mechanism_files
-from validators import analytic, analytic_chain, analytic_changepoint, analytic_fourbar, corpus, harness
+from validators import analytic, analytic_chain, analytic_changepoint, analytic_fourbar, corpus, engines, harness
 from validators.tolerances import tolerance
 from vloop.cli import main
 from vloop.compare import assert_histories_close
@@ -231,9 +231,11 @@ def test_cli_corpus_writes_the_files_and_refuses_bad_arguments(tmp_path, capsys)
 
 
 @pytest.mark.slow
-def test_limit_runs_stop_at_the_recorded_sample_in_exudyn_dynamic_too():
-    """Every engine, Exudyn's time integration included (~3 s a mechanism): the same recorded stop sample."""
+def test_limit_runs_stop_at_the_recorded_sample_in_exudyn_dynamic_too(monkeypatch):
+    """Every engine, Exudyn's time integration included (~3 s a mechanism, the whole run: without the step
+    budget of `vloop validate`): the same recorded stop sample."""
     pytest.importorskip("exudyn")
+    monkeypatch.setattr(engines.ENGINES["exudyn-dynamic"], "options", {})
     items, _ = corpus.generate(12, 78, limit_fraction=1.0)
     for it in items:
         v = harness.validate_mechanism(it.name, harness.ENGINES, mechanism=it.mechanism, corpus=it.sidecar)
