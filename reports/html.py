@@ -37,7 +37,7 @@ from vloop.result import Result
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velocity", "acceleration")
-GROUPS += ("force", "moment")  # kinetostatics, for mechanisms with masses (validators/forces_engines.py)
+GROUPS += ("force", "moment")  # kinetostatics, for mechanisms with masses (validators/engines.py)
 MAX_FRAMES = 40  # animated GIF frames per mechanism
 LINKS_PER_FIGURE = 6  # more rotating links than this are spread over several history figures
 WORST_SHOWN = 4  # quantities per engine in the error-vs-time plots
@@ -690,13 +690,20 @@ def _cell(item: MechanismValidation, engine: str) -> dict[str, Any]:
     checks = _checks_of(item, engine)
     worst = _worst_ratio(checks)
     failed = run.status == "error" or any(not c.passed for c in checks)
-    css = "na" if run.status == "skipped" else ("fail" if failed else "pass")
+    # where the engines disagree, only the odd one out fails (validators.consensus); the others pass
+    verdict = item.verdict.engines.get(engine) if item.verdict is not None else None
+    if verdict in ("pass", "blamed", "undecided"):
+        failed = verdict != "pass"
+    css = "na" if run.status == "skipped" else ("undecided" if verdict == "undecided" else "fail" if failed else "pass")
     via = ", ".join(f"vs {c.reference}" if c.engine == engine else f"closed form vs {engine}" for c in checks)
+    why = item.verdict.reasons.get(engine, "") if item.verdict is not None else ""
     return {
         "status": run.status,
         "css": css,
         "ratio": "" if worst is None else _fmt(worst),
-        "title": (run.message.splitlines()[0][:200] if run.message else run.status) + (f" ({via})" if via else ""),
+        "verdict": verdict or "",
+        "title": (why or (run.message.splitlines()[0][:200] if run.message else run.status))
+        + (f" ({via})" if via else ""),
     }
 
 
@@ -766,6 +773,7 @@ def _mechanism_section(
         "passed": item.passed,
         "error": item.error,
         "cells": [_cell(item, e) for e in engines],
+        "verdict": item.verdict.as_dict() if item.verdict is not None else None,
         "loops": entry.get("loops", "—"),
         "mobility": entry.get("mobility", "—"),
         "samples": entry.get("samples", "—"),
@@ -883,7 +891,15 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
         tolerances=tolerances,
         groups=GROUPS,
         corpus=summary.get("corpus"),  # a generated corpus has its own page, corpus.html (reports/corpus.py)
+        engine_rows=_engine_rows(summary, engines),
+        vloop_odd=[s for s in sections if s["verdict"] and "vloop" in s["verdict"]["blamed"]],
     )
+
+
+def _engine_rows(summary: dict[str, Any], engines: Sequence[str]) -> list[dict[str, Any]]:
+    """Per engine: passes, blamed failures, undecided, not applicable (summary.json's verdicts)."""
+    tally = (summary.get("verdicts") or {}).get("engines") or {}
+    return [{"engine": e, **tally[e]} for e in engines if e in tally]
 
 
 def write_report(validation: Validation, summary: dict[str, Any], out_dir: Path, *, animate: bool = False) -> Path:

@@ -255,15 +255,17 @@ def corpus_failures(summary: dict[str, Any], engines: Iterable[str], options: st
         msgs += [f"{e}: {r['message']}" for e, r in m["runs"].items() if r["status"] == "error"]
         if c["expect"] and not c["expect"].get("passed", True):
             msgs.append(c["expect"]["message"])
-        out.append(
-            {
-                "mechanism": m["name"],
-                "file": m["file"],
-                "family": f"{c['family']}/{c.get('variant', '')}",
-                "reproduce": reproduce_command(int(c["seed"]), int(c["index"]), engines, options),
-                "message": "; ".join(msgs)[:2000],
-            }
-        )
+        entry = {
+            "mechanism": m["name"],
+            "file": m["file"],
+            "family": f"{c['family']}/{c.get('variant', '')}",
+            "reproduce": reproduce_command(int(c["seed"]), int(c["index"]), engines, options),
+            "message": "; ".join(msgs)[:2000],
+        }
+        if "verdict" in m:
+            v = m["verdict"]
+            entry.update(verdict=v["status"], blamed=v["blamed"], reason=v["reason"][:2000])
+        out.append(entry)
     return out
 
 

@@ -307,7 +307,10 @@ def _worst_text(m: dict, engine: str) -> str:
         if c["worst"]
     ]
     worst = max(ratios, default=0.0)
-    mark = "" if all(c["passed"] for c in comps) else " FAIL"
+    own = (m.get("verdict") or {}).get("engines", {}).get(engine)
+    mark = {"blamed": " FAIL", "undecided": " ?"}.get(own or "", "")
+    if own is None and not all(c["passed"] for c in comps):
+        mark = " FAIL"
     return (f"{worst:.1e} of tol" if worst < float("inf") else "not finite") + mark
 
 
@@ -321,13 +324,24 @@ def _table(summary: dict, corpus_page: bool) -> str:
         if m.get("corpus") and m["passed"] and len(generated) > 30:
             continue  # a big corpus: one line per failure here, the rest in corpus.html
         cells = [_worst_text(m, e) for e in engines]
-        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else "FAIL")
+        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else _blame(m))
         lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>17s}" for c in cells) + f"  {verdict}")
     if generated:
         ok = sum(1 for m in generated if m["passed"])
         where = " (per family: corpus.html)" if corpus_page else ""
         lines.append(f"generated corpus: {ok} of {len(generated)} mechanisms pass{where}")
+    odd = (summary.get("verdicts") or {}).get("vloop_blamed") or []
+    if odd:
+        lines.append(f"VLOOP IS THE ODD ONE OUT on {len(odd)} mechanisms: {', '.join(odd[:10])}")
     return "\n".join(lines)
+
+
+def _blame(m: dict) -> str:
+    """FAIL, with the engine the consensus blames (or "undecided")."""
+    v = m.get("verdict") or {}
+    if v.get("status") == "blamed":
+        return f"FAIL: blamed on {', '.join(v['blamed'])}"
+    return "FAIL: undecided" if v.get("status") == "undecided" else "FAIL"
 
 
 # ---------------------------------------------------------------- vloop corpus
