@@ -1,4 +1,5 @@
-"""Command line: ``vloop run | view | loops | info | validate | study``. One function per command.
+"""Command line: ``vloop run | view | loops | info | validate | study | assemble | export``. One function per
+command.
 
 Exit codes: 0 success; 1 a validation that fails its tolerances; 2 bad input, an output that cannot be
 written, or a motion that cannot be completed (one line on stderr, no traceback; ``run`` still writes
@@ -31,8 +32,9 @@ def _fail(msg: str) -> int:
 
 
 def _load(args: argparse.Namespace) -> Any:
-    """The mechanism file named on the command line (profiles outside its folder only if allowed)."""
-    from .files.fileformat import load
+    """The mechanism file named on the command line (profiles outside its folder only if allowed); a file written
+    from dimensions assembled at t = 0."""
+    from . import load
 
     return load(args.file, allow_external_profiles=getattr(args, "allow_external_profiles", False))
 
@@ -628,6 +630,38 @@ def _table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+# ---------------------------------------------------------------- assemble
+
+
+def cmd_assemble(args: argparse.Namespace) -> int:
+    """A file written from dimensions, assembled at t = 0 and written back with closed coordinates (to --out, else
+    to standard output); how each dyad's branch was chosen is printed."""
+    from .authoring import assemble_mechanism
+    from .errors import MechanismError
+    from .files.dimensions import missing_dimensions
+    from .files.fileformat import dumps, load
+    from .files.output import write_text
+
+    draft = load(args.file, allow_external_profiles=args.allow_external_profiles)
+    if not draft.from_dimensions:
+        lacks = "; ".join(missing_dimensions(draft.links, draft.sliders, draft.points, {})[:3])
+        raise MechanismError(
+            f"{args.file}: not written from dimensions ({lacks or 'its centres of mass are given by com'}): its "
+            "coordinates are its assembly (vloop info says how far the t = 0 assembly moves them)",
+            entry="file",
+        )
+    closed, report = assemble_mechanism(draft)
+    text = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n{dumps(closed)}"
+    lines = [f"{closed.name}: {line}" for line in report.lines(closed.units)]
+    if args.out is None:
+        print(text, end="")
+        print("\n".join(lines), file=sys.stderr)
+        return 0
+    write_text(args.out, text)
+    print("\n".join([*lines, f"wrote {args.out}"]))
+    return 0
+
+
 # ---------------------------------------------------------------- study
 
 
@@ -688,7 +722,15 @@ def build_parser() -> argparse.ArgumentParser:
     _parser_corpus(sub)
     _parser_info(sub)
     _parser_study(sub)
+    _parser_assemble(sub)
     return p
+
+
+def _parser_assemble(sub: Any) -> None:
+    a = sub.add_parser("assemble", help="assemble a file written from dimensions at t = 0, write it with coordinates")
+    _add_file(a)
+    a.add_argument("--out", metavar="FIXED.toml", help="the file to write (default: standard output)")
+    a.set_defaults(func=cmd_assemble)
 
 
 def _parser_run(sub: Any) -> None:

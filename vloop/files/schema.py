@@ -50,6 +50,7 @@ MASS_KEYS = (
     Key("mass", "number ≥ 0", "0 (massless)", "kg", "mass of the body", 1.5),
     Key("inertia", "number ≥ 0", "0", "kg·m²", "moment of inertia about the centre of mass", 0.02),
     Key("com", "[x, y]", "mean of the body's joints", "length", "centre of mass at t = 0, world frame", [1.0, 1.0]),
+    Key("com_local", "[u, v]", "none", "length", "centre of mass in the body's frame instead of com", [0.5, 0.0]),
 )
 
 SECTIONS: tuple[Section, ...] = (
@@ -74,8 +75,17 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "joints",
         "[joints] NAME = [x, y]",
-        "every pin or slider point at t = 0",
-        (Key("NAME", "[x, y]", "required", "length", "position at t = 0", [0.0, 0.0]),),
+        "every pin or slider point at t = 0 (written from dimensions: the ground's, and rough hints)",
+        (
+            Key(
+                "NAME",
+                "[x, y]",
+                "required (from dimensions: ground joints)",
+                "length",
+                "position at t = 0 (from dimensions: a hint for moving joints)",
+                [0.0, 0.0],
+            ),
+        ),
     ),
     Section(
         "links",
@@ -92,6 +102,15 @@ SECTIONS: tuple[Section, ...] = (
             ),
             Key("ground", "bool", "false", "", "this link is the frame", None),
             Key("length", "number > 0", "from the coordinates", "length", "stated length (binary links only)", None),
+            Key(
+                "sides",
+                "[a, b, c] or [a, c] > 0",
+                "from the coordinates",
+                "length",
+                "ternary J0-J1-J2: |J0J1|, |J1J2|, |J2J0|; or |J0J1|, |J0J2| with angle",
+                None,
+            ),
+            Key("angle", "number", "none", "rad", "with two sides: angle at J0 from J0→J1 to J0→J2, CCW", None),
             *MASS_KEYS,
         ),
     ),
@@ -102,7 +121,16 @@ SECTIONS: tuple[Section, ...] = (
         (
             Key("joint", "joint name", "required", "", "the pin the block carries", None),
             Key("guide", "link name", '"ground"', "", "the guide (a moving link: an inverse slider)", None),
-            Key("axis", "[ux, uy]", "required", "", "sliding direction at t = 0 (normalised)", None),
+            Key("axis", "[ux, uy]", "required (or angle)", "", "sliding direction at t = 0 (normalised)", None),
+            Key("angle", "number", "from axis", "rad", "sliding direction in the guide's frame, CCW from its θ", None),
+            Key(
+                "offset",
+                "number",
+                "through the joint",
+                "length",
+                "sliding line's distance from the guide's origin, + to the left of the axis",
+                None,
+            ),
             *MASS_KEYS,
         ),
     ),
@@ -112,7 +140,8 @@ SECTIONS: tuple[Section, ...] = (
         "tracer points fixed to a link or slider block",
         (
             Key("link", "link or slider name", "required", "", "the body carrying the point", None),
-            Key("at", "[x, y]", "required", "length", "position at t = 0", None),
+            Key("at", "[x, y]", "required (or local)", "length", "position at t = 0", None),
+            Key("local", "[u, v]", "none", "length", "position in the body's frame instead of at", None),
         ),
     ),
     Section(
@@ -173,7 +202,7 @@ SECTIONS: tuple[Section, ...] = (
                 "{ N = choice }",
                 "none",
                 "",
-                'per loop N: "open", "crossed", "flip", "keep" at t = 0',
+                'per loop N: "open", "crossed", "flip", "keep" at t = 0 (from dimensions: the assembly)',
                 {"1": "keep"},
             ),
             Key(

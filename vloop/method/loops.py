@@ -195,12 +195,15 @@ def loop_residual(sys: LoopSystem, q: np.ndarray, loops: list[int] | None = None
 
 
 def loop_polygon(sys: LoopSystem, q: np.ndarray, loop: Loop) -> list[complex]:
-    """The distinct joints along a loop at configuration ``q`` (the world origin where the loop uses it)."""
+    """The distinct joints along a loop at configuration ``q``. The world origin, where the ground's vectors start,
+    is no joint (unless a ground joint sits there): a loop through two ground pivots is the polygon of its joints."""
     z = term_values(sys, q)
     tol = 1e-12 * sys.mechanism.scale
     pts: list[complex] = []
     for _, joint in loop.nodes:
-        p = 0j if joint == ORIGIN else complex(z @ sys.path[:, sys.point_names.index(joint)])
+        if joint == ORIGIN:
+            continue
+        p = complex(z @ sys.path[:, sys.point_names.index(joint)])
         if not pts or abs(p - pts[-1]) > tol:
             pts.append(p)
     if len(pts) > 1 and abs(pts[0] - pts[-1]) <= tol:
