@@ -12,8 +12,9 @@ closed forms (:func:`vloop.core.solver.close_at_start`), group by group in solvi
 * a block of coupled loops (Newton) starts from the hints (they must be given) and must converge.
 
 The result is the same Mechanism with its coordinates closed to round-off (the ground's as given), slider axes
-at their t = 0 directions, points and centres of mass where their bodies carry them, and the branches asked for
-written as what they came to. It loads and compiles as any file, reproducing itself (``vloop assemble``).
+at their t = 0 directions, points and centres of mass where their bodies carry them; the branches it was asked
+for are in its coordinates now (``[solver] branches`` is left out). It loads and compiles as any file,
+reproducing itself (``vloop assemble``).
 """
 
 from __future__ import annotations
@@ -288,7 +289,7 @@ def _branch(system: LoopSystem, q: np.ndarray, loop: Loop, known: set[int]) -> s
 
 def _closed_mechanism(mech: Mechanism, system: LoopSystem, q: np.ndarray, report: Assembly) -> Mechanism:
     """The mechanism at the assembly q: joints and points where the loops put them (the ground's as given), slider
-    axes turned with their guides, centres of mass on their bodies, the branches asked for as they came out."""
+    axes turned with their guides, centres of mass on their bodies, the branches asked for in the coordinates."""
     z = term_values(system, q) @ system.path
     pos = {n: (p.real, p.imag) for n, p in zip(system.point_names, z.tolist(), strict=True)}
     fixed = set(mech.links[mech.ground].joints)
@@ -296,12 +297,7 @@ def _closed_mechanism(mech: Mechanism, system: LoopSystem, q: np.ndarray, report
     report.moved = {j: math.dist(xy, joints[j]) for j, xy in mech.joints.items() if j not in fixed | set(mech.unplaced)}
     points = {n: p if p.link == mech.ground else dataclasses.replace(p, at=pos[n]) for n, p in mech.points.items()}
     sliders = {n: _axis_at(system, q, s) for n, s in mech.sliders.items()}
-    options = dict(mech.options)
-    if "branches" in options:
-        chosen = {c.loop: c.branch for c in report.choices}
-        options["branches"] = {
-            n: chosen[n] if chosen.get(n) in ("open", "crossed") else "keep" for n in options["branches"]
-        }
+    options = {k: v for k, v in mech.options.items() if k != "branches"}  # the coordinates now hold them
     closed = dataclasses.replace(
         mech, joints=joints, points=points, sliders=sliders, options=options, masses={}, unplaced=()
     )
