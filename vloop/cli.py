@@ -662,6 +662,23 @@ def cmd_assemble(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- export
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """The mechanism at time --at: a drawing (SVG, PDF) or its links as parts (DXF), published as one set."""
+    from .files.output import OutputSet
+    from .views.export import export, time_at
+
+    mech = _load(args)
+    at = time_at(mech, args.at)  # before any work: a bad time is one line, nothing written
+    out = _out_folder(args, mech)
+    with OutputSet(out) as files:
+        export(mech, files.stage, at, args.format)
+    print(f"{mech.name} at t = {at:g} s: wrote " + ", ".join(str(f) for f in files.published))
+    return 0
+
+
 # ---------------------------------------------------------------- study
 
 
@@ -723,7 +740,17 @@ def build_parser() -> argparse.ArgumentParser:
     _parser_info(sub)
     _parser_study(sub)
     _parser_assemble(sub)
+    _parser_export(sub)
     return p
+
+
+def _parser_export(sub: Any) -> None:
+    e = sub.add_parser("export", help="a drawing of the mechanism at time T (SVG, PDF) or its links as parts (DXF)")
+    _add_file(e)
+    e.add_argument("--at", required=True, metavar="T", help="the instant [s], within the file's run")
+    e.add_argument("--format", choices=["svg", "pdf", "dxf"], default="svg", help="svg or pdf (drawing), dxf (parts)")
+    e.add_argument("--out", help="output folder (default: out/NAME)")
+    e.set_defaults(func=cmd_export)
 
 
 def _parser_assemble(sub: Any) -> None:

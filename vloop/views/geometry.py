@@ -28,6 +28,9 @@ from ..result import Result
 _EQUATION = re.compile(r"^loop (\d+) \((.*)\):  (.*) = 0$")
 
 
+BLOCK_SIZE = (0.08, 0.045)  # slider block length and height in drawings, fractions of the mechanism size
+
+
 @dataclass(frozen=True)
 class LoopVector:
     """One vector of a loop, (r + s)·e^{j(θ_link + δ)}, the loop's sign folded into δ (−v = v·e^{jπ}).

@@ -35,14 +35,13 @@ import numpy as np
 from ..errors import MotionError, VloopError
 from ..model import Mechanism
 from ..result import Result
-from .geometry import equation_legend, loop_chains
+from .geometry import BLOCK_SIZE, equation_legend, loop_chains
 
 ASSETS = Path(__file__).resolve().parent / "viewer"
 _PLACEHOLDER = re.compile(r"__CSP__|__TITLE__|__HEADING__|__NAME__|/\*__CSS__\*/|__DATA__|/\*__JS__\*/")
 FORMAT = 1
 MAX_SAMPLES = 200_000  # ~100 MB of page for a small mechanism: beyond this a browser struggles
 HEALTH = ("residual", "cond")
-BLOCK_SIZE = (0.08, 0.045)  # slider block length and height, fractions of the mechanism size
 
 
 class ViewError(VloopError):
