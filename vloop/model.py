@@ -260,6 +260,43 @@ class Mechanism:
         """Body frames and local joint coordinates (stated lengths, sides and local coordinates applied)."""
         return _bodies(self)
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: what it is (mobility, drivers, run), then its bodies, sliders, points, drivers."""
+        import html
+
+        from .result import html_table
+
+        L, J, M = self.gruebler()
+        t = self.times
+        run = f"{len(t):,} samples, t = {t[0]:g} … {t[-1]:g} s" if len(t) else "no sample"
+        how = "written from dimensions" if self.from_dimensions else "coordinates at t = 0"
+        head = (
+            f"<p><b>{html.escape(self.title or self.name)}</b> ({html.escape(self.name)}; {html.escape(self.units)}, "
+            f"{how}): L = {L} bodies, J = {J} joints, Gruebler M = {M}; {len(self.drivers)} driver(s); {run}</p>"
+        )
+        return head + html_table(self._html_rows(), ["name", "kind", "joints", "dimensions"], "bodies and inputs")
+
+    def _html_rows(self) -> list[list[str]]:
+        """One row per link, slider, tracer point and driver."""
+        rows = []
+        for n, lk in self.links.items():
+            dims = f"length {lk.length:g}" if lk.length is not None else ""
+            if lk.sides is not None:
+                dims = f"sides {', '.join(f'{x:g}' for x in lk.sides)}" + (
+                    f", angle {lk.angle:g} rad" if lk.angle else ""
+                )
+            coords = "pivots at their coordinates" if lk.ground else "from the coordinates"
+            rows.append([n, "ground" if lk.ground else "link", " – ".join(lk.joints), dims or coords])
+        for n, sl in self.sliders.items():
+            dims = f"axis ({sl.axis[0]:.4g}, {sl.axis[1]:.4g})" + (f", offset {sl.offset:g}" if sl.offset else "")
+            rows.append([n, f"slider on {sl.guide}", sl.joint, dims])
+        rows += [[n, f"point on {p.link}", "", f"at ({p.at[0]:.4g}, {p.at[1]:.4g})"] for n, p in self.points.items()]
+        for d in self.drivers:
+            unit = "rad" if d.kind == "crank" else self.units
+            motion = "profile" if d.profile is not None else f"{d.x0:.6g} {unit} + {d.v0:g}·t + {d.a0:g}·t²/2"
+            rows.append([d.target, f"driver ({d.kind})", d.pivot or "", motion])
+        return rows
+
     def mean_of_joints(self, body: str) -> tuple[float, float]:
         """The mean of a body's joints at t = 0 (the default centre of mass)."""
         joints = self.links[body].joints if body in self.links else (self.sliders[body].joint,)

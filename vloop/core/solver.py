@@ -714,6 +714,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
         {
             "blocks": [b.kind for b in sys.blocks],
             "assembly": sys.assembly,
+            "units": mech.units,  # the lengths' unit (Result.to_pandas)
             **_events_meta(run, span),
             **_redundancy(sys),
         },

@@ -29,32 +29,13 @@ from typing import IO, Any
 
 import numpy as np
 
-from ..result import Result
+from ..result import Result, column_units
 from .output import OutputError, OutputSet
 
 FORMATS = ("csv", "parquet", "npz")
 HEALTH = (("residual", np.float32), ("cond", np.float32), ("branch", np.int64))
 FLAGS = ("ill_conditioned", "change_point")
 CSV_BYTES = 24  # per value, an upper estimate of a full-precision decimal and its comma
-
-
-def units(columns: list[str], length: str) -> dict[str, str]:
-    """The unit of each output column (``t``: s; angles rad; lengths the file's units)."""
-    per = {
-        "theta": "rad",
-        "omega": "rad/s",
-        "alpha": "rad/s^2",
-        "x": length,
-        "y": length,
-        "s": length,
-        "vx": f"{length}/s",
-        "vy": f"{length}/s",
-        "v": f"{length}/s",
-        "ax": f"{length}/s^2",
-        "ay": f"{length}/s^2",
-        "a": f"{length}/s^2",
-    }
-    return {c: "s" if c == "t" else per.get(c.rsplit(".", 1)[-1], "1") for c in columns}
 
 
 def _arrow(a: np.ndarray) -> object:
@@ -242,7 +223,7 @@ def stream(
     names = ["t", *columns]
     hnames = ["t", *(f"health.{n}" for n, _ in HEALTH), *(f"health.{n}" for n in FLAGS)]
     meta = {"mechanism": mechanism}
-    results = _Table(outset, "results", fmt, names, units(names, length), meta)
+    results = _Table(outset, "results", fmt, names, column_units(names, length), meta)
     health = _Table(outset, "health", fmt, hnames, {n: "s" if n == "t" else "1" for n in hnames}, meta)
     summary, kept = RunSummary(), []
     failure: Exception | None = None
