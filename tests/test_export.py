@@ -139,7 +139,9 @@ def test_svg_renders_in_chromium_without_errors(tmp_path: Path) -> None:
     assert problems == [] and requests == []
 
 
-@pytest.mark.parametrize("at", ["nan", "inf", "-inf", "-1", "2.36", "1e400", "abc", "", "0x1p-3", "[1]"])
+@pytest.mark.parametrize(
+    "at", ["nan", "inf", "-inf", "-1", "2.36", "1e308", "1e400", "10" * 200, "abc", "", "0x1p-3", "[1]", "[[0.5]]"]
+)
 def test_bad_at_is_one_line_and_exit_2(at: str, tmp_path: Path, capsys) -> None:
     out = tmp_path / "o"
     assert main(["export", str(MECHANISMS / "eightbar.toml"), f"--at={at}", "--format", "svg", "--out", str(out)]) == 2
@@ -150,7 +152,7 @@ def test_bad_at_is_one_line_and_exit_2(at: str, tmp_path: Path, capsys) -> None:
 
 def test_at_the_ends_of_the_run_and_a_motion_that_stops_before_it(tmp_path: Path, capsys) -> None:
     path = MECHANISMS / "eightbar.toml"
-    for at in ("0", "2.35"):
+    for at in ("0", "-0", "5e-324", "2.35"):
         assert main(["export", str(path), "--at", at, "--format", "pdf", "--out", str(tmp_path / at)]) == 0
         assert (tmp_path / at / "eightbar.pdf").is_file()
     capsys.readouterr()
@@ -168,3 +170,13 @@ def test_the_one_sample_configuration_is_the_run_at_that_time() -> None:
     one = configuration(mech, run.t[k])
     for name, col in run.columns.items():
         assert abs(one[name][0] - col[k]) <= 1e-9 * max(1.0, np.abs(col).max()), name
+
+
+@pytest.mark.parametrize("hole", [0, -0.0, 1e308, float("nan"), float("inf"), 10**400, "x", [[1.0]], True])
+def test_bad_hole_diameters_are_refused(hole: object, tmp_path: Path) -> None:
+    from vloop.views.export import ExportError, write_dxf
+
+    mech = vloop.load(MECHANISMS / "eightbar.toml")
+    with pytest.raises(ExportError, match="a diameter greater than 0"):
+        write_dxf(mech, configuration(mech, 1.0), tmp_path / "x.dxf", hole=hole)
+    assert not (tmp_path / "x.dxf").exists()

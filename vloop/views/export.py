@@ -205,6 +205,8 @@ def write_dxf(mech: Mechanism, res: Result, path: str | Path, hole: float | None
     except ImportError:
         raise ExportError("DXF export needs ezdxf: pip install 'vloop[export]'", entry="format") from None
     hole = HOLE * mech.scale if hole is None else hole
+    if isinstance(hole, bool) or not isinstance(hole, (int, float)) or not 0 < hole < mech.scale:
+        raise ExportError(f"{mech.name}: hole {show(hole)}: a diameter greater than 0 and below the mechanism's size")
     doc = ezdxf.new("R2010", setup=True)
     doc.header["$INSUNITS"] = DXF_UNITS.get(mech.units.strip().lower(), 0)
     doc.header["$MEASUREMENT"] = 0 if mech.units.strip().lower() in ("in", "ft") else 1
