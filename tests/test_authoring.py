@@ -385,3 +385,24 @@ def test_study_variants_of_a_file_written_from_dimensions_equal_their_own_files(
             diff = np.asarray(res.table.loc[i, f"{c}.series"]) - ref[c]
             diff = np.angle(np.exp(1j * diff)) if c.endswith(".theta") else diff
             assert np.max(np.abs(diff)) <= 1e-11 * max(np.max(np.abs(ref[c])), 1e-9 * mech.scale), (i, c)
+
+
+def test_a_redundant_linkage_from_dimensions_is_assembled_from_its_coordinates(tmp_path: Path, capsys) -> None:
+    """A double parallelogram (Gruebler M = 0, mobility 1) moves only because its dimensions agree exactly: written
+    from dimensions, it is assembled from its coordinates (which must then be given) and moves as the one written
+    from coordinates does."""
+    from tests.test_redundant import DOUBLE
+
+    coords = vloop.loads(DOUBLE.format(o5x=6.0, stop=1.0), source="double")
+    text = DOUBLE.format(o5x=6.0, stop=1.0)
+    text = text.replace('crank = { joints = ["O2", "A"] }', 'crank = { joints = ["O2", "A"], length = 2.0 }')
+    text = text.replace('rocker = { joints = ["O4", "B"] }', 'rocker = { joints = ["O4", "B"], length = 2.0 }')
+    text = text.replace('bar = { joints = ["O5", "E"] }', 'bar = { joints = ["O5", "E"], length = 2.0 }')
+    text = text.replace('["A", "B", "E"] }', '["A", "B", "E"], sides = [4.0, 6.0], angle = 0.0 }')
+    text = text.replace("omega = 2.0", "theta0 = 1.5707963267948966\nomega = 2.0")
+    dims = vloop.loads(text, source="double")
+    assert dims.from_dimensions and not coords.from_dimensions
+    assert _worst(vloop.solve(coords), vloop.solve(dims), coords.scale) <= TOL
+    path = tmp_path / "double.toml"
+    path.write_text(text.replace("E = [6.0, 2.0]\n", ""), encoding="utf-8")
+    _refused(path, capsys, "the linkage is redundant", "give those of E")

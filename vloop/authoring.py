@@ -66,23 +66,31 @@ class Assembly:
         return out
 
 
-def assembled(mech: Mechanism) -> Mechanism:
-    """``mech`` itself, or for a mechanism written from dimensions the same one assembled at t = 0."""
-    return assemble_mechanism(mech)[0] if mech.from_dimensions else mech
-
-
 def assemble_mechanism(mech: Mechanism) -> tuple[Mechanism, Assembly]:
     """The t = 0 assembly of a mechanism written from dimensions (see the module docstring): the closed Mechanism and
     the report. Raises MechanismError where the dimensions cannot close or the choice is ambiguous."""
     if not mech.from_dimensions:
         raise MechanismError(f"{mech.source}: not written from dimensions: its coordinates are its assembly")
     system, structure = loop_system(mech)
+    report = Assembly()
+    if structure.over_determined:  # redundant: no dyad by dyad; the compiler's least squares from the coordinates
+        q = _redundant(system)
+    else:
+        q = _dyad_by_dyad(system, structure, report)
+    closed = _closed_mechanism(mech, system, q, report)
+    _check_inputs(mech, report)
+    report.system = compile_system(closed)
+    return closed, report
+
+
+def _dyad_by_dyad(system: LoopSystem, structure: Structure, report: Assembly) -> np.ndarray:
+    """The t = 0 variables, block by block in solving order (the choices made recorded in ``report``)."""
+    mech = system.mechanism
     q = system.coords_q.copy()
     if mech.drivers:
         q[list(system.drivers)] = inputs_at_start(mech)
-    blocks = list(_blocks(system, structure, q))
+    blocks = list(block_structure(system, structure, q, "auto"))  # σ at the hints, replaced below
     _check_branches(system, blocks)
-    report = Assembly()
     for i, block in enumerate(blocks):
         if block.kind == "newton":
             _newton(system, block, q)
@@ -91,21 +99,22 @@ def assemble_mechanism(mech: Mechanism) -> tuple[Mechanism, Assembly]:
         else:
             blocks[i], q, choice = _choose(system, blocks, q, i)
             report.choices.append(choice)
-    closed = _closed_mechanism(mech, system, q, report)
-    _check_inputs(mech, report)
-    report.system = compile_system(closed)
-    return closed, report
+    return q
 
 
-def _blocks(system: LoopSystem, structure: Structure, q: np.ndarray) -> tuple[Block, ...]:
-    """The blocks in solving order, as the compiler's "auto" method classifies them (σ at the hints, replaced)."""
-    if structure.over_determined:
+def _redundant(system: LoopSystem) -> np.ndarray:
+    """A redundant linkage moves only because its dimensions agree exactly: its coordinates must be given and close
+    (within assembly_tolerance); the compiler assembles it from them, by least squares on every loop."""
+    mech = system.mechanism
+    if mech.unplaced:
         raise MechanismError(
-            f"{system.mechanism.source}: [links] the linkage is redundant (more loop equations than unknowns): "
-            "its dimensions must be exact, so give its coordinates, not its dimensions",
-            entry="links",
+            f"{mech.source}: [joints] the linkage is redundant (more loop equations than unknowns), so it is assembled "
+            f"from its coordinates: give those of {', '.join(mech.unplaced)}",
+            entry="joints",
         )
-    return block_structure(system, structure, q, "auto")
+    return compile_system(
+        dataclasses.replace(mech, options={k: v for k, v in mech.options.items() if k != "branches"})
+    ).q0
 
 
 def _check_branches(system: LoopSystem, blocks: list[Block]) -> None:
