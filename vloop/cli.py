@@ -279,12 +279,16 @@ def _info_parts(mech: Any) -> list[str]:
     kinds = {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}
     lines = [
         f"{mech.name}: {mech.title}" if mech.title else mech.name,
-        f"  source: {mech.source}   units: {mech.units}",
+        f"  source: {mech.source}   units: {mech.units}"
+        + ("   written from dimensions (coordinates: the t = 0 assembly)" if mech.from_dimensions else ""),
     ]
     lines.append(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
     for name, lk in mech.links.items():
         kind = "ground" if lk.ground else kinds.get(len(lk.joints), f"{len(lk.joints)}-joint")
         extra = f", length {bodies[name].local[lk.joints[1]][0]:.6g}" if len(lk.joints) == 2 and not lk.ground else ""
+        if lk.sides is not None:
+            angle = f", angle {lk.angle:.6g} rad" if lk.angle is not None else ""
+            extra = f", sides {', '.join(f'{x:.6g}' for x in lk.sides)}{angle}"
         lines.append(f"  {name:12s} {kind:10s} joints {', '.join(lk.joints)}{extra}")
     lines.append(f"\njoints ({len(mech.joints)}):")
     for j, (x, y) in mech.joints.items():
@@ -295,7 +299,10 @@ def _info_parts(mech: Any) -> list[str]:
         lines.append(f"\nsliders ({len(mech.sliders)}):")
         for s in mech.sliders.values():
             inv = " (inverse slider)" if not mech.links[s.guide].ground else ""
-            lines.append(f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g})")
+            stated = "".join(f", {k} {getattr(s, k):.6g}" for k in ("angle", "offset") if getattr(s, k) is not None)
+            lines.append(
+                f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g}){stated}"
+            )
     if mech.points:
         lines.append(f"\npoints ({len(mech.points)}):")
         lines += [f"  {p.name:8s} on {p.link} at ({p.at[0]:.6g}, {p.at[1]:.6g})" for p in mech.points.values()]

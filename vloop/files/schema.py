@@ -151,7 +151,14 @@ SECTIONS: tuple[Section, ...] = (
         (
             Key("link", "link name", "required", "", "the driven link", None),
             Key("pivot", "joint name", "the link's first joint", "", "must be the link's first joint", None),
-            Key("theta0", "number", "the coordinates' angle", "rad", "θ at t = 0", 0.5),
+            Key(
+                "theta0",
+                "number",
+                "the coordinates' angle",
+                "rad",
+                "θ at t = 0 (state it when coordinates are hints)",
+                0.5,
+            ),
             Key("omega", "number", "0", "rad/s", "angular velocity at t = 0", 2.0),
             Key("alpha", "number", "0", "rad/s²", "angular acceleration", 0.1),
             Key("profile", "CSV path or table", "none", "", "columns t, theta[, omega, alpha] instead", None),
@@ -163,7 +170,14 @@ SECTIONS: tuple[Section, ...] = (
         "a driven slider: s(t) = s0 + v·t + a·t²/2",
         (
             Key("slider", "slider name", "required", "", "the driven slider", None),
-            Key("s0", "number", "from the coordinates", "length", "s at t = 0", None),
+            Key(
+                "s0",
+                "number",
+                "from the coordinates",
+                "length",
+                "s at t = 0 (state it when coordinates are hints)",
+                None,
+            ),
             Key("v", "number", "0", "length/s", "velocity", None),
             Key("a", "number", "0", "length/s²", "acceleration", None),
             Key("profile", "CSV path or table", "none", "", "columns t, s[, v, a] instead", None),
