@@ -406,3 +406,18 @@ def test_a_redundant_linkage_from_dimensions_is_assembled_from_its_coordinates(t
     path = tmp_path / "double.toml"
     path.write_text(text.replace("E = [6.0, 2.0]\n", ""), encoding="utf-8")
     _refused(path, capsys, "the linkage is redundant", "give those of E")
+
+
+def test_a_study_file_may_name_a_file_written_from_dimensions(tmp_path: Path) -> None:
+    from vloop.studies.studyfile import load as load_study
+
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'mechanism = "{(MECHANISMS / "sixbar_watt2_dimensions.toml").as_posix()}"\n'
+        '[[parameters]]\nname = "links.l5.length"\nvalues = [3.9, 4.1]\n'
+        '[[outputs]]\nquantity = "l6.theta"\nstat = "range"\n',
+        encoding="utf-8",
+    )
+    spec = load_study(study)
+    assert spec.mechanism.from_dimensions and not spec.mechanism.unplaced  # assembled, as vloop.load gives it
+    assert spec.mechanism.joints == vloop.load(MECHANISMS / "sixbar_watt2_dimensions.toml").joints

@@ -91,7 +91,7 @@ def study(
     Dask. Lengths in the file's units, angles in rad. Raises MechanismError for a bad parameter or output.
     """
     if not isinstance(mechanism, Mechanism):
-        from ..files.fileformat import load
+        from .. import load  # (assembled at t = 0 if written from dimensions)
 
         mechanism = load(mechanism)
     data: dict[str, Any] = {"parameters": _param_tables(params), "outputs": _output_tables(outputs)}
