@@ -421,3 +421,42 @@ def test_a_study_file_may_name_a_file_written_from_dimensions(tmp_path: Path) ->
     spec = load_study(study)
     assert spec.mechanism.from_dimensions and not spec.mechanism.unplaced  # assembled, as vloop.load gives it
     assert spec.mechanism.joints == vloop.load(MECHANISMS / "sixbar_watt2_dimensions.toml").joints
+
+
+ONE_JOINT_GUIDE = """
+name = "inverted_one_joint"
+units = "mm"
+[joints]
+O2 = [0.0, 0.0]
+O4 = [100.0, 0.0]
+A = [30.0, 25.0]
+[links]
+ground = { joints = ["O2", "O4"], ground = true }
+l2 = { joints = ["O2", "A"], length = 40.0 }
+l4 = { joints = ["O4"] }              # the slotted rocker: one joint, its θ is the slot's direction
+[sliders]
+l3 = { joint = "A", guide = "l4", axis = [-0.9, 0.4], offset = 0.0 }   # the slot drawn roughly
+[[drivers]]
+link = "l2"
+theta0 = 0.5235987755982988
+omega = 10.0
+alpha = 5.0
+[time]
+start = 0.0
+stop = 1.0
+step = 0.005
+"""
+
+
+def test_a_block_on_a_one_joint_guide_takes_the_drawn_slot_direction() -> None:
+    """The inverted slider-crank with a one-joint rocker: no joint tells its two assemblies (slot towards A or away)
+    apart, the slot's drawn direction does; the motion is the catalog file's (whose rocker carries a tip joint)."""
+    mech = vloop.loads(ONE_JOINT_GUIDE, source="inv")
+    ref = vloop.load(MECHANISMS / "inverted_slider_crank.toml")
+    assert mech.from_dimensions
+    assert np.allclose(mech.sliders["l3"].axis, ref.sliders["l3"].axis, rtol=0, atol=1e-15)
+    res, want = vloop.solve(mech), vloop.solve(ref)
+    for c in res.columns:
+        assert np.max(np.abs(res[c] - want[c])) <= TOL * max(np.max(np.abs(want[c])), ref.scale), c
+    away = vloop.loads(ONE_JOINT_GUIDE.replace("[-0.9, 0.4]", "[0.9, -0.4]"), source="inv")  # drawn the other way
+    assert np.allclose(away.sliders["l3"].axis, -np.asarray(ref.sliders["l3"].axis), rtol=0, atol=1e-15)

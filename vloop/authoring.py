@@ -203,7 +203,7 @@ def _choose(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> t
     placed = _placed(system, known, set(block.unknowns))
     names = {s: _branch(system, out, loop, known) for s, out in cands.items()}
     wanted = mech.options.get("branches", {}).get(loop.index + 1)
-    sigma, how = _pick(system, cands, names, placed, wanted, loop.index)
+    sigma, how = _pick(system, cands, names, placed, wanted, block)
     branch = names[sigma] or f"assembly σ = {sigma:+.0f}"
     return dataclasses.replace(block, sigma=sigma), cands[sigma], Choice(loop.index + 1, loop.label, branch, how)
 
@@ -214,10 +214,10 @@ def _pick(
     names: dict[float, str | None],
     placed: list[int],
     wanted: str | None,
-    li: int,
+    block: Block,
 ) -> tuple[float, str]:
     """The branch σ and why: the name asked for, else the hints ("keep" the nearer, "flip" the other)."""
-    mech = system.mechanism
+    mech, li = system.mechanism, block.loops[0]
     where = f"{mech.source}: [solver] branches: loop {li + 1} ({system.loops[li].label})"
     if wanted in ("open", "crossed"):
         if all(n is None for n in names.values()):
@@ -230,25 +230,49 @@ def _pick(
         if not hit:
             raise MechanismError(f"{where} cannot be assembled {wanted} at t = 0", entry="solver")
         return hit[0], "named"
-    hinted = [k for k in placed if system.point_names[k] in mech.joints and system.point_names[k] not in mech.unplaced]
     if len(cands) == 1:
         if wanted == "flip":
             raise MechanismError(f"{where} has one assembly at t = 0: there is none to flip to", entry="solver")
         return next(iter(cands)), "the only assembly"
-    d = {s: _distance(system, out, hinted) for s, out in cands.items()}
-    if not hinted or abs(d[1.0] - d[-1.0]) <= TIE * mech.scale**2:
-        why = "no joint it places has coordinates" if not hinted else "the coordinates are as near one as the other"
-        raise _ambiguous(system, li, placed, names, why)
-    near = min(d, key=d.__getitem__)
-    if wanted == "flip":
-        return -near, "named: the flip of the one nearest the coordinates"
-    far = math.sqrt(d[-near])
-    return near, f"nearest the coordinates: {math.sqrt(d[near]):.3g} {mech.units} against {far:.3g}"
+    near, how = _nearest(system, cands, names, placed, block)
+    return (-near, "named: flip, the one farther from the hints") if wanted == "flip" else (near, how)
 
 
-def _ambiguous(system: LoopSystem, li: int, placed: list[int], names: dict, why: str) -> MechanismError:
+def _nearest(
+    system: LoopSystem, cands: dict[float, np.ndarray], names: dict, placed: list[int], block: Block
+) -> tuple[float, str]:
+    """The assembly nearer the hints: the coordinates of the joints it places (sum of squared distances), else —
+    where it places no hinted joint, as a block turning on its guide — the angles and slides the coordinates draw
+    for its unknowns (angles times the size). Ambiguous (refused) where neither tells the two apart."""
     mech = system.mechanism
+    tie = TIE * mech.scale**2
+    hinted = [k for k in placed if system.point_names[k] in mech.joints and system.point_names[k] not in mech.unplaced]
+    d = {s: _distance(system, out, hinted) for s, out in cands.items()}
+    if hinted and abs(d[1.0] - d[-1.0]) > tie:
+        near = min(d, key=d.__getitem__)
+        return near, f"nearest the coordinates: {math.sqrt(d[near]):.3g} {mech.units} against {math.sqrt(d[-near]):.3g}"
+    drawn = [v for v in block.unknowns if not set(_defining_joints(system, v)) & set(mech.unplaced)]
+    d = {s: _drawn_distance(system, out, drawn) for s, out in cands.items()}
+    if drawn and abs(d[1.0] - d[-1.0]) > tie:
+        return min(d, key=d.__getitem__), "nearest the angles and slides the coordinates draw"
+    why = "no joint it places has coordinates" if not hinted else "the coordinates are as near one as the other"
+    raise _ambiguous(system, block, placed, names, why)
+
+
+def _drawn_distance(system: LoopSystem, q: np.ndarray, variables: list[int]) -> float:
+    """Σ of squared differences of ``variables`` from the values the coordinates draw (angles times the size)."""
+    out = 0.0
+    for v in variables:
+        diff = float(q[v] - system.coords_q[v])
+        out += (system.mechanism.scale * math.remainder(diff, 2 * math.pi)) ** 2 if v < system.n_angles else diff**2
+    return out
+
+
+def _ambiguous(system: LoopSystem, block: Block, placed: list[int], names: dict, why: str) -> MechanismError:
+    mech, li = system.mechanism, block.loops[0]
     joints = [system.point_names[k] for k in placed if system.point_names[k] in mech.joints]
+    ground = mech.links[mech.ground].joints
+    joints += [j for v in block.unknowns for j in _defining_joints(system, v) if j not in joints and j not in ground]
     fix = f"give rough coordinates of {', '.join(joints) or 'its joints'} in [joints]"
     if all(n is not None for n in names.values()):
         fix += f', or [solver] branches = {{ {li + 1} = "open" }} (or "crossed")'
@@ -319,10 +343,13 @@ def _closed_mechanism(mech: Mechanism, system: LoopSystem, q: np.ndarray, report
 
 
 def _axis_at(system: LoopSystem, q: np.ndarray, sl: Slider) -> Slider:
-    """A slider given by its angle in the guide's frame, with its axis at the assembly."""
-    if sl.angle is None:
-        return sl
-    th = sl.angle + (q[system.angle_links.index(sl.guide)] if sl.guide in system.angle_links else 0.0)
+    """A slider on a moving guide with its axis at the assembly: the guide's θ there plus the axis's angle in the
+    guide's frame (stated, or as the coordinates draw it: 0 for a one-joint guide, whose θ is the axis)."""
+    if sl.guide not in system.angle_links:
+        return sl  # the ground's axis is a dimension
+    a = system.angle_links.index(sl.guide)
+    alpha = sl.angle if sl.angle is not None else math.atan2(sl.axis[1], sl.axis[0]) - system.coords_q[a]
+    th = float(q[a]) + alpha
     return dataclasses.replace(sl, axis=(math.cos(th), math.sin(th)))
 
 
