@@ -460,3 +460,20 @@ def test_a_block_on_a_one_joint_guide_takes_the_drawn_slot_direction() -> None:
         assert np.max(np.abs(res[c] - want[c])) <= TOL * max(np.max(np.abs(want[c])), ref.scale), c
     away = vloop.loads(ONE_JOINT_GUIDE.replace("[-0.9, 0.4]", "[0.9, -0.4]"), source="inv")  # drawn the other way
     assert np.allclose(away.sliders["l3"].axis, -np.asarray(ref.sliders["l3"].axis), rtol=0, atol=1e-15)
+
+
+def test_points_and_centres_of_mass_given_in_their_body_s_frame() -> None:
+    """A tracer point and a centre of mass stated in the rod's frame (origin A, x towards B) of a slider-crank with
+    no coordinates for A: both land where the rod carries them, by hand from the assembled A and B."""
+    data = copy.deepcopy(SLIDER_CRANK)
+    del data["joints"]["A"]
+    mech = vloop.from_dict(data)
+    a, b = (complex(*mech.joints[j]) for j in ("A", "B"))
+    assert abs(abs(b - a) - 3.0) <= 1e-14 and abs(b.imag - 0.2) <= 1e-15  # the rod's length, the line y = offset
+    assert abs(a - complex(math.cos(1.2), math.sin(1.2))) <= 1e-15  # the crank at theta0
+    u = (b - a) / abs(b - a)
+    assert abs(complex(*mech.points["P"].at) - (a + u * complex(1.0, 0.5))) <= 1e-14
+    assert abs(complex(*mech.masses["l3"].com) - (a + u * 1.5)) <= 1e-14
+    data["points"]["A"] = data["points"].pop("P")  # a point named like a joint without coordinates
+    with pytest.raises(vloop.MechanismError, match="duplicate name: 'A' is also a joint"):
+        vloop.from_dict(data)

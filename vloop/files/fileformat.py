@@ -118,12 +118,13 @@ def from_dict(
     missing: dict[str, str] = {}  # joints named without coordinates → the entry naming them first
     links = read_links(data.get("links"), joints, probs, missing)
     sliders = read_sliders(data.get("sliders", {}), joints, links, probs, missing)
-    points = read_points(data.get("points", {}), {**joints, **missing}, links, sliders, probs)
+    points = read_points(data.get("points", {}), joints, links, sliders, probs, set(missing))
     probs.raise_if_any()
     read = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
     proto = _geometry(data, read, missing, probs)
     check_topology(proto, probs)
     probs.raise_if_any()
+    proto = dataclasses.replace(proto, points=points_from_local(proto, proto.points))  # through its body frames
     drivers = read_drivers(data.get("drivers"), proto, ctx, probs)
     probs.raise_if_any()
     times = read_time(data.get("time"), drivers, probs)
@@ -139,7 +140,8 @@ def from_dict(
 
 def _geometry(data: dict, m: Mechanism, missing: dict[str, str], probs: Problems) -> Mechanism:
     """The mechanism's t = 0 geometry: written from dimensions or not (:mod:`vloop.files.dimensions`), joints
-    without coordinates placed provisionally, slider axes from their angles, points from their local coordinates."""
+    without coordinates placed provisionally, slider axes from their angles (points given by their local coordinates
+    are placed once the topology is checked)."""
     dims, lacks = dimension_mode(m.links, m.sliders, m.points, data, probs)
     ground = m.ground if any(lk.ground for lk in m.links.values()) else None
     for j, entry in missing.items():
@@ -154,9 +156,7 @@ def _geometry(data: dict, m: Mechanism, missing: dict[str, str], probs: Problems
     joints = place_joints(m.joints, m.links, m.sliders, missing, probs) if missing else m.joints
     probs.raise_if_any()
     sliders = axes_from_angles(m.sliders, m.links, joints)
-    frames = dataclasses.replace(m, joints=joints, sliders=sliders, points={})
-    points = points_from_local(frames, m.points)
-    return dataclasses.replace(frames, points=points, from_dimensions=dims, unplaced=tuple(missing))
+    return dataclasses.replace(m, joints=joints, sliders=sliders, from_dimensions=dims, unplaced=tuple(missing))
 
 
 def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
@@ -380,7 +380,9 @@ def _read_slider(
     return None if axis is None else Slider(sn, j, guide, axis, None, offset)
 
 
-def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems) -> dict[str, Point]:
+def read_points(
+    raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems, unplaced: set[str] | None = None
+) -> dict[str, Point]:
     """[points] NAME = { link, at | local } (a point given by ``local`` is placed on its body by :func:`_geometry`)."""
     if not isinstance(raw, dict):
         probs.add("points", "must be a table of NAME = { link, at }")
@@ -392,7 +394,7 @@ def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Probl
             probs.add(entry, f"expected a table {{ link, at }}, got {show(val)}")
             continue
         check_keys(val, "points", entry, probs)
-        if pn in joints:
+        if pn in joints or pn in (unplaced or ()):
             probs.add(entry, f"duplicate name: '{pn}' is also a joint")
             continue
         lk = val.get("link")
@@ -405,7 +407,9 @@ def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Probl
         key = "at" if "at" in val else "local"
         xy = pair(val[key], key, entry, probs)
         if xy is not None:
-            points[pn] = Point(pn, lk, xy) if key == "at" else Point(pn, lk, (0.0, 0.0), xy)
+            on = links[lk].joints[0] if lk in links else sliders[lk].joint
+            near = joints.get(on, (0.0, 0.0))  # until placed on its body: its body's first joint (the size stays right)
+            points[pn] = Point(pn, lk, xy) if key == "at" else Point(pn, lk, near, xy)
     return points
 
 
