@@ -408,7 +408,7 @@ def test_t0_refusals_keep_their_messages():
         "mechanism size; accepted up to 0.001)"
     )
     fourbar = (root / "fourbar_textbook_example.toml").read_text()
-    fourbar = fourbar.replace(', length = 120.0 }', ' }')  # its coupler drawn, not stated: its coordinates are its assembly
+    fourbar = fourbar.replace(", length = 120.0 }", " }")  # the coupler drawn, not stated: coordinates, not hints
     assert refusal(fourbar.replace("omega = ", "theta0 = 0.3\nomega = ")) == (
         "<string>: [joints] the t = 0 coordinates do not close loop 1 (O2–A–B–O4) with the drivers' t = 0 values "
         "(theta0/s0 differ from the coordinates): off by 15.82 mm (0.1 of the mechanism size; accepted up to 0.001)"
