@@ -30,7 +30,7 @@ import vloop
 from vloop.cli import main
 from vloop.method.equations import describe
 from vloop.views.geometry import body_poses, loop_chains
-from vloop.views.view import ViewError, build_payload, render, solve_for_view, unpack, write_view
+from vloop.views.view import ViewError, build_payload, inline, render, solve_for_view, unpack, write_view
 
 from .conftest import MECHANISMS, mechanism_files
 
@@ -160,10 +160,35 @@ def test_page_is_deterministic_and_offline(eightbar) -> None:
     mech, result = eightbar
     page = render(mech, result, forces=FakeForces(result))
     assert page == render(mech, result, forces=FakeForces(result))
-    assert "default-src 'none'" in page and "script-src 'sha256-" in page
-    scrubbed = page.replace('"http://www.w3.org/2000/svg"', "")  # the SVG namespace is a name, not a request
-    assert not re.search(r"https?://|//cdn|@import|url\(", scrubbed)
+    assert _offline_problems(page) == []  # a CSP; the SVG namespace is a name, not a request
     assert page.count("<script") == 2  # the data (not executed) and the viewer
+
+
+def _offline_problems(page: str) -> list[str]:
+    """What makes a page not offline: a missing CSP, an address, an import or a url() (the SVG namespace is a name)."""
+    problems = [] if "default-src 'none'" in page and "script-src 'sha256-" in page else ["no CSP"]
+    scrubbed = page.replace('"http://www.w3.org/2000/svg"', "")
+    return problems + re.findall(r"https?://|//cdn|@import|url\(", scrubbed)
+
+
+def test_inline_viewer_is_the_page_in_a_sandboxed_frame(eightbar) -> None:
+    """For a notebook: the same page, whole, in an iframe's srcdoc, sandboxed to scripts only (no same origin)."""
+    import html as html_module
+
+    mech, result = eightbar
+    cell = inline(mech, result)._repr_html_()
+    frame = re.fullmatch(
+        r'<iframe title="vloop viewer" sandbox="allow-scripts" style="[^"]*" srcdoc="([^"]*)"></iframe>', cell
+    )
+    assert frame is not None and "allow-same-origin" not in cell
+    page = html_module.unescape(frame.group(1))
+    assert page == render(mech, result)
+    assert _offline_problems(page) == []  # the same check as every vloop view page
+    assert not re.search(r"https?://|//cdn|@import|url\(", cell.replace(frame.group(1), ""))  # and its frame
+    with pytest.raises(ViewError, match="height must be"):
+        inline(mech, result, height=10**400)
+    stopped = inline(vloop.load(STOPPED))  # solved here: the page shows where it stopped
+    assert "cannot assemble at t = 1.73 s" in html_module.unescape(stopped._repr_html_())
 
 
 def test_hostile_title_and_names_stay_text(tmp_path: Path) -> None:
@@ -729,6 +754,37 @@ def test_pages_with_no_loop_or_a_single_sample(open_page, tmp_path: Path) -> Non
             assert "shown at the t = 0 assembly" in page.locator("#error").text_content()
             assert page.locator("[data-plot] circle").count() == 3 * 3  # one dot per link and plot
         assert o.requests == [] and o.problems == [], o.problems
+
+
+def test_inline_viewer_runs_in_its_sandboxed_frame(browser, eightbar, tmp_path: Path) -> None:
+    """A notebook-like host page holding the inline viewer: the page inside draws the joints where the Result has
+    them, with no error and no request beyond the host file."""
+    mech, result = eightbar
+    host = tmp_path / "notebook.html"
+    host.write_text(f"<!DOCTYPE html><html><body><h1>cell</h1>{inline(mech, result)._repr_html_()}</body></html>")
+    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = ctx.new_page()
+    requests, problems = [], []
+
+    def route(r) -> None:
+        if r.request.url in (host.resolve().as_uri(), "about:srcdoc"):
+            r.continue_()
+        else:
+            requests.append(r.request.url)
+            r.abort()
+
+    ctx.route("**/*", route)
+    page.on("console", lambda m: m.type in ("error", "warning") and problems.append(f"{m.type}: {m.text}"))
+    page.on("pageerror", lambda e: problems.append(f"pageerror: {e}"))
+    page.goto(host.resolve().as_uri())
+    viewer = page.frame_locator("iframe")
+    viewer.locator("body[data-ready]").wait_for(state="attached", timeout=20_000)
+    assert viewer.locator("circle[data-joint]").count() == len(mech.tracked_points)
+    frame = next(f for f in page.frames if f is not page.main_frame)
+    x, y = (float(frame.locator('circle[data-joint="B"]').get_attribute(a)) for a in ("cx", "cy"))
+    assert math.hypot(x - result["B.x"][0], -y - result["B.y"][0]) <= 1e-9 * mech.scale
+    ctx.close()
+    assert requests == [] and problems == [], (requests, problems)
 
 
 def test_readme_screenshot_is_committed() -> None:

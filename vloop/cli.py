@@ -1,4 +1,5 @@
-"""Command line: ``vloop run | view | loops | info | validate | study``. One function per command.
+"""Command line: ``vloop run | view | loops | info | validate | study | assemble | export``. One function per
+command.
 
 Exit codes: 0 success; 1 a validation that fails its tolerances; 2 bad input, an output that cannot be
 written, or a motion that cannot be completed (one line on stderr, no traceback; ``run`` still writes
@@ -34,8 +35,9 @@ def _fail(msg: str) -> int:
 
 
 def _load(args: argparse.Namespace) -> Any:
-    """The mechanism file named on the command line (profiles outside its folder only if allowed)."""
-    from .files.fileformat import load
+    """The mechanism file named on the command line (profiles outside its folder only if allowed); a file written
+    from dimensions assembled at t = 0."""
+    from . import load
 
     return load(args.file, allow_external_profiles=getattr(args, "allow_external_profiles", False))
 
@@ -284,12 +286,16 @@ def _info_parts(mech: Any) -> list[str]:
     kinds = {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}
     lines = [
         f"{mech.name}: {mech.title}" if mech.title else mech.name,
-        f"  source: {mech.source}   units: {mech.units}",
+        f"  source: {mech.source}   units: {mech.units}"
+        + ("   written from dimensions (coordinates: the t = 0 assembly)" if mech.from_dimensions else ""),
     ]
     lines.append(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
     for name, lk in mech.links.items():
         kind = "ground" if lk.ground else kinds.get(len(lk.joints), f"{len(lk.joints)}-joint")
         extra = f", length {bodies[name].local[lk.joints[1]][0]:.6g}" if len(lk.joints) == 2 and not lk.ground else ""
+        if lk.sides is not None:
+            angle = f", angle {lk.angle:.6g} rad" if lk.angle is not None else ""
+            extra = f", sides {', '.join(f'{x:.6g}' for x in lk.sides)}{angle}"
         lines.append(f"  {name:12s} {kind:10s} joints {', '.join(lk.joints)}{extra}")
     lines.append(f"\njoints ({len(mech.joints)}):")
     for j, (x, y) in mech.joints.items():
@@ -300,7 +306,10 @@ def _info_parts(mech: Any) -> list[str]:
         lines.append(f"\nsliders ({len(mech.sliders)}):")
         for s in mech.sliders.values():
             inv = " (inverse slider)" if not mech.links[s.guide].ground else ""
-            lines.append(f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g})")
+            stated = "".join(f", {k} {getattr(s, k):.6g}" for k in ("angle", "offset") if getattr(s, k) is not None)
+            lines.append(
+                f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g}){stated}"
+            )
     if mech.points:
         lines.append(f"\npoints ({len(mech.points)}):")
         lines += [f"  {p.name:8s} on {p.link} at ({p.at[0]:.6g}, {p.at[1]:.6g})" for p in mech.points.values()]
@@ -391,6 +400,55 @@ def cmd_corpus(args: argparse.Namespace) -> int:
     from validators.validate import corpus_files
 
     return corpus_files(args)
+
+
+# ---------------------------------------------------------------- assemble
+
+
+def cmd_assemble(args: argparse.Namespace) -> int:
+    """A file written from dimensions, assembled at t = 0 and written back with closed coordinates (to --out, else
+    to standard output); how each dyad's branch was chosen is printed."""
+    from .authoring import assemble_mechanism
+    from .errors import MechanismError
+    from .files.dimensions import missing_dimensions
+    from .files.fileformat import dumps, load
+    from .files.output import write_text
+
+    draft = load(args.file, allow_external_profiles=args.allow_external_profiles)
+    if not draft.from_dimensions:
+        lacks = "; ".join(missing_dimensions(draft.links, draft.sliders, draft.points, {})[:3])
+        raise MechanismError(
+            f"{args.file}: not written from dimensions ({lacks or 'its centres of mass are given by com'}): its "
+            "coordinates are its assembly (vloop info says how far the t = 0 assembly moves them)",
+            entry="file",
+        )
+    closed, report = assemble_mechanism(draft)
+    text = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n{dumps(closed)}"
+    lines = [f"{closed.name}: {line}" for line in report.lines(closed.units)]
+    if args.out is None:
+        print(text, end="")
+        print("\n".join(lines), file=sys.stderr)
+        return 0
+    write_text(args.out, text)
+    print("\n".join([*lines, f"wrote {args.out}"]))
+    return 0
+
+
+# ---------------------------------------------------------------- export
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """The mechanism at time --at: a drawing (SVG, PDF) or its links as parts (DXF), published as one set."""
+    from .files.output import OutputSet
+    from .views.export import export, time_at
+
+    mech = _load(args)
+    at = time_at(mech, args.at)  # before any work: a bad time is one line, nothing written
+    out = _out_folder(args, mech)
+    with OutputSet(out) as files:
+        export(mech, files.stage, at, args.format)
+    print(f"{mech.name} at t = {at:g} s: wrote " + ", ".join(str(f) for f in files.published))
+    return 0
 
 
 # ---------------------------------------------------------------- study
@@ -537,7 +595,25 @@ def build_parser() -> argparse.ArgumentParser:
     _parser_corpus(sub)
     _parser_info(sub)
     _parser_study(sub)
+    _parser_assemble(sub)
+    _parser_export(sub)
     return p
+
+
+def _parser_export(sub: Any) -> None:
+    e = sub.add_parser("export", help="a drawing of the mechanism at time T (SVG, PDF) or its links as parts (DXF)")
+    _add_file(e)
+    e.add_argument("--at", required=True, metavar="T", help="the instant [s], within the file's run")
+    e.add_argument("--format", choices=["svg", "pdf", "dxf"], default="svg", help="svg or pdf (drawing), dxf (parts)")
+    e.add_argument("--out", help="output folder (default: out/NAME)")
+    e.set_defaults(func=cmd_export)
+
+
+def _parser_assemble(sub: Any) -> None:
+    a = sub.add_parser("assemble", help="assemble a file written from dimensions at t = 0, write it with coordinates")
+    _add_file(a)
+    a.add_argument("--out", metavar="FIXED.toml", help="the file to write (default: standard output)")
+    a.set_defaults(func=cmd_assemble)
 
 
 def _parser_run(sub: Any) -> None:

@@ -47,7 +47,7 @@ import numpy as np
 
 from .errors import VloopError
 from .model import Load, Mechanism, length_factor
-from .result import Result
+from .result import Result, html_table
 
 SHAKING = "shaking"
 RANK_TOL = 1e-9  # singular values below this fraction of the largest count as zero (redundant path)
@@ -439,6 +439,22 @@ class ForceResult:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def _repr_html_(self) -> str:
+        """A notebook's summary: per column its unit, its range and the time of its largest magnitude."""
+        import html
+
+        n = len(self.t)
+        span = f"t = {self.t[0]:g} … {self.t[-1]:g} s" if n else "no sample"
+        head = f"<p><b>ForceResult</b> of {html.escape(f'{self.mechanism} by {self.engine}')}: {n:,} samples, {span}"
+        if self.indeterminate:
+            head += f"; indeterminate: {html.escape(', '.join(self.indeterminate))}"
+        rows = []
+        for name, x in self.columns.items() if n else ():
+            unit = "N·m" if name.endswith((".torque", ".moment")) else "N"
+            k = int(np.argmax(np.abs(x)))
+            rows.append([name, unit, float(np.min(x)), float(np.max(x)), float(self.t[k])])
+        return head + "</p>" + html_table(rows, ["column", "unit", "min", "max", "t of |max| [s]"])
 
     def __getitem__(self, key: str) -> np.ndarray:
         return self.t if key == "t" else self.columns[key]

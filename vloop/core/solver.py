@@ -194,6 +194,22 @@ def _locate_failure(run: _Run, st: _State, tg: np.ndarray, k: int, X: np.ndarray
 
 def assemble_blocks(sys: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarray:
     """The t = 0 configuration the closed-form blocks give with their (possibly flipped) branches."""
+    q, why = close_at_start(sys, blocks, q0)
+    if q is None:
+        raise MechanismError(
+            f"{sys.mechanism.source}: [solver] branches: the mechanism cannot be assembled on the requested branch "
+            f"at t = 0 ({why})",
+            entry="solver",
+        )
+    return q
+
+
+def close_at_start(
+    sys: LoopSystem, blocks: tuple, q0: np.ndarray, upto: int | None = None
+) -> tuple[np.ndarray | None, str]:
+    """The t = 0 configuration that blocks 0..``upto`` (default: all) give from ``q0``: each closed-form dyad on its
+    branch σ, a Newton block as ``q0`` holds it (assembled already), the drivers at their t = 0 values. Returns
+    (the variables, free angles in [0, 2π), "") or (None, why not)."""
     trial_sys = dataclasses.replace(sys, blocks=blocks, q0=q0, cache={})
     na, ns = sys.n_angles, len(sys.slider_names)
     st = _State(1, na, ns)
@@ -204,17 +220,13 @@ def assemble_blocks(sys: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarra
     run = _Run(trial_sys, _Inputs(mech), mech.scale, DEFAULT_TOL, DEFAULT_MAX_ITER, DEFAULT_RTOL, detect=False)
     run.blocks = _run_blocks
     _impose_drivers(sys, st, *run.inputs(np.zeros(1)))
-    solved = _run_blocks(run, st, np.zeros(1), 1)
+    solved = _run_blocks(run, st, np.zeros(1), 1, upto)
     if solved.n_ok < 1:
-        raise MechanismError(
-            f"{mech.source}: [solver] branches: the mechanism cannot be assembled on the requested branch at t = 0 "
-            f"({solved.failure.why if solved.failure else 'no solution'})",
-            entry="solver",
-        )
+        return None, solved.failure.why if solved.failure else "no solution"
     th = st.TH[0].copy()
     free = np.array([v not in sys.drivers for v in range(na)], bool)
     th[free] %= TWO_PI  # the file's convention at t = 0: θ in [0, 2π)
-    return np.concatenate([th, st.S[0, :ns]])
+    return np.concatenate([th, st.S[0, :ns]]), ""
 
 
 LEAD_STEP = math.pi / 180  # lead-in path step: 1° of crank (or 1/180 of the size of a slider input)
@@ -702,6 +714,7 @@ def _result(run: _Run, st: _State, grid: _Grid, n_ok: int, solved: _Solved) -> t
         {
             "blocks": [b.kind for b in sys.blocks],
             "assembly": sys.assembly,
+            "units": mech.units,  # the lengths' unit (Result.to_pandas)
             **_events_meta(run, span),
             **_redundancy(sys),
         },

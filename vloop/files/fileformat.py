@@ -8,6 +8,7 @@ files, profiles outside the mechanism's folder (unless allowed), oversized input
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import stat
@@ -32,6 +33,15 @@ from ..model import (
     Profile,
     Slider,
     mobility_message,
+    to_world,
+)
+from .dimensions import (
+    axes_from_angles,
+    check_lengths,
+    check_ternaries,
+    dimension_mode,
+    place_joints,
+    points_from_local,
 )
 from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
 
@@ -108,15 +118,18 @@ def from_dict(
     check_keys(data, "file", "file", probs, extra=TOP_LEVEL)
     name, title, units = read_meta(data, source, probs)
     joints = read_joints(data.get("joints"), probs)
-    links = read_links(data.get("links"), joints, probs)
-    sliders = read_sliders(data.get("sliders", {}), joints, links, probs)
-    points = read_points(data.get("points", {}), joints, links, sliders, probs)
+    missing: dict[str, str] = {}  # joints named without coordinates → the entry naming them first
+    links = read_links(data.get("links"), joints, probs, missing)
+    sliders = read_sliders(data.get("sliders", {}), joints, links, probs, missing)
+    points = read_points(data.get("points", {}), joints, links, sliders, probs, set(missing))
     probs.raise_if_any()
-    proto = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    read = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    proto = _geometry(data, read, missing, probs)
     check_extent(proto, probs)
     probs.raise_if_any()
     check_topology(proto, probs)
     probs.raise_if_any()
+    proto = dataclasses.replace(proto, points=points_from_local(proto, proto.points))  # through its body frames
     drivers = read_drivers(data.get("drivers"), proto, ctx, probs)
     probs.raise_if_any()
     times = read_time(data.get("time"), drivers, probs)
@@ -124,12 +137,31 @@ def from_dict(
     dynamics = read_dynamics(data, proto, ctx, probs)
     probs.raise_if_any()
     times.flags.writeable = False
-    mech = Mechanism(
-        name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options, **dynamics
-    )
+    mech = dataclasses.replace(proto, drivers=tuple(drivers), times=times, options=options, **dynamics)
     if mech.gruebler()[2] > len(drivers):  # fewer drivers than Gruebler's count: never enough to fix the motion
         raise MechanismError(mobility_message(mech), entry="drivers")
     return mech  # Gruebler's count below the drivers may be a redundant linkage: the compiler decides by rank
+
+
+def _geometry(data: dict, m: Mechanism, missing: dict[str, str], probs: Problems) -> Mechanism:
+    """The mechanism's t = 0 geometry: written from dimensions or not (:mod:`vloop.files.dimensions`), joints
+    without coordinates placed provisionally, slider axes from their angles (points given by their local coordinates
+    are placed once the topology is checked)."""
+    dims, lacks = dimension_mode(m.links, m.sliders, m.points, data, probs)
+    ground = m.ground if any(lk.ground for lk in m.links.values()) else None
+    for j, entry in missing.items():
+        if not dims or (ground is not None and j in m.links[ground].joints):
+            known = ", ".join(list(m.joints)[:20]) or "none"
+            why = "a ground joint needs its coordinates"
+            if not dims:
+                why = f"only a file written from dimensions may leave a joint without coordinates; here {lacks}"
+            probs.add(entry, f"unknown joint {show(j)} (known: {known}; {why})")
+    check_ternaries(m.links, m.joints, probs)
+    probs.raise_if_any()
+    joints = place_joints(m.joints, m.links, m.sliders, missing, probs) if missing else m.joints
+    probs.raise_if_any()
+    sliders = axes_from_angles(m.sliders, m.links, joints)
+    return dataclasses.replace(m, joints=joints, sliders=sliders, from_dimensions=dims, unplaced=tuple(missing))
 
 
 def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
@@ -205,14 +237,15 @@ def read_joints(raw: Any, probs: Problems) -> dict[str, tuple[float, float]]:
     return joints
 
 
-def read_links(raw: Any, joints: dict, probs: Problems) -> dict[str, Link]:
-    """[links] NAME = { joints, ground, length } (masses are read with the dynamics)."""
+def read_links(raw: Any, joints: dict, probs: Problems, missing: dict[str, str]) -> dict[str, Link]:
+    """[links] NAME = { joints, ground, length, sides, angle } (masses are read with the dynamics). Joints named
+    without coordinates go to ``missing`` (joint → entry): only a file written from dimensions may have them."""
     if not isinstance(raw, dict) or not raw:
         probs.add("links", "missing or empty: give each link as NAME = { joints = [...] }")
         return {}
     links: dict[str, Link] = {}
     for ln, val in _names(raw, "links", probs).items():
-        link = _read_link(ln, {"joints": val} if isinstance(val, list) else val, joints, probs)
+        link = _read_link(ln, {"joints": val} if isinstance(val, list) else val, joints, probs, missing)
         if link is not None:
             links[ln] = link
     grounds = [n for n, lk in links.items() if lk.ground]
@@ -223,7 +256,7 @@ def read_links(raw: Any, joints: dict, probs: Problems) -> dict[str, Link]:
     return links
 
 
-def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
+def _read_link(ln: str, val: Any, joints: dict, probs: Problems, missing: dict[str, str]) -> Link | None:
     entry = f"links.{ln}"
     if not isinstance(val, dict):
         probs.add(entry, f"expected a table {{ joints = [...] }}, got {show(val)}")
@@ -241,7 +274,7 @@ def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
         return None
     for j in jl:
         if j not in joints:
-            probs.add(entry, f"unknown joint {show(j)} (known: {', '.join(list(joints)[:20]) or 'none'})")
+            _missing_joint(j, entry, joints, probs, missing)
     ground = val.get("ground", False)
     if not isinstance(ground, bool):
         probs.add(entry, "'ground' must be true or false")
@@ -253,25 +286,69 @@ def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
     elif length is not None and length <= 0:
         probs.add(entry, f"'length' must be positive, got {length:g}")
         length = None
-    return Link(ln, tuple(jl), ground, length)
+    sides, angle = _read_sides(val, jl, entry, probs)
+    if ground and (length is not None or sides is not None):
+        probs.add(entry, "the ground's dimensions are its joints' coordinates: it takes no length or sides")
+    return Link(ln, tuple(jl), ground, length, sides, angle)
 
 
-def read_sliders(raw: Any, joints: dict, links: dict[str, Link], probs: Problems) -> dict[str, Slider]:
-    """[sliders] NAME = { joint, guide, axis }."""
+def _missing_joint(j: str, entry: str, joints: dict, probs: Problems, missing: dict[str, str]) -> None:
+    """A joint named without coordinates: kept in ``missing`` if its name is valid (a file written from dimensions
+    may leave it out; :func:`_geometry` decides)."""
+    if name_problem(j):
+        probs.add(entry, f"unknown joint {show(j)} (known: {', '.join(list(joints)[:20]) or 'none'})")
+    else:
+        missing.setdefault(j, entry)
+
+
+def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple[float, ...] | None, float | None]:
+    """A ternary link's ``sides`` (three, or two with ``angle``), checked: positive, a triangle."""
+    raw, angle = val.get("sides"), number(val, "angle", entry, probs)
+    if raw is None:
+        if angle is not None:
+            probs.add(entry, "'angle' goes with two sides: sides = [|J0J1|, |J0J2|]")
+        return None, None
+    if len(jl) != 3 or "length" in val:
+        probs.add(entry, "'sides' is for ternary links (three joints), instead of 'length'")
+        return None, None
+    if not isinstance(raw, list) or len(raw) not in (2, 3):
+        probs.add(entry, f"'sides' must be [a, b, c] or [a, c] with 'angle', got {show(raw)}")
+        return None, None
+    sides = [real(x, "sides", entry, probs) for x in raw]
+    if None in sides:
+        return None, None
+    if min(sides) <= 0:  # type: ignore[type-var]
+        probs.add(entry, f"'sides' must be positive, got {show(raw)}")
+        return None, None
+    if (len(sides) == 2) != (angle is not None):
+        probs.add(entry, "two sides need the 'angle' between them; three sides take no angle")
+        return None, None
+    a, b, c = sides if len(sides) == 3 else (sides[0], 1.0, 1.0)  # type: ignore[misc]
+    if len(sides) == 3 and not (a < b + c and b < a + c and c < a + b):
+        why = "each must be shorter than the other two together; a straight ternary link: two sides, angle = 0 or pi"
+        probs.add(entry, f"sides {a:g}, {b:g}, {c:g} of {'-'.join(jl)} cannot form a triangle ({why})")
+        return None, None
+    return tuple(sides), angle  # type: ignore[arg-type]
+
+
+def read_sliders(
+    raw: Any, joints: dict, links: dict[str, Link], probs: Problems, missing: dict[str, str]
+) -> dict[str, Slider]:
+    """[sliders] NAME = { joint, guide, axis | angle, offset }."""
     if not isinstance(raw, dict):
         probs.add("sliders", "must be a table of NAME = { joint, guide, axis }")
         return {}
     ground = next((n for n, lk in links.items() if lk.ground), None)
     sliders: dict[str, Slider] = {}
     for sn, val in _names(raw, "sliders", probs).items():
-        slider = _read_slider(sn, val, joints, links, ground, probs)
+        slider = _read_slider(sn, val, joints, links, ground, probs, missing)
         if slider is not None:
             sliders[sn] = slider
     return sliders
 
 
 def _read_slider(
-    sn: str, val: Any, joints: dict, links: dict[str, Link], ground: str | None, probs: Problems
+    sn: str, val: Any, joints: dict, links: dict[str, Link], ground: str | None, probs: Problems, missing: dict
 ) -> Slider | None:
     entry = f"sliders.{sn}"
     if not isinstance(val, dict):
@@ -282,9 +359,11 @@ def _read_slider(
         probs.add(entry, f"duplicate name: '{sn}' is also a link (a slider's name is its block's name)")
         return None
     j = val.get("joint")
-    if not isinstance(j, str) or j not in joints:
-        probs.add(entry, f"unknown joint {show(j)}" if isinstance(j, str) else "missing 'joint'")
+    if not isinstance(j, str):
+        probs.add(entry, "missing 'joint'")
         return None
+    if j not in joints:
+        _missing_joint(j, entry, joints, probs, missing)
     guide = val.get("guide", "ground")
     if guide == "ground" and ground is not None:
         guide = ground
@@ -296,15 +375,24 @@ def _read_slider(
             entry, f"the guide '{guide}' names the slider's joint '{j}': a block cannot be pinned to its own guide"
         )
         return None
-    if "axis" not in val:
-        probs.add(entry, "missing 'axis'")
+    offset = number(val, "offset", entry, probs)
+    if ("axis" in val) == ("angle" in val):
+        probs.add(entry, "give 'axis' (its direction at t = 0) or 'angle' (in the guide's frame), one of them")
         return None
+    if "angle" in val:
+        angle = number(val, "angle", entry, probs)
+        if angle is not None and len(links[guide].joints) == 1 and not links[guide].ground:
+            probs.add(entry, f"the one-joint guide '{guide}' turns with the slider's axis: give 'axis', not 'angle'")
+            return None
+        return None if angle is None else Slider(sn, j, guide, (1.0, 0.0), angle, offset)
     axis = direction(val["axis"], "axis", entry, probs)
-    return None if axis is None else Slider(sn, j, guide, axis)
+    return None if axis is None else Slider(sn, j, guide, axis, None, offset)
 
 
-def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems) -> dict[str, Point]:
-    """[points] NAME = { link, at }."""
+def read_points(
+    raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems, unplaced: set[str] | None = None
+) -> dict[str, Point]:
+    """[points] NAME = { link, at | local } (a point given by ``local`` is placed on its body by :func:`_geometry`)."""
     if not isinstance(raw, dict):
         probs.add("points", "must be a table of NAME = { link, at }")
         return {}
@@ -315,16 +403,22 @@ def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Probl
             probs.add(entry, f"expected a table {{ link, at }}, got {show(val)}")
             continue
         check_keys(val, "points", entry, probs)
-        if pn in joints:
+        if pn in joints or pn in (unplaced or ()):
             probs.add(entry, f"duplicate name: '{pn}' is also a joint")
             continue
         lk = val.get("link")
         if not isinstance(lk, str) or (lk not in links and lk not in sliders):
             probs.add(entry, f"unknown link {show(lk)}")
             continue
-        at = pair(val.get("at"), "at", entry, probs)
-        if at is not None:
-            points[pn] = Point(pn, lk, at)
+        if ("at" in val) == ("local" in val):
+            probs.add(entry, "give 'at' (its position at t = 0) or 'local' (in its body's frame), one of them")
+            continue
+        key = "at" if "at" in val else "local"
+        xy = pair(val[key], key, entry, probs)
+        if xy is not None:
+            on = links[lk].joints[0] if lk in links else sliders[lk].joint
+            near = joints.get(on, (0.0, 0.0))  # until placed on its body: its body's first joint (the size stays right)
+            points[pn] = Point(pn, lk, xy) if key == "at" else Point(pn, lk, near, xy)
     return points
 
 
@@ -377,8 +471,13 @@ def check_topology(m: Mechanism, probs: Problems) -> None:
         if j not in named:
             probs.add(f"joints.{j}", "is named by no link or slider")
     guides = {s.guide for s in m.sliders.values()}
+    if m.from_dimensions:
+        check_lengths(m, COINCIDENT_TOL, probs)
     for lk in m.links.values():
-        pts = [m.joints[j] for j in lk.joints]
+        if m.from_dimensions and not lk.ground:  # its shape is its dimensions (checked above), not its coordinates
+            pts = []
+        else:
+            pts = [m.joints[j] for j in lk.joints]
         for i in range(len(pts)):
             for k in range(i + 1, len(pts)):
                 if math.dist(pts[i], pts[k]) <= COINCIDENT_TOL * scale:
@@ -481,7 +580,9 @@ def _read_crank(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, prob
         return None
     keys, cols = ("theta0", "omega", "alpha"), ("t", "theta", "omega", "alpha")
     x0, v0, a0, prof = _motion(d, keys, cols, bodies[ln].theta0, entry, ctx, probs)
-    return Driver("crank", ln, x0, v0, a0, pivot, prof, entry)
+    return Driver(
+        "crank", ln, x0, v0, a0, pivot, prof, entry, _from_coordinates(d, keys[0], lk.joints[:2], m, entry, probs)
+    )
 
 
 def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, probs: Problems) -> Driver | None:
@@ -496,7 +597,19 @@ def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, p
     p = m.joints[sl.joint]
     s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
     x0, v0, a0, prof = _motion(d, ("s0", "v", "a"), ("t", "s", "v", "a"), s_coords, entry, ctx, probs)
-    return Driver("slider", sn, x0, v0, a0, None, prof, entry)
+    on = (sl.joint, *([] if gb.kind == "ground" else m.links[sl.guide].joints[:2]))
+    return Driver("slider", sn, x0, v0, a0, None, prof, entry, _from_coordinates(d, "s0", on, m, entry, probs))
+
+
+def _from_coordinates(d: dict, key: str, joints: tuple[str, ...], m: Mechanism, entry: str, probs: Problems) -> bool:
+    """Whether a driver's t = 0 value is taken from the coordinates of ``joints`` (it states none); refused where
+    one of them has none."""
+    if key in d or "profile" in d:
+        return False
+    without = [j for j in joints if j in m.unplaced]
+    if without:
+        probs.add(entry, f"give {key} (the input's value at t = 0): {', '.join(without)} has no coordinates to take it")
+    return True
 
 
 def _motion(
@@ -797,7 +910,7 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
     tables += [("sliders", n, v) for n, v in (data.get("sliders") or {}).items() if n in m.sliders]
     bodies = m.bodies() if tables else {}
     for section, name, val in tables:
-        if not isinstance(val, dict) or not {"mass", "inertia", "com"} & set(val):
+        if not isinstance(val, dict) or not {"mass", "inertia", "com", "com_local"} & set(val):
             continue
         entry = f"{section}.{name}"
         if section == "links" and m.links[name].ground:
@@ -806,7 +919,12 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
         mass = real(val.get("mass", 0.0), "mass", entry, probs)
         inertia = real(val.get("inertia", 0.0), "inertia", entry, probs)
         joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
+        if "com" in val and "com_local" in val:
+            probs.add(entry, "give 'com' (world, t = 0) or 'com_local' (in the body's frame), one of them")
+            continue
+        local = pair(val["com_local"], "com_local", entry, probs) if "com_local" in val else None
         com = pair(val["com"], "com", entry, probs) if "com" in val else _joint_mean(bodies[name], joints)
+        com = to_world(bodies[name], local) if local is not None else com
         far = far_problem(m, "com", com) if com is not None else ""
         if far:
             probs.add(entry, far)
@@ -815,7 +933,7 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
             if x is not None and x < 0:
                 probs.add(entry, f"'{what}' must not be negative, got {x:g}")
         if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
-            out[name] = MassProperties(mass, inertia, com)
+            out[name] = MassProperties(mass, inertia, com, local)
     return out
 
 
@@ -934,14 +1052,15 @@ def to_dict(mech: Mechanism) -> dict[str, Any]:
     if mech.title:
         out["title"] = mech.title
     out["units"] = mech.units
-    out["joints"] = {j: list(xy) for j, xy in mech.joints.items()}
+    out["joints"] = {j: list(xy) for j, xy in mech.joints.items() if j not in mech.unplaced}
     out["links"] = {n: _link_dict(lk) for n, lk in mech.links.items()}
     if mech.sliders:
-        out["sliders"] = {
-            n: {"joint": s.joint, "guide": s.guide, "axis": list(s.axis)} for n, s in mech.sliders.items()
-        }
+        out["sliders"] = {n: _slider_dict(s) for n, s in mech.sliders.items()}
     if mech.points:
-        out["points"] = {n: {"link": p.link, "at": list(p.at)} for n, p in mech.points.items()}
+        out["points"] = {
+            n: {"link": p.link, **({"at": list(p.at)} if p.local is None else {"local": list(p.local)})}
+            for n, p in mech.points.items()
+        }
     out["drivers"] = [_driver_dict(d) for d in mech.drivers]
     out["time"] = {"times": mech.times.tolist()}
     if mech.options:
@@ -959,6 +1078,18 @@ def _link_dict(lk: Link) -> dict[str, Any]:
         entry["ground"] = True
     if lk.length is not None:
         entry["length"] = lk.length
+    if lk.sides is not None:
+        entry["sides"] = list(lk.sides)
+    if lk.angle is not None:
+        entry["angle"] = lk.angle
+    return entry
+
+
+def _slider_dict(s: Slider) -> dict[str, Any]:
+    entry: dict[str, Any] = {"joint": s.joint, "guide": s.guide}
+    entry.update({"axis": list(s.axis)} if s.angle is None else {"angle": s.angle})
+    if s.offset is not None:
+        entry["offset"] = s.offset
     return entry
 
 
@@ -983,7 +1114,11 @@ def _dynamics_to_dict(mech: Mechanism, out: dict[str, Any]) -> None:
     """Add masses (on their link/slider tables), gravity and loads to a to_dict structure."""
     for name, mp in mech.masses.items():
         table = out["links"][name] if name in mech.links else out["sliders"][name]
-        table.update(mass=mp.mass, inertia=mp.inertia, com=list(mp.com))
+        table.update(mass=mp.mass, inertia=mp.inertia)
+        if mp.local is not None:
+            table["com_local"] = list(mp.local)
+        elif not mech.from_dimensions:  # written from dimensions, the centre of mass is the mean of the joints
+            table["com"] = list(mp.com)
     if mech.gravity is not None:
         out["gravity"] = list(mech.gravity)
     loads = []
@@ -1004,10 +1139,17 @@ def _dynamics_to_dict(mech: Mechanism, out: dict[str, Any]) -> None:
 
 
 def dumps(mech: Mechanism) -> str:
-    """The mechanism as TOML text (see :func:`to_dict`)."""
+    """The mechanism as TOML text (see :func:`to_dict`), short arrays (coordinates, a link's joints) on one line."""
+    import re
+
     import tomli_w
 
-    return tomli_w.dumps(to_dict(mech))
+    short = re.compile(r"\[\n((?:[ ]+[^\[\]{}\n]+,\n){1,4})[ ]*\]")
+
+    def one_line(m: re.Match) -> str:
+        return "[" + ", ".join(x.strip().rstrip(",") for x in m.group(1).splitlines()) + "]"
+
+    return short.sub(one_line, tomli_w.dumps(to_dict(mech)))
 
 
 def save(mech: Mechanism, path: str | Path) -> None:

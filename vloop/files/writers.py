@@ -37,7 +37,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from ..result import Result, arrow_array, write_csv
+from ..result import Result, arrow_array, column_units, write_csv
 from .output import OutputError, OutputSet, atomic_write
 
 FORMATS = ("csv", "parquet", "npz")
@@ -46,23 +46,6 @@ FLAGS = ("ill_conditioned", "change_point")
 CSV_BYTES = 24  # per value, an upper estimate of a full-precision decimal and its comma
 
 
-def units(columns: list[str], length: str) -> dict[str, str]:
-    """The unit of each output column (``t``: s; angles rad; lengths the file's units)."""
-    per = {
-        "theta": "rad",
-        "omega": "rad/s",
-        "alpha": "rad/s^2",
-        "x": length,
-        "y": length,
-        "s": length,
-        "vx": f"{length}/s",
-        "vy": f"{length}/s",
-        "v": f"{length}/s",
-        "ax": f"{length}/s^2",
-        "ay": f"{length}/s^2",
-        "a": f"{length}/s^2",
-    }
-    return {c: "s" if c == "t" else per.get(c.rsplit(".", 1)[-1], "1") for c in columns}
 
 
 def health_columns(res: Result) -> dict[str, np.ndarray]:
@@ -322,7 +305,7 @@ def stream(
     names = ["t", *columns]
     hnames = ["t", *(f"health.{n}" for n, _ in HEALTH), *(f"health.{n}" for n in FLAGS)]
     meta = {"mechanism": mechanism}
-    results = _Table(outset, "results", fmt, names, units(names, length), meta)
+    results = _Table(outset, "results", fmt, names, column_units(names, length), meta)
     health = _Table(outset, "health", fmt, hnames, {n: "s" if n == "t" else "1" for n in hnames}, meta)
     summary, kept = RunSummary(), []
     failure: Exception | None = None

@@ -195,9 +195,9 @@ def _add_slider_edges(
         dx, dy = px - g.origin[0], py - g.origin[1]
         cg, sg = math.cos(g.theta0), math.sin(g.theta0)
         lx, ly = cg * dx + sg * dy, -sg * dx + cg * dy
-        alpha = math.atan2(sl.axis[1], sl.axis[0]) - g.theta0
+        alpha = math.atan2(sl.axis[1], sl.axis[0]) - g.theta0 if sl.angle is None else sl.angle
         s0 = lx * math.cos(alpha) + ly * math.sin(alpha)
-        e = -lx * math.sin(alpha) + ly * math.cos(alpha)
+        e = -lx * math.sin(alpha) + ly * math.cos(alpha) if sl.offset is None else sl.offset  # stated: dimensions
         coords_s.append(s0)
         start = origin_name(mech) if ref[sl.guide][1] == ORIGIN else ref[sl.guide][1]
         line = f"line of {sl.name}"  # its point s = 0

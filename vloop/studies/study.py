@@ -56,7 +56,7 @@ from ..errors import MechanismError, VloopError
 from ..files.schema import Problems
 from ..files.writers import finite_or_null
 from ..model import Mechanism
-from ..result import Result
+from ..result import Result, html_table
 from .studyfile import OutputSpec, StudySpec, from_dict, output_unit, quantity_kind
 
 TASKS_PER_WORKER = 4  # chunks per Dask worker thread when the chunk size is automatic
@@ -93,7 +93,7 @@ def study(
     built. Lengths in the file's units, angles in rad. Raises MechanismError for a bad parameter or output.
     """
     if not isinstance(mechanism, Mechanism):
-        from ..files.fileformat import load
+        from .. import load  # (assembled at t = 0 if written from dimensions)
 
         mechanism = load(mechanism)
     data: dict[str, Any] = {"parameters": _param_tables(params), "outputs": _output_tables(outputs)}
@@ -603,7 +603,24 @@ class StudyResult:
         )
 
     def _repr_html_(self) -> str:
-        return f"<p>{self!r}</p>" + self.table._repr_html_()
+        """A notebook's summary: the counts, the parameters, the summary table and the first variants."""
+        import html
+
+        rows = []
+        for prm in self.spec.parameters:
+            ref = next((r for r in self._model.params if r.name == prm.name), None)
+            spread = f"{len(prm.values)} values" if prm.values else ""
+            if prm.tolerance is not None:
+                spread = "; ".join(x for x in (spread, _tolerance_text(prm.tolerance)) if x)
+            rows.append([prm.name, ref.unit if ref else "", ref.nominal if ref else "", spread])
+        parts = [
+            f"<p><b>{html.escape(repr(self))}</b> on {html.escape(self.spec.mechanism.name)}</p>",
+            html_table(rows, ["parameter", "unit", "nominal", "varied"], "parameters"),
+        ]
+        if len(self.summary):
+            parts.append("<p>summary</p>" + self.summary._repr_html_())
+        parts.append(f"<p>variants (the first {min(10, len(self.table))} of {len(self.table):,})</p>")
+        return "".join(parts) + self.table.head(10)._repr_html_()
 
     def variant_mechanism(self, row: int) -> Mechanism:
         """Variant ``row`` of the table as a Mechanism of its own (its coordinates the t = 0 assembly, so it loads
@@ -696,6 +713,11 @@ OWNS = (
     *(f"{n}.{x}" for n in ("variants", "summary", "sensitivity", "bands") for x in ("csv", "parquet")),
     *("study.json", "band_*.png", "hist_*.png", "grid_*.png", "map_*.png"),
 )  # a study's files: those of a previous study in the same folder are replaced as one set
+
+
+def _tolerance_text(tol: Any) -> str:
+    """A parameter's tolerance in words: uniform within ± its half width, or normal with its σ."""
+    return f"uniform ± {tol.width:g}" if tol.dist == "uniform" else f"normal, σ = {tol.width:g}"
 
 
 def _tolerance_entry(tol: Any) -> dict[str, Any] | None:

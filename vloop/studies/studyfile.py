@@ -204,8 +204,8 @@ class StudySpec:
 
 def load(path: str | Path) -> StudySpec:
     """Read and check a study file (and the mechanism it names). Raises MechanismError naming the entry."""
+    from .. import load as load_mechanism  # (assembled at t = 0 if written from dimensions)
     from ..files.fileformat import _read_text_file
-    from ..files.fileformat import load as load_mechanism
 
     path = Path(path)
     text = _read_text_file(path, MAX_STUDY_BYTES, what="study file", entry=str(path))

@@ -25,6 +25,9 @@ from ..method.equations import Vector, equation_text, legend_text, vector_loops
 from ..model import Mechanism
 from ..result import Result
 
+BLOCK_SIZE = (0.08, 0.045)  # slider block length and height in drawings, fractions of the mechanism size
+
+
 
 @dataclass(frozen=True)
 class LoopChain:

@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import MotionError, VloopError
 from ..model import Mechanism
 from ..result import Result
-from .geometry import equation_legend, loop_chains
+from .geometry import BLOCK_SIZE, equation_legend, loop_chains
 
 ASSETS = Path(__file__).resolve().parent / "viewer"
 _PLACEHOLDER = re.compile(r"__CSP__|__TITLE__|__HEADING__|__NAME__|/\*__CSS__\*/|__DATA__|/\*__JS__\*/")
@@ -49,7 +49,6 @@ FORMAT = 1
 MAX_PAGE_BYTES = 32 << 20  # the sample data of one page, at most: a browser opens it in a few seconds
 VALUE_BYTES = 8 * 4 / 3 * 1.001  # a float64 in the page, worst case: incompressible, deflate's 0.1 % framing, base64
 HEALTH = ("residual", "cond")
-BLOCK_SIZE = (0.08, 0.045)  # slider block length and height, fractions of the mechanism size
 
 
 class ViewError(VloopError):
@@ -455,6 +454,34 @@ def render(mech: Mechanism, result: Result, *, forces: Any = None, error: str | 
     }
     # one pass over the template: text put in is never searched again for placeholders
     return _PLACEHOLDER.sub(lambda m: values[m.group(0)], _asset("page.html"))
+
+
+class InlineView:
+    """A viewer page for a notebook's output cell: Jupyter shows ``_repr_html_``, an iframe that holds the page in
+    ``srcdoc`` and is sandboxed to scripts only (an opaque origin: no network, no access to the notebook)."""
+
+    def __init__(self, page: str, height: int = 720) -> None:
+        self.page = page
+        self.height = height
+
+    def _repr_html_(self) -> str:
+        return (
+            f'<iframe title="vloop viewer" sandbox="allow-scripts" style="width: 100%; height: {self.height}px; '
+            f'border: 0" srcdoc="{html.escape(self.page, quote=True)}"></iframe>'
+        )
+
+
+def inline(
+    mech: Mechanism, result: Result | None = None, *, forces: Any = None, error: str | None = None, height: int = 720
+) -> InlineView:
+    """The interactive viewer of a run, inline in a notebook (``vloop.views.view.inline(mech, res)`` as a cell's last
+    line). Without ``result`` the file's motion is solved (a stopped motion shows its last instant and message).
+    ``height`` [px] of the cell's frame, 200 to 4000."""
+    if isinstance(height, bool) or not isinstance(height, int) or not 200 <= height <= 4000:
+        raise ViewError(f"{mech.name}: height must be a whole number of pixels from 200 to 4000, got {height!r}")
+    if result is None:
+        result, error = solve_for_view(mech)
+    return InlineView(render(mech, result, forces=forces, error=error), height)
 
 
 def write_view(
