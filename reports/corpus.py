@@ -2,8 +2,10 @@
 
     write_corpus_page(summary, Path("validation"))      # -> validation/corpus.html
 
-Built from summary.json alone (so it can be redrawn from an old run): the pass rate per family,
-variant and engine, the worst errors with the files they come from, histograms of the error
+Built from summary.json alone (so it can be redrawn from an old run): first, in red, every mechanism where
+vloop is the odd engine out; per engine its passes, the failures blamed on it and the undecided ones (the
+consensus of validators.consensus); the pass rate per family, variant and engine, the worst errors with
+the files they come from, histograms of the error
 ratios (worst error / allowed, per comparison, log scale), the runs into a limit and whether every
 engine stopped at the recorded sample, and every failure with the one command that reproduces it
 and, when it was minimized, the smallest failing file. One self-contained HTML file (figures as
@@ -19,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .html import _RC, TEMPLATES, _new_figure, _png
+from .html import _RC, TEMPLATES, _new_figure, _picture
 
 WORST_SHOWN = 25
 HIST_BINS = np.arange(-17.0, 4.01, 0.5)  # log10(error / allowed): round-off far left, failures right of 0
@@ -31,6 +33,17 @@ def _ratio(q: dict[str, Any] | None) -> float | None:
         return None
     err = float("inf") if isinstance(q["max_abs"], str) else float(q["max_abs"])
     return err / q["allowed"] if q["allowed"] > 0 else (0.0 if err == 0 else float("inf"))
+
+
+def engine_status(m: dict[str, Any], engine: str) -> str | None:
+    """``engine``'s verdict on mechanism ``m``: "pass", "blamed", "undecided" (validators.consensus), None if it
+    had nothing to say. A summary written before verdicts existed: "blamed" for every engine in a failure."""
+    verdict = m.get("verdict")
+    if verdict is not None:
+        status = verdict["engines"].get(engine)
+        return None if status in (None, "skipped") else status
+    ok = _engine_ok(m, engine)
+    return None if ok is None else ("pass" if ok else "blamed")
 
 
 def _engine_ok(m: dict[str, Any], engine: str) -> bool | None:
@@ -58,16 +71,41 @@ def family_rows(mechs: list[dict[str, Any]], engines: list[str]) -> list[dict[st
         ms = groups[key]
         cells = []
         for e in engines:
-            verdicts = [v for v in (_engine_ok(m, e) for m in ms) if v is not None]
-            cells.append(_rate_cell(sum(verdicts), len(verdicts)))
-        rows.append({"family": key, "total": _rate_cell(sum(m["passed"] for m in ms), len(ms)), "cells": cells})
+            statuses = [v for v in (engine_status(m, e) for m in ms) if v is not None]
+            cells.append(_rate_cell(statuses))
+        total = _rate_cell(["pass" if m["passed"] else (m.get("verdict") or {}).get("status", "blamed") for m in ms])
+        rows.append({"family": key, "total": total, "cells": cells})
     return rows
 
 
-def _rate_cell(ok: int, n: int) -> dict[str, Any]:
+def _rate_cell(statuses: list[str]) -> dict[str, Any]:
+    """passes/ran, with the blamed failures and the undecided ones under it."""
+    n = len(statuses)
     if n == 0:
-        return {"text": "—", "css": "na", "title": "not run"}
-    return {"text": f"{ok}/{n}", "css": "pass" if ok == n else "fail", "title": f"{100.0 * ok / n:.1f} % pass"}
+        return {"text": "—", "css": "na", "title": "not run", "extra": ""}
+    ok, blamed, undecided = (statuses.count(s) for s in ("pass", "blamed", "undecided"))
+    extra = ", ".join(f"{k} {w}" for k, w in ((blamed, "blamed"), (undecided, "undecided")) if k)
+    css = "fail" if blamed else ("undecided" if undecided else "pass")
+    return {"text": f"{ok}/{n}", "css": css, "title": f"{100.0 * ok / n:.1f} % pass", "extra": extra}
+
+
+def engine_rows(mechs: list[dict[str, Any]], engines: list[str]) -> list[dict[str, Any]]:
+    """Per engine over the corpus: mechanisms passed, failures blamed on it, undecided, not run (skipped)."""
+    rows = []
+    for e in engines:
+        statuses = [engine_status(m, e) for m in mechs]
+        counts = {s: statuses.count(s) for s in ("pass", "blamed", "undecided")}
+        rows.append({"engine": e, **counts, "skipped": statuses.count(None)})
+    return rows
+
+
+def odd_vloop(mechs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The mechanisms where vloop is the odd one out, with the reason."""
+    return [
+        {"mechanism": m["name"], "file": m["file"], "reason": m["verdict"]["reasons"].get("vloop", "")}
+        for m in mechs
+        if "vloop" in (m.get("verdict") or {}).get("blamed", [])
+    ]
 
 
 def worst_rows(mechs: list[dict[str, Any]], limit: int = WORST_SHOWN) -> list[dict[str, Any]]:
@@ -127,7 +165,7 @@ def histogram(mechs: list[dict[str, Any]]) -> Any:
         for ax in list(axes.flat)[len(pairs) :]:
             ax.set_visible(False)
         fig.tight_layout()
-        return _png(fig, "Histograms of the worst error over its allowance, per engine and reference")
+        return _picture(fig, "Histograms of the worst error over its allowance, per engine and reference")
 
 
 def limit_rows(mechs: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -172,6 +210,10 @@ def render_corpus(summary: dict[str, Any]) -> str:
         command=info.get("command", ""),
         engines=engines,
         families=family_rows(mechs, engines),
+        engine_rows=engine_rows(mechs, engines),
+        vloop_odd=odd_vloop(mechs),
+        n_blamed=sum(1 for m in mechs if (m.get("verdict") or {}).get("status") == "blamed"),
+        n_undecided=sum(1 for m in mechs if (m.get("verdict") or {}).get("status") == "undecided"),
         worst=worst_rows(mechs),
         histogram=histogram(mechs),
         limits=limits,

@@ -12,7 +12,9 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
+import re
 from pathlib import Path
 
 import jsonschema
@@ -20,13 +22,14 @@ import numpy as np
 import pytest
 
 import vloop
+from tests.conftest import plant
 from validators import corpus, harness, shrink
 from vloop.cli import main
 
 SCHEMA = json.loads((Path(harness.__file__).parent / "summary.schema.json").read_text())
 ENGINES = ("vloop", "analytic", "pinocchio", "exudyn-kinematic")
 SEED = 424242
-TIMING = ("seconds", "task_seconds", "worker")
+TIMING = ("seconds", "task_seconds", "cpu_seconds", "worker")
 
 
 @pytest.fixture(scope="module")
@@ -119,7 +122,7 @@ def test_corpus_page_shows_families_worst_errors_histograms_and_limits(in_proces
     _, summary = in_process
     path = write_corpus_page(summary, tmp_path)
     html = path.read_text()
-    for anchor in ('id="family-table"', 'id="worst-table"', 'id="limit-table"', "data:image/png;base64,"):
+    for anchor in ('id="family-table"', 'id="worst-table"', 'id="limit-table"', "data:image/webp;base64,"):
         assert anchor in html
     families = {f"{m['corpus']['family']}/{m['corpus']['variant']}" for m in summary["mechanisms"]}
     assert all(f in html for f in families)
@@ -131,22 +134,13 @@ def test_corpus_page_shows_families_worst_errors_histograms_and_limits(in_proces
 def broken_analytic(monkeypatch):
     """Inject a bug: the closed form's rocker angle is off by 1e-6 rad whenever a four-bar's crank is
     longer than 0.1 (file units) — a failure that survives shrinking, as a real one would."""
-    real = harness._engine_fn
 
-    def engine(name):
-        fn = real(name)
-        if name != "analytic":
-            return fn
+    def wrong(mech, res):
+        if "rocker.theta" in res.columns and mech.links["crank"].length > 0.1:
+            res.columns["rocker.theta"] = res.columns["rocker.theta"] + 1e-6
+        return res
 
-        def wrong(mech):
-            res = fn(mech)
-            if "rocker.theta" in res.columns and mech.links["crank"].length > 0.1:
-                res.columns["rocker.theta"] = res.columns["rocker.theta"] + 1e-6
-            return res
-
-        return wrong
-
-    monkeypatch.setattr(harness, "_engine_fn", engine)
+    plant(monkeypatch, "analytic", wrong)
 
 
 def test_nightly_corpus_reproduces_and_minimizes_a_failure(tmp_path, broken_analytic, capsys):
@@ -228,10 +222,10 @@ def test_validate_a_folder_checks_the_sidecar_expectations(tmp_path, capsys):
 def test_validate_refuses_bad_runner_options(tmp_path, capsys):
     f = str(Path(__file__).resolve().parents[1] / "mechanisms" / "eightbar.toml")
     for extra, what in [
-        (["--workers", "0"], "workers must be a positive integer"),
-        (["--timeout", "-1"], "timeout must be a positive number"),
-        (["--timeout", "inf"], "timeout must be a positive number"),
-        (["--corpus", "0"], "--n/--corpus must be between 1"),
+        (["--workers", "0"], "argument --workers: must be an integer from 1 to 256, got 0"),
+        (["--timeout", "-1"], "argument --timeout: must be a number above 0 and at most 604800, got '-1'"),
+        (["--timeout", "inf"], "argument --timeout: must be a number above 0 and at most 604800, got 'inf'"),
+        (["--corpus", "0"], "argument --corpus: must be an integer from 1 to 1,000,000, got 0"),
     ]:
         assert main(["validate", f, "--engines", "vloop", "--out", str(tmp_path), "--no-report", *extra]) == 2
         err = capsys.readouterr().err
@@ -281,3 +275,91 @@ def test_nightly_does_not_compare_generated_files_of_different_seeds():
     assert nightly.compare_summaries(summary(2, 1e-8), summary(1, 1e-16)) == []
     (flag,) = nightly.compare_summaries(summary(1, 1e-8), summary(1, 1e-16))
     assert flag["kind"] == "crossed tolerance" and flag["mechanism"] == "c00003-fourbar-kite@seed1"
+
+
+# ---------------------------------------------------------------- the odd engine out (validators.consensus)
+
+PLANT_SEED = 2026
+PLANT_INDICES = (
+    2,
+    21,
+    39,
+    50,
+    52,
+    55,
+)  # a limit run, an eight-bar, an attached dyad, a Stephenson III, a ramp, a rocking
+
+
+@pytest.fixture(scope="module")
+def plant_files(tmp_path_factory) -> list[Path]:
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    out = tmp_path_factory.mktemp("plant")
+    corpus.write([corpus.draw_item(PLANT_SEED, i).item for i in PLANT_INDICES], out, seed=PLANT_SEED)
+    return sorted(out.glob("*.toml"))
+
+
+def _perturbed(mech, res):
+    """A copy of the engine's own result with every link angle off by 1e-6 rad (1000× the 1e-9 tolerance)."""
+    res = dataclasses.replace(res, columns=dict(res.columns))
+    for c in [c for c in res.columns if c.endswith(".theta")]:
+        res.columns[c] = res.columns[c] + 1e-6
+    return res
+
+
+@pytest.mark.parametrize("wrong", ["pinocchio", "vloop"])
+def test_a_planted_wrong_engine_is_the_one_blamed(wrong, plant_files, monkeypatch, tmp_path):
+    """Four engines on six generated mechanisms, one of them made wrong on purpose: the consensus of the other
+    three blames exactly that engine, on every mechanism, in summary.json and on the corpus page; nothing else
+    is marked failing. A wrong vloop is the loudest line of the page."""
+    from reports.corpus import write_corpus_page
+
+    plant(monkeypatch, wrong, _perturbed)
+    summary = harness.to_summary(harness.run(plant_files, ENGINES))
+    jsonschema.validate(summary, SCHEMA)
+    mechs = summary["mechanisms"]
+    assert len(mechs) == len(PLANT_INDICES) and not summary["passed"]
+    for m in mechs:
+        v = m["verdict"]
+        assert v["status"] == "blamed" and v["blamed"] == [wrong], (m["name"], v)
+        assert v["reasons"][wrong].startswith(f"{wrong} disagrees with ")
+        assert {e for e, s in v["engines"].items() if s != "pass"} <= {wrong, "analytic"}  # analytic: skipped
+    tally = summary["verdicts"]["engines"]
+    assert tally[wrong]["blamed"] == len(mechs) and tally[wrong]["pass"] == 0
+    assert all(t["blamed"] == 0 and t["undecided"] == 0 for e, t in tally.items() if e != wrong)
+    assert summary["verdicts"]["vloop_blamed"] == ([m["name"] for m in mechs] if wrong == "vloop" else [])
+    html = write_corpus_page(summary, tmp_path).read_text()
+    row = html[html.index(f'<td class="mono">{wrong}</td>') :].split("</tr>")[0]
+    assert f'<td class="cell fail">{len(mechs)}</td>' in row  # its blamed failures
+    table = html[html.index('id="family-table"') :].split("</tbody>")[0].split("<tbody>")[1]
+    for tr in table.split("</tr>")[:-1]:  # per family: the mechanisms' cell, then one cell per engine
+        css = re.findall(r'<td class="cell (\w+)"', tr)
+        assert [c for e, c in zip(ENGINES, css[1:], strict=True) if c == "fail"] == ["fail"], tr
+        assert css[1 + ENGINES.index(wrong)] == "fail"
+    if wrong == "vloop":
+        loud = html.index('id="vloop-odd"')
+        assert loud < html.index('id="corpus-verdict"') and "vloop is the odd one out on 6 mechanisms" in html
+    else:
+        assert 'id="vloop-odd"' not in html
+
+
+def test_a_disagreement_without_majority_is_undecided():
+    """Two engines that disagree cannot say which is right; with three, the odd one is blamed."""
+    from validators.consensus import decide
+
+    two = decide(["vloop", "pinocchio"], {("pinocchio", "vloop"): "l3.theta off"})
+    assert two.status == "undecided" and two.engines == {"vloop": "undecided", "pinocchio": "undecided"}
+    assert "two engines cannot tell" in two.reason
+    three = decide(["vloop", "analytic", "pinocchio"], {("pinocchio", "vloop"): "x", ("analytic", "pinocchio"): "y"})
+    assert three.status == "blamed" and three.blamed == ("pinocchio",)
+    ring = decide(["a", "b", "c"], {("a", "b"): "1", ("b", "c"): "2", ("a", "c"): "3"})
+    assert ring.status == "undecided" and set(ring.engines.values()) == {"undecided"}
+    # a loose engine that cannot tell a wrong vloop from the others neither accuses nor excuses it
+    loose = decide(
+        ["vloop", "analytic", "pinocchio", "exudyn-dynamic"], {("analytic", "vloop"): "", ("pinocchio", "vloop"): ""}
+    )
+    assert loose.blamed == ("vloop",) and loose.engines["exudyn-dynamic"] == "pass"
+    # two wrong engines out of five that agree with each other: both blamed by the three others
+    pair = {(w, r): "" for w in ("exudyn-kinematic", "exudyn-dynamic") for r in ("vloop", "analytic", "pinocchio")}
+    both = decide(["vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"], pair)
+    assert both.status == "blamed" and set(both.blamed) == {"exudyn-kinematic", "exudyn-dynamic"}

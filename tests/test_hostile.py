@@ -91,7 +91,7 @@ def scaled(mech: vloop.Mechanism, factor: float) -> vloop.Mechanism:
     for link in data["links"].values():
         if "length" in link:
             link["length"] *= factor
-    return vloop.from_dict(data, source=mech.source)
+    return vloop.mechanism.from_dict(data, source=mech.source)  # read only: a size refused later, by the compiler
 
 
 @pytest.mark.parametrize("factor", [1e-60, 1e-30, 1e30, 1e56])
@@ -231,6 +231,39 @@ def test_profiles_outside_the_folder_are_refused_and_never_echoed(tmp_path, caps
     assert main(["run", str(f), "--out", str(tmp_path / "o"), "--allow-external-profiles"]) == 2
     line = one_clean_line(capsys.readouterr().err)
     assert "every data row must be" in line and "TOP-SECRET" not in line
+
+
+def _profile_case(tmp_path: Path, spec: str) -> Path:
+    """A four-bar in tmp_path/m whose crank follows θ = π/2 + t [rad] from the profile ``spec``."""
+    folder = tmp_path / "m"
+    folder.mkdir(exist_ok=True)
+    (folder / "p.csv").write_text(f"t,theta\n0,{math.pi / 2!r}\n1,{math.pi / 2 + 1!r}\n")
+    f = folder / "m.toml"
+    f.write_text(FOURBAR.replace("omega = 1.0", f"profile = {str(spec)!r}"))
+    return f
+
+
+def test_profiles_are_resolved_alike_absolute_or_relative_and_links_out_are_refused(tmp_path, capsys):
+    """An absolute path into the mechanism's folder is read like the relative one (the crank then follows the
+    profile: θ(1 s) = π/2 + 1); what really lies outside — by an absolute path or a symbolic link inside the
+    folder that points out — is refused with one line naming the file and the entry."""
+    inside = [str(tmp_path / "m" / "p.csv"), "p.csv", "./sub/../p.csv", str(tmp_path / "m" / "." / "p.csv")]
+    (tmp_path / "m" / "sub").mkdir(parents=True)
+    for spec in inside:
+        mech = vloop.load(_profile_case(tmp_path, spec))
+        assert abs(vloop.solve(mech, times=np.array([0.0, 1.0]))["crank.theta"][1] - (math.pi / 2 + 1)) <= 1e-12
+    os.symlink(tmp_path / "m", tmp_path / "link_to_m")  # the folder reached through a link: still inside
+    mech = vloop.load(tmp_path / "link_to_m" / _profile_case(tmp_path, str(tmp_path / "m" / "p.csv")).name)
+    assert mech.drivers[0].profile is not None
+    (tmp_path / "outside.csv").write_text("t,theta\n0,1\n1,2\n")
+    os.symlink(tmp_path / "outside.csv", tmp_path / "m" / "escape.csv")
+    for spec in (str(tmp_path / "outside.csv"), "escape.csv", "../outside.csv"):
+        f = _profile_case(tmp_path, spec)
+        assert main(["run", str(f), "--out", str(tmp_path / "o")]) == 2
+        line = one_clean_line(capsys.readouterr().err)
+        assert line.startswith(f"vloop: error: {f}: [drivers[0] (link 'crank')] profile ")
+        assert "is outside the mechanism file's folder" in line and "(allow others with --allow-external" in line
+        assert not (tmp_path / "o").exists()
 
 
 # ---------------------------------------------------------------- 4. output safety

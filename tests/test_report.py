@@ -75,7 +75,7 @@ def test_report_is_self_contained(built: Built) -> None:
     assert not re.search(r"<(link|script|iframe|object|embed)\b", text, re.I)
     assert "@import" not in text and "url(" not in text
     sources = re.findall(r'\bsrc="([^"]*)"', text)
-    assert sources and all(s.startswith(("data:image/png;base64,", "data:image/gif;base64,")) for s in sources)
+    assert sources and all(s.startswith(("data:image/webp;base64,", "data:image/gif;base64,")) for s in sources)
     hrefs = re.findall(r'\bhref="([^"]*)"', text)
     inside = [h for h in hrefs if h.startswith("#")]
     viewers = [h for h in hrefs if not h.startswith("#")]
@@ -120,7 +120,7 @@ def test_each_section_has_its_loops_and_equations(built: Built) -> None:
         for lp in system.loops:
             assert f"loop {lp.index + 1} ({lp.label})" in sec
         assert str(escape(describe(system))) in sec
-        assert sec.count("data:image/png;base64,") >= 3  # drawing, histories, errors
+        assert sec.count("data:image/webp;base64,") >= 3  # drawing, histories, errors
         assert sec.count("data:image/gif;base64,") == 1
 
 
@@ -224,3 +224,92 @@ def test_screenshot_in_chromium(built: Built, tmp_path: Path) -> None:
     assert fail_bg.sum() > 2000, "the red FAILED banner and cells are not rendered"
     orange = (r > 190) & (g > 110) & (g < 185) & (b < 120)  # slider blocks, in the drawing and the animation
     assert orange.sum() > 200, "the mechanism drawing is not rendered"
+
+
+# ------------------------------------------------------------------ size and layout
+
+
+def test_figures_are_lossless_webp_of_the_palette_image(built: Built) -> None:
+    """Every figure is lossless WebP (the 'VP8L' chunk), and its pixels are exactly those of the figure
+    rendered and reduced to 256 colours the way a palette PNG would hold them (a figure drawn twice)."""
+    import base64
+    import io
+
+    from reports.html import DPI, _new_figure, _picture
+
+    for uri in re.findall(r'src="data:image/webp;base64,([^"]+)"', built.text):
+        data = base64.b64decode(uri)
+        assert data[:4] == b"RIFF" and data[8:16] == b"WEBPVP8L", "not lossless WebP"
+
+    def figure():
+        fig = _new_figure(4.0, 3.0)
+        ax = fig.add_subplot()
+        t = np.linspace(0.0, 1.0, 300)
+        for k in range(10):
+            ax.plot(t, np.sin(6 * t + k), lw=1.5, alpha=0.6 if k % 2 else 1.0, label=f"curve {k}")
+        ax.legend()
+        ax.set_title("ten curves, half of them translucent")
+        return fig
+
+    image = _picture(figure(), "test")
+    got = Image.open(io.BytesIO(base64.b64decode(image.uri.split(",", 1)[1]))).convert("RGB")
+    buf = io.BytesIO()
+    figure().savefig(buf, format="png", dpi=DPI, bbox_inches="tight", pad_inches=0.08, facecolor="white")
+    rgb = Image.open(buf).convert("RGB")
+    want = rgb.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).convert("RGB")
+    assert (image.width, image.height) == got.size == want.size
+    assert np.array_equal(np.asarray(got), np.asarray(want))
+
+
+_LAYOUT_PROBE = """
+<script>
+window.addEventListener("load", function () {
+  var out = [];
+  document.querySelectorAll("table").forEach(function (t, k) {
+    var box = t.parentElement.getBoundingClientRect();
+    t.querySelectorAll("th, td").forEach(function (c) {
+      var r = c.getBoundingClientRect();
+      if (r.width === 0) return;
+      if (r.left < box.left - 0.5 || r.right > box.right + 0.5 || r.right > innerWidth)
+        out.push({table: t.id || t.className || String(k), cell: c.textContent.trim().slice(0, 40), right: r.right,
+                  container: box.right, viewport: innerWidth});
+    });
+  });
+  var p = document.createElement("pre");
+  p.id = "layout-probe";
+  p.textContent = JSON.stringify({tables: document.querySelectorAll("table").length, outside: out, width: innerWidth});
+  document.body.appendChild(p);
+});
+</script>
+"""
+
+
+def test_every_table_cell_fits_at_1400_px(built: Built, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The summary with all five engine columns (the catalog's validation), the longest catalog name and a
+    stopped run's STOPPED badges, and the per-group tables: every cell inside its container and the window."""
+    import copy
+    import dataclasses
+
+    import reports.html as report_html
+
+    wide = copy.deepcopy(built.validation)
+    extra = ("exudyn-kinematic", "exudyn-dynamic")
+    for item in wide.items:
+        if item.error:
+            continue
+        for e in extra:  # the vloop run and its checks under the other engines' names
+            item.runs[e] = dataclasses.replace(item.runs["vloop"], engine=e)
+            item.checks += [dataclasses.replace(c, engine=e) for c in item.checks if c.engine == "pinocchio"]
+    summary = harness.to_summary(wide) | {"engines": [*ENGINES, *extra]}
+    blank = report_html.Image("data:image/webp;base64,", 10, 10, "figure")
+    monkeypatch.setattr(report_html, "_picture", lambda fig, alt, dpi=0: blank)  # layout only: no figure pixels
+    text = report_html.render(wide, summary)
+    assert text.count('<th class="mono" style="text-align:center">') == 5 and "STOPPED".lower() in text
+    page = tmp_path / "wide.html"
+    page.write_text(text.replace("</body>", _LAYOUT_PROBE + "</body>"), encoding="utf-8")
+    run = _browse(page, "--window-size=1400,1000", "--virtual-time-budget=5000", "--dump-dom")
+    m = re.search(r'<pre id="layout-probe">(.*?)</pre>', run.stdout, re.S)
+    assert m, f"the probe did not run (exit {run.returncode}): {run.stderr[-1500:]}"
+    found = json.loads(html.unescape(m.group(1)))
+    assert found["width"] == 1400 and found["tables"] >= 2 + len(NAMES)
+    assert found["outside"] == [], found["outside"][:5]

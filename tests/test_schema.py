@@ -48,8 +48,45 @@ def test_readme_tables_are_the_schema():
     assert block.group(1) == schema.markdown(), "README's key tables differ from vloop/files/schema.py: regenerate them"
 
 
-def _where(section: str) -> tuple[dict, list]:
-    """A valid file and the path of the table that holds the section's keys."""
+WATT_FROM_DIMENSIONS = {  # the keys only a file written from dimensions takes: a ternary by sides, a slider by angle
+    "name": "watt",
+    "joints": {"O2": [0.0, 0.0], "O4": [5.0, 0.0], "O6": [12.0, -4.0], "B": [7.0, 3.0], "D": [9.0, -1.0]},
+    "links": {
+        "ground": {"joints": ["O2", "O4", "O6"], "ground": True},
+        "l2": {"joints": ["O2", "A"], "length": 2.0},
+        "l3": {"joints": ["A", "B"], "length": 6.0},
+        "l4": {"joints": ["O4", "B", "C"], "sides": [4.0, 3.0], "angle": -2.2689280275926285},
+        "l5": {"joints": ["C", "D"], "length": 4.0},
+        "l6": {"joints": ["O6", "D"], "length": 4.0},
+    },
+    "drivers": [{"link": "l2", "theta0": 0.5235987755982988, "omega": 2.0}],
+    "time": {"start": 0.0, "stop": 0.5, "step": 0.1},
+}
+SLIDER_CRANK_FROM_DIMENSIONS = {
+    "name": "scd",
+    "joints": {"O2": [0.0, 0.0], "B": [3.0, 0.5]},
+    "links": {
+        "ground": {"joints": ["O2"], "ground": True},
+        "crank": {"joints": ["O2", "A"], "length": 1.0},
+        "rod": {"joints": ["A", "B"], "length": 3.0},
+    },
+    "sliders": {"blk": {"joint": "B", "guide": "ground", "angle": 0.0, "offset": 0.5}},
+    "drivers": [{"link": "crank", "theta0": 1.0, "omega": 1.0}],
+    "time": {"start": 0.0, "stop": 0.5, "step": 0.1},
+}
+
+
+def _where(section: str, key: str = "") -> tuple[dict, list]:
+    """A valid file and the path of the table that holds the section's keys (``key``: the keys only a file written
+    from dimensions takes have one of those)."""
+    if (section, key) in (("links", "sides"), ("links", "angle")):
+        return copy.deepcopy(WATT_FROM_DIMENSIONS), ["links", "l4"]
+    if (section, key) in (("sliders", "angle"), ("sliders", "offset")):
+        return copy.deepcopy(SLIDER_CRANK_FROM_DIMENSIONS), ["sliders", "blk"]
+    if (section, key) == ("points", "local"):  # instead of 'at'
+        data = copy.deepcopy(SLIDER_CRANK)
+        del data["points"]["P"]["at"]
+        return data, ["points", "P"]
     if section in ("file",):
         return copy.deepcopy(BASE), []
     if section == "links":
@@ -83,7 +120,7 @@ def _table(data: dict, path: list) -> dict:
     ids=lambda v: v if isinstance(v, str) else v.name,
 )
 def test_every_documented_key_with_an_example_is_accepted(section, key):
-    data, path = _where(section)
+    data, path = _where(section, key.name)
     _table(data, path)[key.name] = copy.deepcopy(key.example)
     if section == "time" and key.name == "times":
         _table(data, path).clear()

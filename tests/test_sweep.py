@@ -48,6 +48,8 @@ def test_a_crank_that_turns_fully_is_swept_over_one_turn():
 def test_cli_sweep(tmp_path, capsys):
     assert main(["run", str(PAST_LIMIT), "--sweep", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "θ_l2 rocks between its limits -2.429420866 and 2.429420866" in out
+    lim = 2.429420866  # ±139.1956°, printed as angles in [0°, 360°) with the counter-clockwise travel between them
+    assert f"rocks between the limits of θ_l2 from {2 * math.pi - lim:.10g} rad (220.8044°) counter-clockwise " in out
+    assert f"to {lim:.10g} rad (139.1956°), a travel of 278.391" in out
     rows = np.loadtxt(tmp_path / "results.csv", delimiter=",", skiprows=1)
     assert rows.shape[0] > 800 and np.all(np.isfinite(rows))

@@ -354,7 +354,133 @@ def test_nongrashof_toggles_are_the_limit_positions() -> None:
     cyc = vloop.teaching.cycle(mech)
     assert not cyc.full_turn
     assert np.allclose([tg.input for tg in cyc.toggles], [-lim, lim], atol=1e-9, rtol=0)
-    assert all(tg.dyad == "B" and tg.folded < 1e-5 for tg in cyc.toggles)  # μ → 0 as √(distance to the limit)
+    assert all(tg.dyad == "B" and tg.folded < 1e-9 for tg in cyc.toggles)  # μ = 0 at the toggle
+
+
+def test_triple_rocker_swing_and_transmission_angle_at_the_located_limits() -> None:
+    """The non-Grashof four-bar (a = 3, b = 4, c = 4.5, d = 6): the rocker's swing runs from its dead centre
+    (crank and coupler in line, |O2B| = a + b) to the toggle at the lower limit (coupler and rocker in line,
+    |AO4| = b + c), by the law of cosines: θ4 = π − γ, cos γ = (d² + c² − (a + b)²)/(2dc), and θ4 = π + φ,
+    cos φ = (d² + (b + c)² − a²)/(2d(b + c)): swing φ + γ = 95.6189°. Taken one grid step short of the toggle
+    it was 93.2039°, and the minimum transmission angle 5.3890° (0° at the toggles). The limits are located to
+    1e-12 of the range and the toggle's configuration is exact to that (measured: swing 1.1e-12 rad)."""
+    a, b, c, d = 3.0, 4.0, 4.5, 6.0
+    gamma = math.acos((d * d + c * c - (a + b) ** 2) / (2 * d * c))
+    phi = math.acos((d * d + (b + c) ** 2 - a * a) / (2 * d * (b + c)))
+    lim = math.acos((a * a + d * d - (b + c) ** 2) / (2 * a * d))
+    for stem in ("fourbar_nongrashof_past_limit", "fourbar_nongrashof_rocking"):
+        cyc = vloop.teaching.cycle(load(stem))
+        assert abs(cyc.outputs["l4"].travel - (phi + gamma)) <= 1e-9, stem
+        assert abs(vloop.stroke(load(stem), "l4") - (phi + gamma)) <= 1e-9
+        (mu,) = cyc.dyads
+        assert mu.min <= 1e-9 and abs(abs(mu.min_input) - lim) <= 1e-9  # μ = 0 at a toggle, not 5.3890°
+        assert all(tg.folded <= 1e-9 for tg in cyc.toggles)
+        assert abs(mu.max - math.pi / 2) <= 1e-12  # the coupler and rocker square to each other inside the range
+        cos_mu = (b * b + c * c - a * a - d * d + 2 * a * d * math.cos(mu.max_input)) / (2 * b * c)
+        assert abs(cos_mu) <= 1e-12  # ... where the law of cosines gives μ = 90°
+
+
+@pytest.mark.parametrize(
+    "stem", ["fourbar_textbook_example", "fourbar_crank_rocker_open", "fourbar_crank_rocker_crossed"]
+)
+def test_crank_rocker_transmission_angle_extremes_with_crank_and_ground_in_line(stem: str) -> None:
+    """A crank-rocker's transmission angle is extreme with crank and ground in line (cos μ is linear in cos θ2):
+    at θ2 = 0, cos μ = (b² + c² − (d − a)²)/(2bc), at θ2 = π, (b² + c² − (d + a)²)/(2bc); folded to [0, 90°], its
+    peak is 90° where cos μ = 0 if μ passes 90°, at cos θ2 = (a² + d² − b² − c²)/(2ad)."""
+    mech = load(stem)
+    bodies = mech.bodies()
+    a, b, c = (bodies[n].local[j][0] for n, j in (("l2", "A"), ("l3", "B"), ("l4", "B")))
+    d = math.dist(mech.joints["O2"], mech.joints["O4"])
+    ends = {
+        x: math.acos((b * b + c * c - (d - a * math.cos(x)) ** 2 - (a * math.sin(x)) ** 2) / (2 * b * c))
+        for x in (0.0, math.pi)
+    }
+    folded = {x: min(m, math.pi - m) for x, m in ends.items()}
+    (mu,) = vloop.teaching.cycle(mech).dyads
+    lo = min(folded, key=folded.get)
+    assert abs(mu.min - folded[lo]) <= 1e-12 and abs(math.remainder(mu.min_input - lo, TWO_PI)) <= 1e-9
+    if (ends[0.0] - math.pi / 2) * (ends[math.pi] - math.pi / 2) < 0:
+        square = math.acos((a * a + d * d - b * b - c * c) / (2 * a * d))  # ± this
+        assert abs(mu.max - math.pi / 2) <= 1e-12
+        assert min(abs(math.remainder(mu.max_input - x, TWO_PI)) for x in (square, -square)) <= 1e-9
+    else:
+        hi = max(folded, key=folded.get)
+        assert abs(mu.max - folded[hi]) <= 1e-12 and abs(math.remainder(mu.max_input - hi, TWO_PI)) <= 1e-9
+
+
+def test_slider_crank_transmission_angle_extremes() -> None:
+    """Offset slider-crank (r = 2, l = 6, e = 1): the rod leans by asin((r·sin θ2 − e)/l), most at θ2 = 270°
+    (μ = 90° − asin((r + e)/l) = 60°) and not at all where r·sin θ2 = e (μ = 90°, θ2 = 30° or 150°)."""
+    r, ell, e = 2.0, 6.0, 1.0
+    (mu,) = vloop.teaching.cycle(load("slider_crank_offset")).dyads
+    assert abs(mu.min - (math.pi / 2 - math.asin((r + e) / ell))) <= 1e-12
+    assert abs(math.remainder(mu.min_input - 1.5 * math.pi, TWO_PI)) <= 1e-9
+    assert abs(mu.max - math.pi / 2) <= 1e-12
+    assert min(abs(math.remainder(mu.max_input - x, TWO_PI)) for x in (math.pi / 6, 5 * math.pi / 6)) <= 1e-9
+
+
+def mirrored(mech: vloop.Mechanism, reverse: bool = True) -> vloop.Mechanism:
+    """The mechanism's mirror image in the x-axis (y → −y, slider axes too), the crank turning the other way."""
+    data = vloop.mechanism.to_dict(mech)
+    data["joints"] = {j: [x, -y] for j, (x, y) in data["joints"].items()}
+    for sl in data.get("sliders", {}).values():
+        sl["axis"] = [sl["axis"][0], -sl["axis"][1]]
+    for p in data.get("points", {}).values():
+        p["at"] = [p["at"][0], -p["at"][1]]
+    for dr in data["drivers"]:
+        dr.pop("theta0", None)
+        for k in ("omega", "alpha"):
+            if k in dr and reverse:
+                dr[k] = -dr[k]
+    return vloop.from_dict(data, source=f"mirror of {mech.name}")
+
+
+def reversed_crank(mech: vloop.Mechanism) -> vloop.Mechanism:
+    d = mech.drivers[0]
+    return dataclasses.replace(mech, drivers=(dataclasses.replace(d, v0=-d.v0, a0=-d.a0),))
+
+
+def test_slow_stroke_sense_follows_the_crank_sense() -> None:
+    """Offset slider-crank (r = 2, l = 6, e = 1, block on y = e): extended dead centre (s max) at
+    θ_e = asin(e/(l + r)), folded (s min) at θ_f = π + asin(e/(l − r)); counter-clockwise from θ_e to θ_f is π + β,
+    β = asin(e/(l − r)) − asin(e/(l + r)) > 0. Crank CCW (ω > 0): the stroke with s decreasing takes π + β, the slow
+    one. Crank CW (ω < 0): it takes π − β, so the slow stroke is s increasing. The mirror image (e → −e) driven
+    the other way moves as the original does: slow stroke s decreasing."""
+    r, ell, e = 2.0, 6.0, 1.0
+    beta = math.asin(e / (ell - r)) - math.asin(e / (ell + r))
+    ratio = (math.pi + beta) / (math.pi - beta)
+    mech = load("slider_crank_offset")
+    cases = {"ccw": (mech, -1), "cw": (reversed_crank(mech), +1), "mirror, cw": (mirrored(mech), -1)}
+    cases["mirror, ccw"] = (mirrored(mech, reverse=False), +1)
+    for what, (m, sense) in cases.items():
+        out = vloop.teaching.cycle(m).outputs["l4"]
+        assert out.slow_sense == sense, what
+        assert abs(out.time_ratio - ratio) <= 1e-12, what
+    lines = report.info_lines(reversed_crank(mech))
+    assert any(f"time ratio {ratio:.10g} (slow stroke with l4 increasing)" in line for line in lines), lines
+
+
+def test_mirror_images_have_equal_time_ratios() -> None:
+    """The eight-bar's sliders l6 and l8 are mirror images: both rest where l4 does (crank and coupler in line,
+    θ2 = π and 2π), where the rods also stand upright — the slider's rate vanishes like the cube of the distance
+    there, and taken by its own sign l8's rest came out 2.4e-8 rad off (time ratio 1.000000015). Each time
+    ratio is 1 to round-off; and a crank-rocker and its mirror image (crank turning the other way) give the same
+    time ratio, (π + α)/(π − α) with α = Δ − π, Δ the crank's turn between the rocker's dead centres."""
+    cyc = vloop.teaching.cycle(load("eightbar"))
+    for name in ("l4", "l6", "l8"):
+        assert abs(cyc.outputs[name].time_ratio - 1.0) <= 1e-12, name
+        assert [abs(math.remainder(x.input, math.pi)) <= 1e-12 for x in cyc.outputs[name].rests] == [True, True]
+    assert [x.input for x in cyc.outputs["l6"].rests] == [x.input for x in cyc.outputs["l8"].rests]
+    mech = load("fourbar_crank_rocker_open")
+    bodies = mech.bodies()
+    a, b, c = (bodies[n].local[j][0] for n, j in (("l2", "A"), ("l3", "B"), ("l4", "B")))
+    d = math.dist(mech.joints["O2"], mech.joints["O4"])
+    ext = math.acos((d * d + (a + b) ** 2 - c * c) / (2 * d * (a + b)))  # |O2B| = a + b, B above the ground line
+    fold = math.pi + math.acos((d * d + (b - a) ** 2 - c * c) / (2 * d * (b - a)))  # |O2B| = b − a
+    alpha = abs((fold - ext) - math.pi)
+    want = (math.pi + alpha) / (math.pi - alpha)
+    got = [vloop.time_ratio(m, "l4") for m in (mech, mirrored(mech))]
+    assert abs(got[0] - want) <= 1e-12 and abs(got[1] - got[0]) <= 1e-12
 
 
 # ---------------------------------------------------------------- velocity ratio, mechanical advantage
@@ -430,3 +556,65 @@ def test_run_extras_info_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert "Kennedy's theorem reaches all 15 pairs" in text
     assert vloop_main(["run", str(path), "--out", str(tmp_path / "bad"), "--ma", "l6,zz"]) == 2
     assert "unknown output 'zz'" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
+def test_plain_import_reaches_the_teaching_subpackage_on_first_use() -> None:
+    """README: ``import vloop`` then ``vloop.teaching.cycle(mech)``, in a fresh interpreter; ``import vloop`` alone
+    does not import the teaching subpackage (it stays light)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, vloop\n"
+        "light = not any(m.startswith('vloop.teaching') for m in sys.modules)\n"
+        f"mech = vloop.load({str(MECH / 'slider_crank_offset.toml')!r})\n"
+        "print(light, repr(vloop.teaching.cycle(mech).outputs['l4'].time_ratio))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    r, ell, e = 2.0, 6.0, 1.0  # the offset slider-crank's closed form (test_offset_slider_crank_stroke_and_time_ratio)
+    beta = math.asin(e / (ell - r)) - math.asin(e / (ell + r))
+    assert out[0] == "True"
+    assert abs(float(out[1]) - (math.pi + beta) / (math.pi - beta)) <= 1e-9
+    with pytest.raises(AttributeError, match="no attribute 'no_such_part'"):
+        vloop.no_such_part  # noqa: B018
+
+
+ANGLE_PRINTED = r"(-?\d+(?:\.\d+)?(?:e[-+]?\d+)?) rad \((-?\d+\.\d+)°\)"
+
+
+def test_every_angle_the_command_line_prints_is_in_zero_to_360(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Angles are printed in [0°, 360°) (rad in [0, 2π)), whatever turn the input starts or ends on: the textbook
+    four-bar starts at θ2 = 40°, so its dead centres are found at 40° + travel (the extended one at 384.1468° before
+    wrapping); a run past the limit names the input; ``run --sweep`` prints the limits of the rocking input."""
+    import re
+
+    mech = load("fourbar_textbook_example")
+    a, b, c, d = 40.0, 120.0, 80.0, 100.0  # crank and coupler in line, extended: |O2B| = a + b, B above O2O4
+    extended = math.acos((d * d + (a + b) ** 2 - c * c) / (2 * d * (a + b)))
+    texts = []
+    for args in (
+        ["info", str(MECH / "fourbar_textbook_example.toml")],
+        ["info", str(MECH / "fourbar_nongrashof_past_limit.toml")],
+        ["run", "--sweep", str(MECH / "fourbar_nongrashof_past_limit.toml"), "--out", str(tmp_path / "sweep")],
+        ["run", str(MECH / "fourbar_nongrashof_past_limit.toml"), "--out", str(tmp_path / "past")],
+    ):
+        vloop_main(args)
+        captured = capsys.readouterr()
+        texts.append(captured.out + captured.err)
+    printed = [(r, float(g)) for text in texts for r, g in re.findall(ANGLE_PRINTED, text)]
+    assert len(printed) >= 20
+    for text, deg in printed:
+        rad = float(text)
+        assert 0.0 <= rad < TWO_PI and 0.0 <= deg < 360.0, (rad, deg)
+        digits = len(text.split("e")[0].replace(".", "").lstrip("0")) or 1  # rad: half a unit of its last digit
+        last = 0.5 * 10.0 ** (math.floor(math.log10(rad)) - digits + 1) if rad else 0.0
+        assert abs(math.degrees(rad) - deg) <= 0.5e-4 + math.degrees(last), text  # one angle, printed twice
+    rests = re.findall(r"dead centre at θ_l2 = (\S+) rad \((\S+)°\): l4 at rest", texts[0])
+    rest = [r for r in rests if abs(float(r[0]) - extended) <= 1e-9]  # 24.1468°, was 384.1468°
+    assert len(rests) == 2 and len(rest) == 1 and rest[0][1] == "24.1468"
+    assert mech.drivers[0].value_text(2 * math.pi + extended, "mm") == f"θ_l2 = {rest[0][0]} rad (24.1468°)"
+    lim = math.acos((3.0**2 + 6.0**2 - 8.5**2) / (2 * 3.0 * 6.0))  # the non-Grashof input's limits, ±139.1956°
+    assert f"from {TWO_PI - lim:.10g} rad (220.8044°) counter-clockwise to {lim:.10g} rad (139.1956°)" in texts[2]
+    assert vloop.model.angle_text(-1e-12) == "0 rad (0.0000°)"  # within the printed precision of a full turn

@@ -9,7 +9,7 @@ import jsonschema
 import pytest
 
 import vloop
-from tests.conftest import MECHANISMS
+from tests.conftest import MECHANISMS, plant
 from validators import harness, nightly
 from vloop.cli import main
 
@@ -67,18 +67,10 @@ def test_perturbed_engine_input_fails_naming_mechanism_engine_quantity_time():
 
 
 def test_failing_engine_does_not_stop_the_others(tmp_path, monkeypatch, capsys):
-    real = harness._engine_fn
+    def boom(mech, res):
+        raise RuntimeError("closed form exploded")
 
-    def broken(name):
-        if name == "analytic":
-
-            def boom(m):
-                raise RuntimeError("closed form exploded")
-
-            return boom
-        return real(name)
-
-    monkeypatch.setattr(harness, "_engine_fn", broken)
+    plant(monkeypatch, "analytic", boom)
     code = main(
         [
             "validate",
@@ -115,21 +107,12 @@ def test_nightly_flags_an_injected_regression(validated, tmp_path, monkeypatch, 
     yesterday = root / "2026-11-20"
     yesterday.mkdir(parents=True)
     (yesterday / "summary.json").write_text(json.dumps(summary))
-    real = harness._engine_fn
 
-    def drifting(name):
-        fn = real(name)
-        if name != "pinocchio":
-            return fn
+    def drifting(mech, res):
+        res.columns["l3.alpha"] = res.columns["l3.alpha"] * (1 + 1e-10)
+        return res
 
-        def run(m):
-            res = fn(m)
-            res.columns["l3.alpha"] = res.columns["l3.alpha"] * (1 + 1e-10)
-            return res
-
-        return run
-
-    monkeypatch.setattr(harness, "_engine_fn", drifting)
+    plant(monkeypatch, "pinocchio", drifting)
     code = main(
         [
             "validate",

@@ -30,7 +30,7 @@ import vloop
 from vloop.cli import main
 from vloop.method.equations import describe
 from vloop.views.geometry import body_poses, loop_chains
-from vloop.views.view import ViewError, build_payload, render, solve_for_view, unpack, write_view
+from vloop.views.view import ViewError, build_payload, inline, render, solve_for_view, unpack, write_view
 
 from .conftest import MECHANISMS, mechanism_files
 
@@ -160,10 +160,35 @@ def test_page_is_deterministic_and_offline(eightbar) -> None:
     mech, result = eightbar
     page = render(mech, result, forces=FakeForces(result))
     assert page == render(mech, result, forces=FakeForces(result))
-    assert "default-src 'none'" in page and "script-src 'sha256-" in page
-    scrubbed = page.replace('"http://www.w3.org/2000/svg"', "")  # the SVG namespace is a name, not a request
-    assert not re.search(r"https?://|//cdn|@import|url\(", scrubbed)
+    assert _offline_problems(page) == []  # a CSP; the SVG namespace is a name, not a request
     assert page.count("<script") == 2  # the data (not executed) and the viewer
+
+
+def _offline_problems(page: str) -> list[str]:
+    """What makes a page not offline: a missing CSP, an address, an import or a url() (the SVG namespace is a name)."""
+    problems = [] if "default-src 'none'" in page and "script-src 'sha256-" in page else ["no CSP"]
+    scrubbed = page.replace('"http://www.w3.org/2000/svg"', "")
+    return problems + re.findall(r"https?://|//cdn|@import|url\(", scrubbed)
+
+
+def test_inline_viewer_is_the_page_in_a_sandboxed_frame(eightbar) -> None:
+    """For a notebook: the same page, whole, in an iframe's srcdoc, sandboxed to scripts only (no same origin)."""
+    import html as html_module
+
+    mech, result = eightbar
+    cell = inline(mech, result)._repr_html_()
+    frame = re.fullmatch(
+        r'<iframe title="vloop viewer" sandbox="allow-scripts" style="[^"]*" srcdoc="([^"]*)"></iframe>', cell
+    )
+    assert frame is not None and "allow-same-origin" not in cell
+    page = html_module.unescape(frame.group(1))
+    assert page == render(mech, result)
+    assert _offline_problems(page) == []  # the same check as every vloop view page
+    assert not re.search(r"https?://|//cdn|@import|url\(", cell.replace(frame.group(1), ""))  # and its frame
+    with pytest.raises(ViewError, match="height must be"):
+        inline(mech, result, height=10**400)
+    stopped = inline(vloop.load(STOPPED))  # solved here: the page shows where it stopped
+    assert "cannot assemble at t = 1.73 s" in html_module.unescape(stopped._repr_html_())
 
 
 def test_hostile_title_and_names_stay_text(tmp_path: Path) -> None:
@@ -281,18 +306,61 @@ def test_view_command_opens_the_browser_only_when_asked(tmp_path: Path, monkeypa
     assert opened == [(tmp_path / "eightbar.html").resolve().as_uri()]
 
 
-def test_too_many_samples_refused_before_solving(tmp_path: Path, capsys) -> None:
-    from vloop.views.view import MAX_SAMPLES
+def _chain(tmp_path: Path, dyads: int, samples: int) -> Path:
+    """A chain of ``dyads`` RRR dyads on a crank (benchmarks/bench_compile.py) over ``samples`` samples."""
+    import sys as _sys
 
-    text = EIGHTBAR.read_text(encoding="utf-8").replace("step = 0.05", f"step = {2.35 / (MAX_SAMPLES + 5)!r}")
-    big = tmp_path / "big.toml"
-    big.write_text(text, encoding="utf-8")
-    assert main(["view", str(big), "--out", str(tmp_path)]) == 2
-    assert f"the viewer takes at most {MAX_SAMPLES}" in capsys.readouterr().err
-    mech = vloop.load(EIGHTBAR)
-    many = vloop.Result("eightbar", "vloop", np.zeros(MAX_SAMPLES + 1), {})
-    with pytest.raises(ViewError, match="samples; the viewer takes at most"):
-        build_payload(mech, many)
+    _sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from bench_compile import dyad_chain
+
+    data = vloop.mechanism.to_dict(dyad_chain(dyads))
+    data["time"] = {"start": 0.0, "stop": 1.0, "step": 1.0 / (samples - 1)}
+    path = tmp_path / "chain.toml"
+    vloop.save(vloop.from_dict(data), path)
+    return path
+
+
+def test_a_long_runs_page_is_bounded_by_its_bytes(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A page holds at most MAX_PAGE_BYTES of sample data (worst case 8·4/3 bytes a value): a longer run is solved
+    at every sample and the page carries every k-th one and the last, with the exact values of those samples
+    (a direct solve at the same instants agrees to 1e-12 of each column's peak) and a note that says so."""
+    from vloop.views import view
+
+    monkeypatch.setattr(view, "MAX_PAGE_BYTES", 1 << 20)
+    f = _chain(tmp_path, 5, 20_001)
+    assert main(["view", str(f), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    page = tmp_path / "o" / "chain5.html"
+    data = _data_of(page)
+    thin = data["thinned"]
+    n_cols = len(data["data"]["columns"])
+    assert thin["of"] == 20_001 and thin["every"] > 1
+    assert thin["shown"] * n_cols * view.VALUE_BYTES <= 1 << 20  # the bound, from the estimate's own terms
+    assert f"20001 samples (the page carries {thin['shown']})" in out
+    cols = unpack(data["data"])
+    rows = view.page_rows(20_001, thin["every"])
+    assert len(cols["t"]) == thin["shown"] == len(rows) and rows[-1] == 20_000
+    mech = vloop.load(f)
+    assert np.array_equal(cols["t"], mech.times[rows])
+    direct = vloop.solve(mech, times=mech.times[rows])
+    for name, ref in direct.columns.items():
+        assert np.max(np.abs(cols[name] - ref)) <= 1e-12 * max(np.max(np.abs(ref)), 1.0), name
+    assert "carries" in (Path(view.__file__).parent / "viewer" / "viewer.js").read_text()
+    small = view.build_payload(vloop.load(EIGHTBAR), vloop.solve(vloop.load(EIGHTBAR)))
+    assert small["thinned"] is None  # a page that fits carries every sample
+
+
+@pytest.mark.slow
+def test_a_41_link_chain_at_100000_samples_gives_a_bounded_page(tmp_path: Path, capsys) -> None:
+    """The case that wrote a 137 MiB page: now at most MAX_PAGE_BYTES of data plus the page's fixed part."""
+    from vloop.views import view
+
+    f = _chain(tmp_path, 20, 100_000)
+    assert len(vloop.load(f).links) == 42  # 41 moving links and the ground
+    assert main(["view", str(f), "--out", str(tmp_path / "o")]) == 0
+    size = (tmp_path / "o" / "chain20.html").stat().st_size
+    assert size <= view.MAX_PAGE_BYTES + (2 << 20), size
+    assert _data_of(tmp_path / "o" / "chain20.html")["thinned"]["of"] == 100_000
 
 
 def _data_of(path: Path) -> dict:
@@ -688,6 +756,209 @@ def test_pages_with_no_loop_or_a_single_sample(open_page, tmp_path: Path) -> Non
         assert o.requests == [] and o.problems == [], o.problems
 
 
+def test_inline_viewer_runs_in_its_sandboxed_frame(browser, eightbar, tmp_path: Path) -> None:
+    """A notebook-like host page holding the inline viewer: the page inside draws the joints where the Result has
+    them, with no error and no request beyond the host file."""
+    mech, result = eightbar
+    host = tmp_path / "notebook.html"
+    host.write_text(f"<!DOCTYPE html><html><body><h1>cell</h1>{inline(mech, result)._repr_html_()}</body></html>")
+    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = ctx.new_page()
+    requests, problems = [], []
+
+    def route(r) -> None:
+        if r.request.url in (host.resolve().as_uri(), "about:srcdoc"):
+            r.continue_()
+        else:
+            requests.append(r.request.url)
+            r.abort()
+
+    ctx.route("**/*", route)
+    page.on("console", lambda m: m.type in ("error", "warning") and problems.append(f"{m.type}: {m.text}"))
+    page.on("pageerror", lambda e: problems.append(f"pageerror: {e}"))
+    page.goto(host.resolve().as_uri())
+    viewer = page.frame_locator("iframe")
+    viewer.locator("body[data-ready]").wait_for(state="attached", timeout=20_000)
+    assert viewer.locator("circle[data-joint]").count() == len(mech.tracked_points)
+    frame = next(f for f in page.frames if f is not page.main_frame)
+    x, y = (float(frame.locator('circle[data-joint="B"]').get_attribute(a)) for a in ("cx", "cy"))
+    assert math.hypot(x - result["B.x"][0], -y - result["B.y"][0]) <= 1e-9 * mech.scale
+    ctx.close()
+    assert requests == [] and problems == [], (requests, problems)
+
+
 def test_readme_screenshot_is_committed() -> None:
     shot = Path(__file__).resolve().parents[1] / "docs" / "viewer.png"
     assert shot.is_file() and shot.stat().st_size < 200_000
+
+
+# ------------------------------------------------------------------ what the picture shows
+
+
+def _screen(page, x: float, y: float) -> tuple[float, float]:
+    """A model point's position on the page [CSS px], through the drawing's own transform."""
+    return tuple(
+        page.evaluate(
+            "([x, y]) => { const p = new DOMPoint(x, -y).matrixTransform(document.getElementById('view').getScreenCTM());"
+            " return [p.x, p.y]; }",
+            [x, y],
+        )
+    )
+
+
+def _segment_distance(p: complex, a: complex, b: complex) -> float:
+    ab = b - a
+    s = 0.0 if ab == 0 else min(1.0, max(0.0, ((p - a) * ab.conjugate()).real / abs(ab) ** 2))
+    return abs(p - (a + s * ab))
+
+
+def _path_point_inside_a_plate(mech, result, clearance: float) -> tuple[int, str, complex]:
+    """(sample shown, plate, a sample of some point's path) with the path sample inside the plate drawn at
+    the shown sample, ``clearance`` away from the plate's edges, every other link's bar and every joint."""
+    z = {p: result[f"{p}.x"] + 1j * result[f"{p}.y"] for p in mech.tracked_points}
+    plates = [n for n, lk in mech.links.items() if not lk.ground and len(lk.joints) == 3]
+    for i in range(0, len(result), 10):
+        for plate in plates:
+            a, b, c = (z[j][i] for j in mech.links[plate].joints)
+            bars = [[z[j][i] for j in lk.joints] for n, lk in mech.links.items() if not lk.ground and n != plate]
+            for path in z.values():
+                for q in path:
+                    w = np.array([((b - a) * (q - a).conjugate()).imag, ((c - b) * (q - b).conjugate()).imag,
+                                  ((a - c) * (q - c).conjugate()).imag])  # fmt: skip
+                    inside = np.all(w > 0) or np.all(w < 0)
+                    edges = min(_segment_distance(q, u, v) for u, v in ((a, b), (b, c), (c, a)))
+                    others = min(_segment_distance(q, s[0], s[-1]) for s in bars)
+                    joints = min(abs(q - zz[i]) for zz in z.values())
+                    if inside and min(edges, others, joints) > clearance:
+                        return i, plate, q
+    raise AssertionError("no path sample lies inside a plate")
+
+
+def test_paths_are_drawn_over_the_plates(open_page, tmp_path: Path) -> None:
+    """Stephenson III: the coupler curves run across the ternary coupler l3 (in the catalog's Watt II they
+    stay outside its rocker plate); a path's pixels inside the plate are the path's colour (#009E73 at
+    75 % over the plate), not the plate's (#c9d6e8)."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    mech = vloop.load(MECHANISMS / "sixbar_stephenson3.toml")
+    result = vloop.solve(mech)
+    o = open_page(write_view(mech, result, tmp_path / "stephenson3.html"))
+    page = o.page
+    for layer in ("loops", "labels"):  # nothing else over the paths
+        page.click(f'[data-overlay="{layer}"]')
+    page.click('[data-overlay="paths"]')
+    order = page.evaluate("[...document.querySelectorAll('#view > g')].map((g) => g.dataset.layer)")
+    assert order.index("paths") > max(order.index("bodies"), order.index("blocks"))
+    assert order.index("paths") < order.index("pins")
+    upp = page.evaluate("vloopViewer.unitsPerPixel")
+    i, plate, q = _path_point_inside_a_plate(mech, result, clearance=14 * upp)
+    page.evaluate(f"vloopViewer.setIndex({i})")
+    x, y = _screen(page, q.real, q.imag)
+    shot = Image.open(BytesIO(page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 5, "height": 5})))
+    px = np.asarray(shot.convert("RGB"), float).reshape(-1, 3)
+    greenest = px[np.argmax(px[:, 1] - px[:, 0])]
+    assert greenest[1] - greenest[0] > 80 and greenest[0] < 120, f"{plate} hides the path at {q}: {greenest}"
+    assert o.requests == [] and o.problems == []
+
+
+def _overlap(a: dict, b: dict) -> bool:
+    return (
+        a["x"] < b["x"] + b["width"]
+        and b["x"] < a["x"] + a["width"]
+        and a["y"] < b["y"] + b["height"]
+        and b["y"] < a["y"] + a["height"]
+    )
+
+
+def test_scale_legend_never_covers_the_drawing(open_page, eightbar_page) -> None:
+    o = open_page(eightbar_page)
+    page = o.page
+    for layer in ("vel", "acc", "forces"):
+        page.click(f'[data-overlay="{layer}"]')
+    for large in (False, True):
+        if large:
+            page.click("#large")
+        page.wait_for_timeout(100)  # the resize observer's frame
+        legend = page.locator("#scale-legend").bounding_box()
+        view = page.locator("#view").bounding_box()
+        wrap = page.locator("#view-wrap").bounding_box()
+        assert page.locator("#scale-legend .row").count() == 3
+        assert not _overlap(legend, view), (large, legend, view)
+        assert wrap["y"] <= legend["y"] and legend["y"] + legend["height"] <= wrap["y"] + wrap["height"] + 0.5
+        for layer in ("bodies", "pins", "vel", "acc", "forces", "labels"):  # the drawing, as rendered
+            box = page.locator(f'g[data-layer="{layer}"]').bounding_box()
+            assert box is not None and not _overlap(legend, box), (large, layer)
+        # the sizes meant to stay constant on screen follow the drawing's new size
+        upp = page.evaluate("vloopViewer.unitsPerPixel")
+        vb = [float(v) for v in page.locator("#view").get_attribute("viewBox").split()]
+        assert upp == pytest.approx(max(vb[2] / view["width"], vb[3] / view["height"]), rel=1e-3)
+    assert o.requests == [] and o.problems == []
+
+
+def _kind(col: str) -> str:
+    q = col.rsplit(".", 1)[-1]
+    return {"x": "length", "y": "length", "s": "length", "vx": "velocity", "vy": "velocity", "v": "velocity",
+            "ax": "acceleration", "ay": "acceleration", "a": "acceleration"}.get(q, q)  # fmt: skip
+
+
+def test_numbers_read_against_their_scale_on_one_line(open_page, eightbar_page, eightbar) -> None:
+    """Every value: within 1e-6 of its kind's peak over the run (7 digits), round-off (≤ 1e-12 of that peak)
+    shown as 0, at most 7 significant digits, no exponent for a value above 1e-6 of the peak, one line.
+    At t = 0 the paper's eight-bar has θ2 = 90°: A = (0, 3) exactly, A moves along x, and the coupler l3
+    translates (A and B both move along x), so A.x, A.vy, A.ax and ω3 are 0 by hand."""
+    result = eightbar[1]
+    peaks: dict[str, float] = {}
+    for col, v in result.columns.items():
+        peaks[_kind(col)] = max(peaks.get(_kind(col), 0.0), float(np.abs(v).max()))
+    o = open_page(eightbar_page)
+    page = o.page
+    for large in (False, True):
+        if large:
+            page.click("#large")
+        for k in (0, 17, 33):
+            page.evaluate(f"vloopViewer.setIndex({k})")
+            cells = page.evaluate(
+                """() => [...document.querySelectorAll('#numbers td.num')].map((td) => {
+                  const r = document.createRange(); r.selectNodeContents(td);
+                  return {col: td.dataset.col, text: td.textContent, value: +td.dataset.value, lines: r.getClientRects().length,
+                          overflow: td.scrollWidth - td.clientWidth};
+                })"""
+            )
+            for c in cells:
+                assert c["lines"] == 1 and c["overflow"] <= 0, c
+                col = c["col"]
+                if col.startswith(("force:", "health.")):
+                    continue
+                shown, value = float(c["text"]), c["value"]
+                degrees = value != float(result[col][k])  # the θ [°] column: the same column in degrees
+                peak = peaks[_kind(col)] * (180 / math.pi if degrees else 1.0)
+                assert abs(shown - value) <= 1e-6 * peak, c
+                if abs(value) <= 1e-12 * peak:
+                    assert c["text"] == "0", c
+                digits = re.sub(r"e.*$", "", c["text"]).lstrip("-").replace(".", "").lstrip("0")
+                assert len(digits) <= 7, c
+                if abs(value) > 1e-6 * peak:
+                    assert "e" not in c["text"], c
+    page.evaluate("vloopViewer.setIndex(0)")
+    for col in ("A.x", "A.vy", "A.ax", "l3.omega"):
+        assert abs(result[col][0]) < 1e-13 * peaks[_kind(col)]  # round-off, not a value
+        assert page.locator(f'td[data-col="{col}"]').first.text_content() == "0", col
+    assert o.requests == [] and o.problems == []
+
+
+def test_coincident_plot_series_are_dashed_and_named(open_page, eightbar_page, eightbar) -> None:
+    result = eightbar[1]
+    assert np.abs(result["l6.s"] - result["l8.s"]).max() < 1e-9  # mirror images (paper, Fig. 1)
+    o = open_page(eightbar_page)
+    page = o.page
+    toggle = page.locator('[data-series-toggle="l8"]')
+    assert toggle.get_attribute("data-coincides") == "l6" and "l8 (= l6)" in toggle.text_content()
+    assert page.locator('[data-series-toggle="l4"]').get_attribute("data-coincides") is None
+    for q in ("s", "v", "a"):
+        plot = page.locator(f'[data-plot="Sliders:{q}"]')
+        dash = {n: plot.locator(f'path[data-series="{n}"]').get_attribute("stroke-dasharray") for n in ("l6", "l8")}
+        assert dash["l6"] is None and dash["l8"], dash
+    assert page.locator('[data-series-toggle="l7"]').get_attribute("data-coincides") is None  # θ7 ≠ θ5
+    assert o.requests == [] and o.problems == []

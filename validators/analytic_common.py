@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from vloop.drivers import evaluate
-from vloop.mechanism import Body, Driver, Mechanism
+from vloop.mechanism import Body, Driver, Mechanism, angle_text
 from vloop.result import Result
 
 ENGINE = "analytic"
@@ -197,7 +197,7 @@ def check_assembly(
     user_t = t if inserted is None else np.delete(t, inserted)
     if inserted is not None and k == inserted:
         raise LimitPositionError(
-            f"{mech.name}: cannot be assembled at t = 0 (driver θ = {theta_in[k]:.10g} rad): {what(k)}",
+            f"{mech.name}: cannot be assembled at t = 0 (driver θ = {angle_text(theta_in[k])}): {what(k)}",
             sample=-1,
             time=0.0,
             input_value=float(theta_in[k]),
@@ -206,7 +206,7 @@ def check_assembly(
     i = requested_index(k, inserted)
     partial = resolve(user_t[:i]) if i > 0 else None
     raise LimitPositionError(
-        f"{mech.name}: no assembly at sample {i} (t = {user_t[i]:.10g} s, driver θ = {theta_in[k]:.10g} rad): "
+        f"{mech.name}: no assembly at sample {i} (t = {user_t[i]:.10g} s, driver θ = {angle_text(theta_in[k])}): "
         f"{what(k)}; the {i} samples before it are in .partial",
         sample=i,
         time=float(user_t[i]),

@@ -1205,7 +1205,7 @@ def plan_rocking(draft: Draft, p: dict[str, float]) -> Motion:
     motion = Motion([{"link": link, "pivot": pivot, "profile": prof}], _grid(h, n), n)
     motion.notes.append(
         f"tabulated rocking input θ(t) = {c:.6g} + {amp:.6g}·sin({big:.6g}·t + {psi:.6g}) rad, {rows + 1} rows "
-        "with exact ω and α columns (cubic Hermite between rows)"
+        "with exact ω and α columns (quintic Hermite between rows)"
     )
     return motion
 

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,6 +66,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from . import exudyn_model as em
+from .tolerances import condition_number, integrator_roundoff
 
 ENGINES = {"kinematic": "exudyn-kinematic", "dynamic": "exudyn-dynamic"}
 
@@ -72,6 +74,11 @@ ENGINES = {"kinematic": "exudyn-kinematic", "dynamic": "exudyn-dynamic"}
 _FD_OFFSETS = (1, 2, 3)
 _FD_WEIGHTS = (3 / 4, -3 / 20, 1 / 60)
 FD_TURN = 0.01  # rad: largest body rotation within the difference stencil's unit step
+# kinematic continuation: largest predicted move of any coordinate per step (rad, or fraction of the mechanism
+# size); the Taylor predictor is then within ~0.25³/6 ≈ 3e-3 of the solution, well inside Newton's basin
+MAX_MOVE = 0.25
+JUMP_RATIO = 0.1  # largest Newton correction of a continuation step, as a fraction of the predicted move
+JUMP_FLOOR = 1e-9  # ... plus this (rad, fraction of the size): a mechanism at rest moves by round-off only
 
 # dynamic mode: step from an accuracy target (see dynamic_step)
 DEFAULT_ACCURACY = 1e-5  # relative acceleration error aimed at by the default step
@@ -107,8 +114,11 @@ def solve(
     :func:`dynamic_step`), ``accuracy`` (target acceleration error relative to
     the peak, default 1e-5, not below 1e-6), ``spectral_radius`` (ρ∞, 0.6),
     ``newton_tol`` (Newton increment tolerance relative to the mechanism size,
-    default 1e-10). Samples on a common grid from t = 0 are integrated in one
-    run whose step divides the grid; irregular samples in one run per interval.
+    default 1e-10), ``max_steps`` (integrate at most about that many steps and
+    return the samples reached, whole sample periods; ``meta["budget"]`` says how
+    many of how many; default: all). Samples on a common grid from t = 0 are
+    integrated in one run whose step divides the grid; irregular samples in one
+    run per interval.
 
     Raises :class:`vloop.errors.MotionError` (with ``.partial``) when a sample
     cannot be assembled (kinematic) or the integration fails (dynamic).
@@ -301,24 +311,41 @@ class _Kinematics:
         for inp, row in zip(self.model.driver_inputs, self.model.driver_rows, strict=True):
             gamma[row] -= inp(t)[2]
         qdd = lin(-gamma)
-        cond = float(np.linalg.cond(jac))
-        return qd, qdd, cond
+        return qd, qdd, condition_number(jac, ~self.rot, self.size)
 
     def state(self, q: np.ndarray, t: float, iters: int) -> _State:
         qd, qdd, cond = self.rates(q, t)
         return _State(t, q, qd, qdd, cond, iters)
 
     def step(self, s: _State, t: float, jump_tol: float = 0.1) -> _State | None:
-        """From state ``s`` to time ``t`` by Taylor predictor + Newton; None if not accepted."""
+        """From state ``s`` to time ``t`` by Taylor predictor + Newton; None if not accepted.
+
+        Not accepted either when the predictor moves any coordinate by more than MAX_MOVE (rad, or
+        that fraction of the mechanism size), or when Newton corrects the predicted position, or the
+        new velocities differ from the predicted ones (q̇ + h·q̈) times h, by more than JUMP_RATIO of the
+        predicted move: on the branch being followed both err by O(h³) against a move of O(h), while
+        a landing on another branch (next to a toggle or a change point, where branches come close or
+        meet and a follower can turn many times faster than the input) differs by about the move
+        itself, in the velocities even where the positions of the two branches are close. The step is
+        then halved until the predictor is that good, so the motion continues from Exudyn's own
+        previous state on its own branch.
+        """
         dt = t - s.t
         pred = s.q + dt * s.qd + 0.5 * dt * dt * s.qdd
+        move = float(np.max(np.abs(self.w * (pred - s.q))))
+        if move > MAX_MOVE:
+            return None
         q, ok, it = self.newton(pred, t)
         if not ok:
             return None
-        if float(np.max(np.abs(self.w * (q - pred)))) > jump_tol:  # a jump, not a continuation
+        correction = float(np.max(np.abs(self.w * (q - pred))))
+        if correction > min(jump_tol, JUMP_RATIO * move + JUMP_FLOOR):  # a jump, not a continuation
             return None
         st = self.state(q, t, it)
         if not np.all(np.isfinite(st.qdd)):
+            return None
+        turned = float(np.max(np.abs(self.w * (st.qd - s.qd - dt * s.qdd)))) * abs(dt)
+        if turned > JUMP_RATIO * move + JUMP_FLOOR:  # the velocities of another branch
             return None
         return st
 
@@ -349,11 +376,9 @@ def _assembly_time(mech: Mechanism) -> float:
 
 
 def _driver_text(mech: Mechanism, t: float) -> str:
-    """The drivers' input values at ``t``, e.g. "θ_l2 = 2.4312 rad"."""
+    """The drivers' input values at ``t``, e.g. "θ_l2 = 2.4312 rad (139.2974°)" (angles in [0°, 360°))."""
     x, _, _ = evaluate_all(mech, np.array([t]))
-    return ", ".join(
-        f"{d.symbol} = {x[0, i]:.6g} {'rad' if d.kind == 'crank' else mech.units}" for i, d in enumerate(mech.drivers)
-    )
+    return ", ".join(d.value_text(x[0, i], mech.units, 6) for i, d in enumerate(mech.drivers))
 
 
 def _assemble(kin: _Kinematics, mech: Mechanism, t0: float, engine: str, times: np.ndarray) -> _State:
@@ -386,8 +411,15 @@ def _solve_kinematic(
     kin = _Kinematics(model, tol=tol, max_iter=max_iter)
     for inp in model.driver_inputs:
         inp.prefetch(times)
-    t_asm = _assembly_time(mech)
-    state = _assemble(kin, mech, t_asm, engine, times)
+    state = _assemble(kin, mech, _assembly_time(mech), engine, times)
+    return _track(kin, mech, times, state, engine, max_halvings)
+
+
+def _track(
+    kin: _Kinematics, mech: Mechanism, times: np.ndarray, state: _State, engine: str, max_halvings: int = 14
+) -> Result:
+    """Every sample by continuation from the assembled ``state`` (MotionError with the samples before a failure)."""
+    model = kin.model
     n = kin.n
     Q, QD, QDD = (np.zeros((len(times), n)) for _ in range(3))
     cond = np.zeros(len(times))
@@ -428,21 +460,31 @@ def _commensurate(times: np.ndarray, t_start: float) -> float | None:
     return base
 
 
-def _motion_rate(mech: Mechanism, times: np.ndarray) -> float:
+def _kinematic_pass(
+    mech: Mechanism, times: np.ndarray, kin: _Kinematics | None = None, start: _State | None = None
+) -> Result:
+    """Exudyn's kinematic solution over ``times`` (up to a limit, if the motion stops), on ``kin``'s model if given."""
+    try:
+        if kin is None or start is None:
+            return _solve_kinematic(mech, times)
+        return _track(kin, mech, times, start, ENGINES["kinematic"])
+    except MotionError as exc:
+        return exc.partial
+
+
+def _motion_rate(mech: Mechanism, times: np.ndarray, res: Result | None = None) -> float:
     """Characteristic angular rate Ω [rad/s] of the motion, for choosing the time step.
 
     Ω = max over moving bodies and samples of max(|ω|, sqrt|α|), from a kinematic
-    pass (cheap); the drivers' own rates (θ̇, or ṡ / size for a slider) also count.
+    pass (``res``, else one is run); the drivers' own rates (θ̇, or ṡ / size for a slider) also count.
     """
     size = mech.scale
     _, v, a = evaluate_all(mech, times)
     per_driver = [1.0 if d.kind == "crank" else 1.0 / size for d in mech.drivers]
     rate = max(float(np.max(np.abs(v[:, i]) * f, initial=0.0)) for i, f in enumerate(per_driver))
     rate = max(rate, *(float(np.max(np.sqrt(np.abs(a[:, i]) * f), initial=0.0)) for i, f in enumerate(per_driver)))
-    try:
-        res = _solve_kinematic(mech, times)
-    except MotionError as exc:
-        res = exc.partial
+    if res is None:
+        res = _kinematic_pass(mech, times)
     if res is not None and len(res):
         for name in mech.moving_links:
             lk = res.link(name)
@@ -499,6 +541,70 @@ class _Quiet:
         exu.config.printToConsole = self._was
 
 
+def _plan(
+    kin: _Kinematics,
+    mech: Mechanism,
+    times: np.ndarray,
+    t_asm: float,
+    step: float,
+    start: _State,
+    too_fine: Callable[[float], bool],
+) -> tuple[list[tuple[float, float, int, float]], float, _State]:
+    """The integration runs (start, end, steps, sensor period), the step h [s] and the state to start from.
+
+    Samples on a common grid from t_asm: one run whose step h = spacing / m (m from ``step``). The
+    integrator's start-up transient must have died out (MIN_STEPS_TO_SAMPLE steps) by the first sample
+    after the start (the one at t_asm is the assembly itself), so h is cut to give those steps. Where that
+    cut would take h so small that the index-3 accelerations' round-off (∝ 1/h²) swamps them (``too_fine``:
+    samples much closer than the accuracy's step, next to a toggle), the run keeps the accuracy's step and
+    starts that many steps *before* t_asm instead, from Exudyn's own kinematic solution continued backwards
+    (inputs given by formulas hold for t < 0 too; not a profile's); the sample at t_asm is then an integrated
+    one too. Irregular samples: one run per interval.
+    """
+    base = _commensurate(times, t_asm)
+    if base is None:  # irregular samples: one run per interval, each continued from the previous end state
+        edges = np.concatenate([[t_asm], times[times > t_asm]])
+        segments = []
+        for a, b in itertools.pairwise(edges):
+            k = max(MIN_STEPS_TO_SAMPLE, math.ceil((b - a) / step - 1e-9))  # each restart has its transient
+            segments.append((float(a), float(b), k, float(b - a)))
+        return segments, step, start
+    m = max(1, math.ceil(base / step - 1e-9))
+    later = times[times > t_asm + 0.5 * base]
+    first = round((later[0] - t_asm) / base) if later.size else MIN_STEPS_TO_SAMPLE
+    t0 = t_asm
+    if first * m < MIN_STEPS_TO_SAMPLE:
+        cut = math.ceil(MIN_STEPS_TO_SAMPLE / first)
+        periods = math.ceil(MIN_STEPS_TO_SAMPLE / m)  # whole sample periods keep the sensors on the grid
+        earlier = None
+        if too_fine(base / cut) and all(d.profile is None for d in mech.drivers):
+            earlier = kin.advance(start, t_asm - periods * base, max_halvings=14)
+        if earlier is not None:
+            t0, start = t_asm - periods * base, earlier
+        else:
+            m = cut
+    n_steps = round((times[-1] - t0) / base) * m
+    return [(t0, float(times[-1]), n_steps, base)], base / m, start
+
+
+def _within(segments: list[tuple[float, float, int, float]], max_steps: int) -> list[tuple[float, float, int, float]]:
+    """The runs cut to about ``max_steps`` steps: whole sample periods (at least one past t = 0), or whole runs."""
+    if sum(k for _, _, k, _ in segments) <= max_steps:
+        return segments
+    if len(segments) == 1:  # one run on the sample grid, perhaps started a few periods before t = 0
+        a, b, k, period = segments[0]
+        per_period = k / round((b - a) / period)
+        keep = max(int(max_steps // per_period), round(max(-a, 0.0) / period) + 1)
+        return [(a, a + keep * period, round(keep * per_period), period)]
+    kept, total = [], 0
+    for seg in segments:
+        if kept and total + seg[2] > max_steps:
+            break
+        kept.append(seg)
+        total += seg[2]
+    return kept
+
+
 def _solve_dynamic(
     mech: Mechanism,
     times: np.ndarray,
@@ -506,10 +612,8 @@ def _solve_dynamic(
     accuracy: float = DEFAULT_ACCURACY,
     spectral_radius: float = SPECTRAL_RADIUS,
     newton_tol: float = 1e-10,
+    max_steps: int | None = None,
 ) -> Result:
-    import exudyn as exu
-    from exudyn.itemInterface import SensorNode
-
     engine = ENGINES["dynamic"]
     t_asm = _assembly_time(mech)
     if times[0] < t_asm:
@@ -520,56 +624,79 @@ def _solve_dynamic(
     model = em.build(mech)
     kin = _Kinematics(model)
     start = _assemble(kin, mech, t_asm, engine, times)
-    n = kin.n
     mbs = model.mbs
+    for inp in model.driver_inputs:
+        inp.prefetch(times)
+    passed = _kinematic_pass(mech, times, kin, start)  # the step's rate Ω and the conditioning κ
+    requested = len(times)
+    if step is None:
+        step = dynamic_step(mech, times, accuracy, rate=_motion_rate(mech, times, passed))
+    segments, h, start = _plan(kin, mech, times, t_asm, step, start, _too_fine(passed, mech, spectral_radius))
+    planned = sum(k for _, _, k, _ in segments)
+    if max_steps is not None:  # the samples within the first max_steps steps only (the claim says so)
+        segments = _within(segments, max_steps)
+        times = times[times <= segments[-1][1] + 1e-9 * max(float(times[-1] - t_asm), 1.0)]
+    sensors = _start_from(model, start)
+    ss = _dynamic_settings(spectral_radius, newton_tol * mech.scale)
+    grid = np.concatenate([np.linspace(a, b, k + 1) for a, b, k, _ in segments])
+    clock = min(segments[0][0], 0.0)  # Exudyn's time starts at 0 or later: a pre-roll before t = 0 runs on t − clock
+    for inp in model.driver_inputs:
+        inp.prefetch(grid)
+        inp.shift = clock
+    records = _Records(model, sensors, clock)
+    for a, b, k, period in segments:
+        ss.timeIntegration.startTime = a - clock
+        ss.timeIntegration.endTime = b - clock
+        ss.timeIntegration.numberOfSteps = k
+        ss.solution.sensors.writePeriod = period
+        try:
+            with _Quiet():
+                mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
+        except Exception as exc:  # Exudyn raises SolverError (or another ExudynError) when Newton fails
+            records.collect()
+            raise _integration_failed(mech, engine, model, times, records, h, exc) from None
+        records.collect()
 
-    # consistent initial state from the assembly at t_asm: positions, velocities (node parameters) ...
-    for bm in model.moving.values():
+    res = _dynamic_result(mech, engine, model, times, records, complete=True)
+    res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
+    if len(res) < requested:
+        res.meta["budget"] = {"max_steps": max_steps, "planned_steps": planned, "samples": len(res), "of": requested}
+    res.meta["allowance"] = _roundoff(res, passed, mech.scale, h, spectral_radius)
+    return res
+
+
+def _start_from(model: em.ExudynModel, start: _State) -> list[list[int]]:
+    """The initial state from the (pre-rolled) assembly, the sensors, the assembled system; the sensors' ids."""
+    import exudyn as exu
+
+    mbs = model.mbs
+    for bm in model.moving.values():  # positions and velocities are node parameters ...
         mbs.SetNodeParameter(bm.node, "initialCoordinates", start.q[bm.ode2].tolist())
         mbs.SetNodeParameter(bm.node, "initialVelocities", start.qd[bm.ode2].tolist())
-
-    if step is None:
-        step = dynamic_step(mech, times, accuracy)
-    base = _commensurate(times, t_asm)
-    segments: list[tuple[float, float, int, float]]  # (start, end, steps, sensor period)
-    if base is not None:  # one run on a grid that holds every sample
-        m = max(1, math.ceil(base / step - 1e-9))
-        later = times[times > t_asm + 0.5 * base]
-        if later.size:  # the start-up transient must have died out by the first sample after the start
-            m = max(m, math.ceil(MIN_STEPS_TO_SAMPLE / round((later[0] - t_asm) / base)))
-        n_steps = round((times[-1] - t_asm) / base) * m
-        segments = [(t_asm, float(times[-1]), n_steps, base)]
-        h = base / m
-    else:  # irregular samples: one run per interval, each continued from the previous end state
-        edges = np.concatenate([[t_asm], times[times > t_asm]])
-        segments = []
-        for a, b in itertools.pairwise(edges):
-            k = max(MIN_STEPS_TO_SAMPLE, math.ceil((b - a) / step - 1e-9))  # each restart has its transient
-            segments.append((float(a), float(b), k, float(b - a)))
-        h = step
-
-    sensors = [
-        [
-            int(
-                mbs.AddSensor(
-                    SensorNode(
-                        nodeNumber=bm.node, storeInternal=True, writeToFile=False, fileName="", outputVariableType=ovt
-                    )
-                )
-            )
-            for bm in model.moving.values()
-        ]
-        for ovt in (
-            exu.OutputVariableType.Coordinates,
-            exu.OutputVariableType.Coordinates_t,
-            exu.OutputVariableType.Coordinates_tt,
-        )
-    ]
+    sensors = _sensors(model)
     mbs.Assemble()
-    # ... and accelerations, from the same constraint equations (Exudyn's own initial-acceleration solve
+    # ... the accelerations come from the same constraint equations (Exudyn's own initial-acceleration solve
     # ignores the time dependence of the driver user functions, i.e. a driver's own acceleration)
     mbs.systemData.SetODE2Coordinates_tt(start.qdd.tolist(), configuration=exu.ConfigurationType.Initial)
+    return sensors
 
+
+def _sensors(model: em.ExudynModel) -> list[list[int]]:
+    """Node sensors kept in memory: coordinates, their rates and accelerations of every moving body."""
+    import exudyn as exu
+    from exudyn.itemInterface import SensorNode
+
+    def sensor(node: int, kind: Any) -> int:
+        item = SensorNode(nodeNumber=node, storeInternal=True, writeToFile=False, fileName="", outputVariableType=kind)
+        return int(model.mbs.AddSensor(item))
+
+    kinds = (exu.OutputVariableType.Coordinates, exu.OutputVariableType.Coordinates_t)
+    kinds += (exu.OutputVariableType.Coordinates_tt,)
+    return [[sensor(bm.node, kind) for bm in model.moving.values()] for kind in kinds]
+
+
+def _dynamic_settings(spectral_radius: float, newton_tol: float) -> Any:
+    """Index-3 generalized-α with a fixed step, Newton on every iteration's Jacobian."""
     ss = _settings()
     ti = ss.timeIntegration
     ti.generalizedAlpha.spectralRadius = spectral_radius
@@ -580,75 +707,95 @@ def _solve_dynamic(
     # residual mixes forces and lengths whose size depends on the file's units (a mm mechanism's
     # residual cannot reach a fixed tolerance), the increment is a length [file units] or an angle
     ti.newton.residualMode = 1
-    ti.newton.relativeTolerance = newton_tol * mech.scale
-    ti.newton.absoluteTolerance = newton_tol * mech.scale
+    ti.newton.relativeTolerance = newton_tol
+    ti.newton.absoluteTolerance = newton_tol
     ti.newton.useModifiedNewton = False
     ti.adaptiveStep = False
     ti.automaticStepSize = False
+    return ss
 
-    grid = np.concatenate([np.linspace(a, b, k + 1) for a, b, k, _ in segments])
-    for inp in model.driver_inputs:
-        inp.prefetch(grid)
 
-    bodies = list(model.moving.values())
-    t_rows: list[np.ndarray] = []
-    rows: list[list[np.ndarray]] = [[], [], []]
+class _Records:
+    """The sensors' rows gathered after each run: times (on vloop's clock) and q, q̇, q̈ of every body."""
 
-    def collect() -> None:
-        data = [[np.asarray(mbs.GetSensorStoredData(s)) for s in group] for group in sensors]
+    def __init__(self, model: em.ExudynModel, sensors: list[list[int]], clock: float) -> None:
+        self.model, self.sensors, self.clock = model, sensors, clock
+        self.t: list[np.ndarray] = []
+        self.rows: list[list[np.ndarray]] = [[], [], []]
+
+    def collect(self) -> None:
+        mbs, bodies, n = self.model.mbs, list(self.model.moving.values()), self.model.n_ode2
+        data = [[np.asarray(mbs.GetSensorStoredData(s)) for s in group] for group in self.sensors]
         if data[0][0].ndim != 2 or data[0][0].shape[0] == 0:
             return
         nr = min(arr.shape[0] for group in data for arr in group)
-        t_rows.append(data[0][0][:nr, 0])
+        self.t.append(data[0][0][:nr, 0] + self.clock)
         for kind, group in enumerate(data):
             block = np.zeros((nr, n))
             for bm, arr in zip(bodies, group, strict=True):
                 block[:, bm.ode2] = arr[:nr, 1:4]
-            rows[kind].append(block)
+            self.rows[kind].append(block)
 
-    for a, b, k, period in segments:
-        ti.startTime = a
-        ti.endTime = b
-        ti.numberOfSteps = k
-        ss.solution.sensors.writePeriod = period
-        try:
-            with _Quiet():
-                mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
-        except Exception as exc:  # Exudyn raises SolverError (or another ExudynError) when Newton fails
-            collect()
-            partial = _dynamic_result(mech, engine, model, times, t_rows, rows, n, complete=False)
-            k_fail = len(partial)
-            t_fail = float(times[min(k_fail, len(times) - 1)])
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise MotionError(
-                f"{mech.name}: {engine}: Exudyn's time integration (h = {h:.3g} s) failed before sample {k_fail} "
-                f"at t = {t_fail:.6g} s ({_driver_text(mech, t_fail)}): {reason}",
-                time=t_fail,
-                sample=k_fail,
-                driver_value=evaluate_all(mech, np.array([t_fail]))[0][0],
-                partial=partial,
-            ) from None
-        collect()
 
-    res = _dynamic_result(mech, engine, model, times, t_rows, rows, n, complete=True)
-    res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
-    return res
+def _integration_failed(
+    mech: Mechanism, engine: str, model: em.ExudynModel, times: np.ndarray, records: _Records, h: float, exc: Exception
+) -> MotionError:
+    """The MotionError of a time integration that stopped, with the samples recorded before it."""
+    partial = _dynamic_result(mech, engine, model, times, records, complete=False)
+    k_fail = len(partial)
+    t_fail = float(times[min(k_fail, len(times) - 1)])
+    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return MotionError(
+        f"{mech.name}: {engine}: Exudyn's time integration (h = {h:.3g} s) failed before sample {k_fail} "
+        f"at t = {t_fail:.6g} s ({_driver_text(mech, t_fail)}): {reason}",
+        time=t_fail,
+        sample=k_fail,
+        driver_value=evaluate_all(mech, np.array([t_fail]))[0][0],
+        partial=partial,
+    )
+
+
+def _too_fine(passed: Result, mech: Mechanism, spectral_radius: float) -> Callable[[float], bool]:
+    """Whether a step h [s] makes the accelerations' round-off bound (tolerances.integrator_roundoff) more than
+    a tenth of what the stated tolerance allows them, judged on the kinematic pass (its peaks and κ)."""
+    from .tolerances import tolerance
+
+    allowed = tolerance(ENGINES["dynamic"], "vloop").rtol
+
+    def fine(h: float) -> bool:
+        bound = _roundoff(passed, passed, mech.scale, h, spectral_radius)
+        for group in ("acceleration", "angular acceleration"):
+            cols = [
+                c for c in passed.columns if c.endswith((".ax", ".ay", ".a") if group == "acceleration" else ".alpha")
+            ]
+            peak = max((float(np.max(np.abs(passed[c]), initial=0.0)) for c in cols), default=0.0)
+            if len(bound[group]) and np.max(bound[group]) > 0.1 * allowed[group] * peak:  # type: ignore[index]
+                return True
+        return False
+
+    return fine
+
+
+def _roundoff(res: Result, passed: Result, size: float, h: float, spectral_radius: float) -> dict[str, np.ndarray]:
+    """The rates' round-off per sample (tolerances.integrator_roundoff) from Exudyn's own conditioning κ."""
+    kappa = np.asarray(passed.health.get("cond", np.zeros(0)), float)
+    kappa = np.pad(kappa, (0, max(0, len(res) - len(kappa))), mode="edge") if len(kappa) else np.zeros(len(res))
+
+    def peak(ends: tuple[str, ...]) -> float:
+        return max((float(np.max(np.abs(res[c]), initial=0.0)) for c in res.columns if c.endswith(ends)), default=0.0)
+
+    length, angle = peak((".x", ".y")), peak((".theta",))
+    return integrator_roundoff(kappa[: len(res)], length, size, angle, h, spectral_radius)
 
 
 def _dynamic_result(
-    mech: Mechanism,
-    engine: str,
-    model: em.ExudynModel,
-    times: np.ndarray,
-    t_rows: list[np.ndarray],
-    rows: list[list[np.ndarray]],
-    n: int,
-    complete: bool,
+    mech: Mechanism, engine: str, model: em.ExudynModel, times: np.ndarray, records: _Records, complete: bool
 ) -> Result:
     """The samples found in the sensor rows (all of them if ``complete``, else the leading ones recorded)."""
-    if t_rows:
-        t_all = np.concatenate(t_rows)
-        Q, QD, QDD = (np.concatenate(r) for r in rows)
+    n = model.n_ode2
+    if records.t:
+        t_all = np.concatenate(records.t)
+        Q, QD, QDD = (np.concatenate(r) for r in records.rows)
     else:
         t_all = np.zeros(0)
         Q = QD = QDD = np.zeros((0, n))

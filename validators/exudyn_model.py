@@ -63,6 +63,7 @@ class DriverInput:
 
     def __init__(self, driver: Driver) -> None:
         self.driver = driver
+        self.shift = 0.0  # Exudyn's clock is t − shift (a time integration that starts before t = 0)
         self._cache: dict[float, tuple[float, float, float]] = {}
 
     def prefetch(self, t: np.ndarray) -> None:
@@ -73,7 +74,7 @@ class DriverInput:
         self._cache.update(zip(t.tolist(), zip(x.tolist(), v.tolist(), a.tolist(), strict=True), strict=True))
 
     def __call__(self, t: float) -> tuple[float, float, float]:
-        t = float(t)
+        t = float(t) + self.shift
         hit = self._cache.get(t)
         if hit is None:
             if self.driver.profile is None:  # closed form: no need to cache

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import importlib.metadata
+import itertools
 import platform
 import time
 from collections.abc import Callable, Iterable
@@ -29,40 +30,19 @@ from vloop.errors import MechanismError, MotionError, VloopError
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .forces_engines import with_forces
-from .tolerances import TOLERANCES, tolerance
+from .consensus import Verdict, decide, tally
+from .engines import ENGINES as REGISTRY
+from .engines import engine
+from .tolerances import TOLERANCES, Tolerance, conditioning_floor, pair_tolerance, tolerance
 
 SCHEMA = "vloop-validation-summary/1"
-ENGINES = ("vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic")
+ENGINES = tuple(REGISTRY)  # the registered engines' names (validators/engines.py), in the order reports show them
 REFERENCES = ("vloop", "analytic")
-
-
-def _engine_fn(name: str) -> Callable[[Mechanism], Result]:
-    if name == "vloop":
-        return lambda m: vloop.solve(m)
-    if name == "analytic":
-        from . import analytic
-
-        return lambda m: analytic.solve(m)
-    if name == "pinocchio":
-        from . import pinocchio
-
-        return lambda m: pinocchio.solve(m)
-    if name in ("exudyn-kinematic", "exudyn-dynamic"):
-        from . import exudyn
-
-        mode = name.split("-", 1)[1]
-        return lambda m: exudyn.solve(m, mode=mode)
-    raise ValueError(f"unknown engine '{name}' (known: {', '.join(ENGINES)})")
 
 
 def engine_applies(name: str, mech: Mechanism) -> bool:
     """Whether an engine has anything to say about ``mech`` (closed forms exist for some only)."""
-    if name == "analytic":
-        from . import analytic
-
-        return analytic.available(mech)
-    return True
+    return engine(name).applies(mech)
 
 
 @dataclass
@@ -76,6 +56,7 @@ class EngineRun:
     seconds: float = 0.0
     worker: str = ""  # who ran the task (vloop.runner: "local:HOST:PID" or the Dask worker)
     task_seconds: float = 0.0  # the task's wall time where it ran (engine + its imports), s
+    cpu_seconds: float = 0.0  # the engine's CPU time in the process that ran it, s (not inflated by a busy machine)
     n_samples: int | None = None  # kept when the Result is dropped to save memory
 
     @property
@@ -112,6 +93,7 @@ class MechanismValidation:
     error: str = ""  # the file itself is bad
     corpus: dict[str, Any] | None = None  # the generated file's sidecar (validators.corpus): family, seed, expectations
     expectation: dict[str, Any] | None = None  # what the sidecar expected of every engine, and what happened
+    verdict: Verdict | None = None  # who is the odd one out when the engines disagree (validators.consensus)
 
     @property
     def passed(self) -> bool:
@@ -153,12 +135,26 @@ def versions() -> dict[str, str]:
 
 def run_engine(name: str, mech: Mechanism) -> EngineRun:
     """Run one engine; a MotionError gives status "stopped" with its partial Result."""
+    cpu0 = time.process_time()
+    run = _run_engine(name, mech)
+    run.cpu_seconds = time.process_time() - cpu0
+    return run
+
+
+def _run_engine(name: str, mech: Mechanism) -> EngineRun:
     if not engine_applies(name, mech):
         return EngineRun(name, "skipped", message="no closed form for this structure")
     t0 = time.perf_counter()
     try:
-        res = with_forces(name, _engine_fn(name))(mech)
-        return EngineRun(name, "ok", res, seconds=time.perf_counter() - t0)
+        res = engine(name).run(mech)
+        budget = res.meta.get("budget")
+        note = (
+            f"compared on the first {budget['samples']} of {budget['of']} samples (its budget of "
+            f"{budget['max_steps']} integration steps of the {budget['planned_steps']} planned)"
+            if budget
+            else ""
+        )
+        return EngineRun(name, "ok", res, note, seconds=time.perf_counter() - t0)
     except MotionError as exc:
         return EngineRun(name, "stopped", exc.partial, str(exc), time.perf_counter() - t0)
     except ValueError as exc:  # the closed forms' LimitPositionError is a ValueError with .partial
@@ -171,15 +167,37 @@ def run_engine(name: str, mech: Mechanism) -> EngineRun:
         return EngineRun(name, "error", None, f"{type(exc).__name__}: {exc}", time.perf_counter() - t0)
 
 
+def _budgeted(r: EngineRun) -> bool:
+    """Whether the run covers the first samples only, by design (a time integration's step budget)."""
+    return r.status == "ok" and r.result is not None and bool(r.result.meta.get("budget"))
+
+
 def _extent(r: EngineRun) -> str:
+    if _budgeted(r):
+        return f"ran the first {r.samples} (its step budget)"
     return f"stopped after {r.samples}" if r.status == "stopped" else f"ran all {r.samples}"
 
 
-def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | None:
-    """Compare run ``a`` against reference run ``b`` under the stated tolerance."""
-    if (a.engine, b.engine) not in TOLERANCES or a.status == "skipped" or b.status == "skipped":
+def conditioning(runs: Iterable[EngineRun]) -> np.ndarray | None:
+    """Per sample, the largest Jacobian condition number the runs report (health "cond"); None if none does."""
+    reported = [r.result.health for r in runs if r.result is not None]
+    conds = [np.asarray(h["cond"], float) for h in reported if "cond" in h]
+    if not conds:
         return None
-    tol = tolerance(a.engine, b.engine)
+    n = max(len(c) for c in conds)
+    return np.max([np.pad(c, (0, n - len(c))) for c in conds], axis=0)
+
+
+def check(
+    a: EngineRun, b: EngineRun, mech_name: str, tol: Tolerance | None = None, kappa: np.ndarray | None = None
+) -> CheckedComparison | None:
+    """Compare run ``a`` against reference run ``b`` under the stated tolerance (or ``tol``), plus the
+    conditioning floor (tolerances.conditioning_floor) of the largest condition number at each sample of the
+    two engines' own (each engine's error grows with its formulation's) and of ``kappa``, the configuration's
+    (vloop's, in the loops' own coordinates: what a closed form, which reports none, suffers from too)."""
+    if a.status == "skipped" or b.status == "skipped" or (tol is None and (a.engine, b.engine) not in TOLERANCES):
+        return None
+    tol = tol or tolerance(a.engine, b.engine)
     if a.result is None or b.result is None:
         missing = a if a.result is None else b
         return CheckedComparison(
@@ -188,7 +206,8 @@ def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | Non
     n = min(a.samples, b.samples)
     msg = ""
     passed = True
-    if a.status != b.status or abs(a.samples - b.samples) > 1:
+    prefix = (_budgeted(a) and a.samples <= b.samples) or (_budgeted(b) and b.samples <= a.samples)
+    if not prefix and (a.status != b.status or abs(a.samples - b.samples) > 1):
         if a.status == "stopped" or b.status == "stopped":
             passed = abs(a.samples - b.samples) <= 1 and a.status == b.status
             if not passed:
@@ -197,22 +216,40 @@ def check(a: EngineRun, b: EngineRun, mech_name: str) -> CheckedComparison | Non
         # Approaching a limit position every rate grows without bound and every engine's conditioning
         # with it (a time integrator's most of all): compare the first 90 % of what both solved.
         n = max(int(0.9 * (n - 1)), 0)
-    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor)
+    own = conditioning((a, b))
+    if own is not None:
+        kappa = own if kappa is None else np.maximum(own[: len(kappa)], kappa[: len(own)])
+    floor_t = conditioning_floor(kappa[:n]) if kappa is not None and len(kappa) >= n else None
+    atol_t = _allowances(a.result, b.result, n)
+    cmp = compare(a.result.head(n), b.result.head(n), tol.rtol, floor=tol.floor, floor_t=floor_t, atol_t=atol_t)
     if not cmp.passed:
         passed = False
         msg = "; ".join(filter(None, [msg, cmp.message(limit=3).replace("\n", "; ")]))
+    if passed and prefix:
+        msg = f"within tolerance on the first {n} samples ({(a if _budgeted(a) else b).engine}'s step budget)"
     return CheckedComparison(a.engine, b.engine, cmp, n, passed, msg or "within tolerance", tol.rtol)
+
+
+def _allowances(a: Result, b: Result, n: int) -> dict[str, np.ndarray] | None:
+    """The error bounds both engines report per sample and group (Result.meta["allowance"]), added up."""
+    out: dict[str, np.ndarray] = {}
+    for res in (a, b):
+        for g, arr in (res.meta.get("allowance") or {}).items():
+            arr = np.asarray(arr, float)[:n]
+            out[g] = out[g] + arr if g in out else arr
+    return out or None
 
 
 def _checks(item: MechanismValidation, engines: tuple[str, ...]) -> None:
     """Compare every engine with every reference run (vloop, then the closed form)."""
+    kappa = conditioning([item.runs["vloop"]]) if "vloop" in item.runs else None
     for ref in REFERENCES:
         if ref not in item.runs:
             continue
         for name in engines:
             if name == ref or name not in item.runs:
                 continue
-            c = check(item.runs[name], item.runs[ref], item.name)
+            c = check(item.runs[name], item.runs[ref], item.name, kappa=kappa)
             if c is not None:
                 item.checks.append(c)
 
@@ -230,9 +267,12 @@ def expectation(item: MechanismValidation) -> dict[str, Any] | None:
         return None
     want = int(side["expect"]["samples"])
     stop = side["expect"].get("stop_sample")
-    problems, observed = [], {}
+    problems, observed, partial = [], {}, []
     for name, r in item.runs.items():
         observed[name] = r.samples if r.status in ("ok", "stopped") else None
+        if _budgeted(r) and r.samples <= (stop if stop is not None else want):
+            partial.append(name)  # the first samples only, by design: nothing to check against the count
+            continue
         if r.status == "skipped":
             if name == "analytic" and side.get("closed_form"):
                 problems.append("analytic skipped, but the family has a closed form")
@@ -246,15 +286,54 @@ def expectation(item: MechanismValidation) -> dict[str, Any] | None:
         "samples": want,
         "stop_sample": stop,
         "observed": observed,
+        "partial": partial,
         "passed": not problems,
         "message": "; ".join(problems) or "as expected",
     }
+
+
+def _cross_checks(item: MechanismValidation) -> None:
+    """Every pair of engines not compared yet, under the pair's tolerance (tolerances.pair_tolerance)."""
+    done = {frozenset((c.engine, c.reference)) for c in item.checks}
+    names = [e for e in ENGINES if e in item.runs and item.runs[e].status != "skipped"]
+    kappa = conditioning([item.runs["vloop"]]) if "vloop" in item.runs else None
+    for i, ref in enumerate(names):
+        for name in names[i + 1 :]:
+            if frozenset((name, ref)) not in done:
+                c = check(item.runs[name], item.runs[ref], item.name, pair_tolerance(name, ref), kappa)
+                if c is not None:
+                    item.checks.append(c)
+
+
+def verdict(item: MechanismValidation) -> Verdict:
+    """Who is the odd one out (validators.consensus): all engines are compared pairwise once any disagree."""
+    voters = [e for e, r in item.runs.items() if r.status != "skipped"]
+    skipped = [e for e, r in item.runs.items() if r.status == "skipped"]
+    if item.passed:
+        return decide(voters, {}, skipped)
+    _cross_checks(item)
+    against = {(c.engine, c.reference): c.message for c in item.checks if not c.passed}
+    exp = item.expectation
+    if exp is not None and not exp["passed"]:
+        want = exp["stop_sample"] if exp["stop_sample"] is not None else exp["samples"]
+        met = {e: n == want for e, n in exp["observed"].items() if n is not None and e not in exp.get("partial", ())}
+        for a, b in itertools.combinations(met, 2):
+            if met[a] != met[b]:
+                odd = a if not met[a] else b
+                why = f"{odd} returned {exp['observed'][odd]} samples, the generator expects {want}"
+                against.setdefault((a, b), why)
+        if met and not any(met.values()) and not against:
+            v = decide(voters, {}, skipped)
+            v.status, v.reason = "undecided", f"every engine agrees, but not with the generator: {exp['message']}"
+            return v
+    return decide(voters, against, skipped)
 
 
 def _finalize(item: MechanismValidation, engines: tuple[str, ...], keep_results: bool) -> None:
     item.runs = {e: item.runs[e] for e in engines if e in item.runs}
     _checks(item, engines)
     item.expectation = expectation(item)
+    item.verdict = verdict(item)
     if not keep_results and item.corpus is not None and item.passed:
         for r in item.runs.values():
             r.drop_result()
@@ -323,6 +402,7 @@ def run(
     timeout: float | None = None,
     bar: bool | None = None,
     keep_results: bool = False,
+    items: list[MechanismValidation] | None = None,
 ) -> Validation:
     """Validate every mechanism file with every engine, each (mechanism, engine) one task of vloop.runner.
 
@@ -330,7 +410,8 @@ def run(
     on a running one. A task that fails, crashes its worker or passes ``timeout`` [s] is that engine's
     error. ``progress`` gets one line per finished task; ``bar`` as :func:`vloop.runner.run_tasks`'s
     ``progress``. Results of generated files that pass are dropped once compared (``keep_results=False``)
-    so that a corpus of thousands fits in memory; the summary keeps their numbers.
+    so that a corpus of thousands fits in memory; the summary keeps their numbers. ``items``: the files already
+    loaded by :func:`load_items` (``paths`` is then not read again).
     """
     from vloop.runner import run_tasks
 
@@ -340,7 +421,7 @@ def run(
             raise MechanismError(f"unknown engine '{e}' (known: {', '.join(ENGINES)})", entry="engines")
     started = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     t0 = time.perf_counter()
-    items = load_items(paths)
+    items = load_items(paths) if items is None else items
     tasks = [(k, e) for k, it in enumerate(items) if it.mechanism is not None for e in engines]
     waiting = {k: len(engines) for k, _ in tasks}
 
@@ -435,12 +516,15 @@ def to_summary(v: Validation) -> dict[str, Any]:
                 "message": r.message,
                 "worker": r.worker,
                 "task_seconds": r.task_seconds,
+                "cpu_seconds": r.cpu_seconds,
             }
             for name, r in it.runs.items()
         }
         if it.corpus is not None:
             entry["corpus"] = _corpus_entry(it)
         entry["comparisons"] = [_comparison_entry(c) for c in it.checks]
+        if it.verdict is not None:
+            entry["verdict"] = it.verdict.as_dict()
         mechs.append(entry)
     out = {
         "schema": SCHEMA,
@@ -452,6 +536,7 @@ def to_summary(v: Validation) -> dict[str, Any]:
         "tolerances": {f"{a} vs {b}": t.as_dict() for (a, b), t in TOLERANCES.items()},
         "mechanisms": mechs,
     }
+    out["verdicts"] = verdicts(v)
     if v.runner:
         out["runner"] = v.runner
     corpus = [it.corpus for it in v.items if it.corpus is not None]
@@ -463,6 +548,16 @@ def to_summary(v: Validation) -> dict[str, Any]:
             "limit_runs": sum(1 for c in corpus if c["expect"].get("stop_sample") is not None),
         }
     return out
+
+
+def verdicts(v: Validation) -> dict[str, Any]:
+    """Per engine: mechanisms passed, blamed on it, undecided, skipped; the verdicts' counts; where vloop is blamed."""
+    decided = [it for it in v.items if it.verdict is not None]
+    return {
+        "engines": tally((it.verdict for it in decided), v.engines),  # type: ignore[misc]
+        "mechanisms": _count(it.verdict.status for it in decided),  # type: ignore[union-attr]
+        "vloop_blamed": [it.name for it in decided if "vloop" in it.verdict.blamed],  # type: ignore[union-attr]
+    }
 
 
 def _count(keys: Iterable[str]) -> dict[str, int]:
@@ -561,16 +656,16 @@ def comparison_table(summary: dict[str, Any]) -> Any:
     return df
 
 
+def write_table(summary: dict[str, Any], path: str | Path, fmt: str = "parquet") -> Path:
+    """Write the comparison table as ``fmt`` ("parquet" or "csv", vloop.files.writers.write_table): errors in the
+    quantity's unit (see summary.json), times in s, ratios unitless; a non-finite error is a null."""
+    from vloop.files.writers import write_table as write
+
+    units = {"engine_seconds": "s", "t_at_max": "s", "max_rel": "1", "ratio": "1"}
+    units.update(dict.fromkeys(("max_abs", "rms", "peak", "allowed"), "the quantity's"))
+    return write(comparison_table(summary), path, fmt, units, {"schema": SCHEMA})
+
+
 def write_parquet(summary: dict[str, Any], path: str | Path) -> Path:
-    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``) through vloop.files.output."""
-    import io
-
-    from vloop.files.output import write_bytes
-
-    try:
-        import pyarrow  # noqa: F401
-    except ImportError as exc:
-        raise VloopError(f"writing {path} needs pyarrow: pip install 'vloop[parquet]' ({exc})", entry="out") from None
-    buf = io.BytesIO()
-    comparison_table(summary).to_parquet(buf, index=False, engine="pyarrow")
-    return write_bytes(path, buf.getvalue())
+    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``)."""
+    return write_table(summary, path, "parquet")

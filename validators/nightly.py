@@ -116,8 +116,114 @@ def compare_summaries(current: dict[str, Any], previous: dict[str, Any]) -> list
     return flags
 
 
-def load_summary(path: Path) -> dict[str, Any]:
-    return json.loads(Path(path).read_text(encoding="utf-8"))
+MAX_SUMMARY_BYTES = 1 << 30
+
+
+def load_summary(path: str | Path) -> dict[str, Any]:
+    """A previous run's summary.json, checked before it is used: a readable file, UTF-8 JSON with finite numbers
+    (no NaN, Infinity or 1e400; integers below 2**63), and the shape :func:`compare_summaries` reads. Anything
+    else is a VloopError naming the file and the first field that is wrong."""
+    from vloop.errors import VloopError
+
+    where = f"previous summary {path}"
+    try:
+        data = _read_json(Path(path))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise VloopError(f"{where}: {_why(exc)}", entry="previous") from None
+    problem = _summary_problem(data)
+    if problem:
+        raise VloopError(f"{where}: {problem}", entry="previous")
+    return data
+
+
+def _read_json(path: Path) -> Any:
+    if not path.is_file():
+        raise OSError(f"{'is a folder' if path.is_dir() else 'does not exist'}; give a summary.json file")
+    if path.stat().st_size > MAX_SUMMARY_BYTES:
+        raise OSError(f"is larger than {MAX_SUMMARY_BYTES >> 20} MB")
+    text = path.read_bytes().decode("utf-8")
+    if not text.strip():
+        raise ValueError("is empty")
+    return json.loads(text, parse_constant=_refuse_constant, parse_float=_finite_float, parse_int=_bounded_int)
+
+
+class _NotFinite(ValueError):
+    pass
+
+
+def _refuse_constant(name: str) -> float:
+    raise _NotFinite(f"holds {name}: numbers must be finite")
+
+
+def _finite_float(text: str) -> float:
+    x = float(text)
+    if x != x or x in (float("inf"), float("-inf")):
+        raise _NotFinite(f"holds {text[:30]}, too large for a floating-point number")
+    return x
+
+
+def _bounded_int(text: str) -> int:
+    if len(text.lstrip("-")) > 19 or abs(int(text)) >= 2**63:
+        raise _NotFinite(f"holds the integer {text[:30]}{'...' if len(text) > 30 else ''}, too large")
+    return int(text)
+
+
+def _why(exc: BaseException) -> str:
+    if isinstance(exc, UnicodeDecodeError):
+        return f"is not UTF-8 text (byte {exc.start})"
+    if isinstance(exc, RecursionError):
+        return "is nested too deeply to be a summary"
+    if isinstance(exc, json.JSONDecodeError):
+        return f"is not JSON ({exc.msg}, line {exc.lineno} column {exc.colno})"
+    if isinstance(exc, OSError) and exc.errno is None:
+        return str(exc)
+    if isinstance(exc, OSError):
+        return f"cannot be read: {(exc.strerror or str(exc)).lower()}"
+    return str(exc)
+
+
+def _summary_problem(data: Any) -> str:
+    """The first field of a summary that is not as written by vloop validate ("" when it is)."""
+    if not isinstance(data, dict) or not isinstance(data.get("mechanisms"), list):
+        return "is not a vloop validation summary (a JSON object with a 'mechanisms' list)"
+    for i, m in enumerate(data["mechanisms"]):
+        at = f"mechanisms[{i}]"
+        if not isinstance(m, dict) or not isinstance(m.get("name"), str):
+            return f"{at}: must be an object with a 'name'"
+        c = m.get("corpus")
+        if c and not (isinstance(c, dict) and isinstance(c.get("seed"), int) and not isinstance(c["seed"], bool)):
+            return f"{at}.corpus: must be an object with an integer 'seed'"
+        if not isinstance(m.get("runs", {}), dict) or not isinstance(m.get("comparisons", []), list):
+            return f"{at}: 'runs' must be an object and 'comparisons' a list"
+        for e, r in m.get("runs", {}).items():
+            if not (isinstance(r, dict) and isinstance(r.get("status"), str) and isinstance(r.get("message", ""), str)):
+                return f"{at}.runs.{e}: must be an object with a 'status' and a 'message'"
+        for k, comp in enumerate(m.get("comparisons", [])):
+            problem = _comparison_problem(comp, f"{at}.comparisons[{k}]")
+            if problem:
+                return problem
+    return ""
+
+
+def _comparison_problem(comp: Any, at: str) -> str:
+    if not (isinstance(comp, dict) and isinstance(comp.get("engine"), str) and isinstance(comp.get("reference"), str)):
+        return f"{at}: must be an object with an 'engine' and a 'reference'"
+    if not isinstance(comp.get("quantities", []), list):
+        return f"{at}.quantities: must be a list"
+    for j, q in enumerate(comp.get("quantities", [])):
+        here = f"{at}.quantities[{j}]"
+        if not (isinstance(q, dict) and isinstance(q.get("quantity"), str) and isinstance(q.get("passed"), bool)):
+            return f"{here}: must be an object with a 'quantity' and 'passed'"
+        err, allowed = q.get("max_abs"), q.get("allowed")
+        if err != "inf" and not _number(err, 0.0):
+            return f'{here}.max_abs: must be a number ≥ 0 or "inf", got {str(err)[:30]}'
+        if not _number(allowed, 0.0):
+            return f"{here}.allowed: must be a number ≥ 0, got {str(allowed)[:30]}"
+    return ""
+
+
+def _number(x: Any, lo: float) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and x >= lo
 
 
 # ------------------------------------------------------------------ generated corpus: reproduce and minimize
@@ -149,15 +255,17 @@ def corpus_failures(summary: dict[str, Any], engines: Iterable[str], options: st
         msgs += [f"{e}: {r['message']}" for e, r in m["runs"].items() if r["status"] == "error"]
         if c["expect"] and not c["expect"].get("passed", True):
             msgs.append(c["expect"]["message"])
-        out.append(
-            {
-                "mechanism": m["name"],
-                "file": m["file"],
-                "family": f"{c['family']}/{c.get('variant', '')}",
-                "reproduce": reproduce_command(int(c["seed"]), int(c["index"]), engines, options),
-                "message": "; ".join(msgs)[:2000],
-            }
-        )
+        entry = {
+            "mechanism": m["name"],
+            "file": m["file"],
+            "family": f"{c['family']}/{c.get('variant', '')}",
+            "reproduce": reproduce_command(int(c["seed"]), int(c["index"]), engines, options),
+            "message": "; ".join(msgs)[:2000],
+        }
+        if "verdict" in m:
+            v = m["verdict"]
+            entry.update(verdict=v["status"], blamed=v["blamed"], reason=v["reason"][:2000])
+        out.append(entry)
     return out
 
 

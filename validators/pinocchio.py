@@ -51,6 +51,8 @@ from vloop.errors import MechanismError, MotionError
 from vloop.mechanism import Body, Mechanism
 from vloop.result import Result
 
+from .tolerances import condition_number
+
 ENGINE = "pinocchio"
 TWO_PI = 2.0 * math.pi
 
@@ -495,6 +497,10 @@ class _Solver:
         self.pm, self.w = pm, _Work(pm)
         self.tol, self.max_iter, self.max_bisect, self.max_cond = tol, max_iter, max_bisect, max_cond
         self.crossings = 0  # change points passed (det J changed sign on the predicted path)
+        self.lengths = np.zeros(pm.nv, bool)  # the coordinates that are lengths: prismatic joints (others turn)
+        for j in list(pm.model.joints)[1:]:
+            if j.shortname().startswith("JointModelP"):
+                self.lengths[j.idx_v : j.idx_v + j.nv] = True
         crank = np.array([d.kind == "crank" for d in pm.mech.drivers])
         self.max_dx = np.where(crank, MAX_CRANK_STEP, MAX_SLIDER_STEP * pm.mech.scale)
 
@@ -546,6 +552,7 @@ class _Solver:
         cond = float(np.linalg.cond(J))
         if not math.isfinite(cond) or cond > self.max_cond:
             raise _NoConvergence(f"singular position (Jacobian condition number {cond:.3g})")
+        cond = condition_number(J, self.lengths, self.pm.mech.scale)  # the health's: free of the file's units
         rhs = np.zeros(self.pm.n_rows)
         rhs[self.w.drv_index] = xd[self.w.drv_which]
         v = np.linalg.solve(J, rhs)
@@ -583,11 +590,22 @@ class _Solver:
         return prev
 
     def advance(self, prev: _State, t: float, inputs: Inputs, depth: int = 0) -> _State:
-        """From ``prev`` to time ``t``: Taylor predictor, then bisect the interval on failure."""
+        """From ``prev`` to time ``t``: Taylor predictor, then bisect the interval on failure.
+
+        The interval is bisected first where the predictor moves any coordinate by more than
+        MAX_CRANK_STEP (rad, or that fraction of its length scale), not only the drivers: next to a
+        change point a follower can turn many times faster than the input (a kite's coupler swings
+        through half a turn while the crank turns a little), and a predictor that far off can land
+        Newton on the other branch, which meets this one there.
+        """
         dt = t - prev.t
         x, xd, xdd = inputs(t)
+        guess = prev.q + dt * prev.v + 0.5 * dt * dt * prev.a
+        far = float(np.max(np.abs(guess - prev.q) / self.pm.q_scale)) > MAX_CRANK_STEP
         try:
-            return self.step(prev, t, x, xd, xdd, prev.q + dt * prev.v + 0.5 * dt * dt * prev.a)
+            if far and depth < self.max_bisect:
+                raise _NoConvergence("predicted move too long")
+            return self.step(prev, t, x, xd, xdd, guess)
         except _NoConvergence:
             if depth >= self.max_bisect:
                 raise

@@ -9,12 +9,16 @@ forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .errors import MechanismError, MotionError, VloopError
-from .mechanism import Mechanism, dumps, from_dict, load, loads, save
+from .mechanism import Mechanism, dumps, save
+from .mechanism import from_dict as _read_dict
+from .mechanism import load as _read_file
+from .mechanism import loads as _read_text
 from .result import Result
 
 __version__ = "0.1.0"
@@ -52,15 +56,55 @@ _TEACHING = (
 
 
 def __getattr__(name: str) -> Any:
+    """The teaching functions, ``vloop.study`` and every submodule (``vloop.teaching.cycle`` after a plain
+    ``import vloop``), imported on first use so that ``import vloop`` stays light. Imported by name: modules
+    that import the package for vloop.solve must not look as if they depended on what is built on them."""
+    import importlib
+    import importlib.util
+
     if name in _TEACHING:
-        from . import teaching
-
-        return getattr(teaching, name)
-    if name == "study":  # design studies, imported on first use (by name: modules that import the package
-        import importlib  # for vloop.solve must not look as if they depended on the studies built on them)
-
+        return getattr(importlib.import_module(".teaching", __name__), name)
+    if name == "study":
         return importlib.import_module(".studies.study", __name__).study
+    if name.isidentifier() and not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}"):
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")
+
+
+def load(path: str | Path, *, allow_external_profiles: bool = False) -> Mechanism:
+    """Read and validate a mechanism file (:class:`MechanismError` on any problem); a file written from dimensions
+    comes back assembled at t = 0 (README "Mechanisms from dimensions"). Profiles must lie in the file's folder
+    unless ``allow_external_profiles``."""
+    return _assembled(_read_file(path, allow_external_profiles=allow_external_profiles))
+
+
+def loads(
+    text: str, *, source: str = "<string>", base_dir: str | Path | None = None, allow_external_profiles: bool = False
+) -> Mechanism:
+    """:func:`load` from TOML text."""
+    return _assembled(
+        _read_text(text, source=source, base_dir=base_dir, allow_external_profiles=allow_external_profiles)
+    )
+
+
+def from_dict(
+    data: dict, *, source: str = "<dict>", base_dir: str | Path | None = None, allow_external_profiles: bool = False
+) -> Mechanism:
+    """:func:`load` from the parsed TOML structure."""
+    return _assembled(
+        _read_dict(data, source=source, base_dir=base_dir, allow_external_profiles=allow_external_profiles)
+    )
+
+
+def _assembled(mech: Mechanism) -> Mechanism:
+    """A mechanism written from dimensions, assembled (its LoopSystem kept for the first solve); others as read."""
+    if not mech.from_dimensions:
+        return mech
+    from .authoring import assemble_mechanism
+
+    closed, report = assemble_mechanism(mech)
+    _keep_system(closed, None, report.system)
+    return closed
 
 
 def compile(mechanism: Mechanism, method: str | None = None) -> Any:
@@ -107,8 +151,6 @@ _SYSTEMS: dict[tuple[int, str | None], tuple[Any, Any]] = {}
 def _system_of(mechanism: Mechanism, method: str | None) -> Any:
     """The LoopSystem of a Mechanism for ``method``, compiled once per (Mechanism object, method) and kept
     while that object lives (a Mechanism is immutable: solving it again needs no new compile)."""
-    import weakref
-
     from .compiler import compile_system
 
     key = (id(mechanism), method)
@@ -116,12 +158,20 @@ def _system_of(mechanism: Mechanism, method: str | None) -> Any:
     if hit is not None and hit[0]() is mechanism:
         return hit[1]
     system = compile_system(mechanism, method)
+    _keep_system(mechanism, method, system)
+    return system
+
+
+def _keep_system(mechanism: Mechanism, method: str | None, system: Any) -> None:
+    """Keep ``system`` as the LoopSystem of ``mechanism`` for ``method`` while that object lives."""
+    import weakref
+
+    key = (id(mechanism), method)
     try:
         ref = weakref.ref(mechanism, lambda _, key=key, systems=_SYSTEMS: systems.pop(key, None))
     except TypeError:  # not weak-referenceable: no cache
-        return system
+        return
     _SYSTEMS[key] = (ref, system)
-    return system
 
 
 def solve_forces(mechanism: Mechanism | Any, result: Result) -> Any:

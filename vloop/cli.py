@@ -1,4 +1,5 @@
-"""Command line: ``vloop run | view | loops | info | validate | study``. One function per command.
+"""Command line: ``vloop run | view | loops | info | validate | study | assemble | export``. One function per
+command.
 
 Exit codes: 0 success; 1 a validation that fails its tolerances; 2 bad input, an output that cannot be
 written, or a motion that cannot be completed (one line on stderr, no traceback; ``run`` still writes
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -17,13 +19,15 @@ import numpy as np
 
 from . import __version__
 from .errors import MotionError, VloopError
+from .model import angle_text
 from .result import Result
 
+RUN_TABLES = ("results.csv", "results.parquet", "results.npz", "health.csv", "health.parquet", "health.npz")
 INFO_SOLVE_LIMIT = 200_000  # vloop info solves the file's motion up to this many samples
 
 
 def _fail(msg: str) -> int:
-    print(f"vloop: error: {msg}", file=sys.stderr)
+    print(f"vloop: error: {' '.join(msg.splitlines())}", file=sys.stderr)  # one line, whatever the message holds
     return 2
 
 
@@ -31,8 +35,9 @@ def _fail(msg: str) -> int:
 
 
 def _load(args: argparse.Namespace) -> Any:
-    """The mechanism file named on the command line (profiles outside its folder only if allowed)."""
-    from .files.fileformat import load
+    """The mechanism file named on the command line (profiles outside its folder only if allowed); a file written
+    from dimensions assembled at t = 0."""
+    from . import load
 
     return load(args.file, allow_external_profiles=getattr(args, "allow_external_profiles", False))
 
@@ -45,7 +50,7 @@ def _out_folder(args: argparse.Namespace, mech: Any) -> Path:
 
 
 def _add_file(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", help="mechanism file (TOML)")
+    p.add_argument("file", type=_type("file"), help="mechanism file (TOML)")
     p.add_argument(
         "--allow-external-profiles",
         action="store_true",
@@ -87,7 +92,7 @@ def _run_streamed(args: argparse.Namespace, mech: Any, system: Any, out: Path, o
     keep = bool(args.plot or args.html or args.extras or outputs is not None or has_forces(mech))
     n = len(mech.times)
     budget.check(system, n, not keep, CHUNK_ROWS, args.memory_budget)
-    with OutputSet(out) as files:
+    with OutputSet(out, owns=RUN_TABLES) as files:  # a results.csv never stays beside a new results.parquet
         writers.check_disk(files.folder, n, budget.columns(system), args.format)
         chunks = solve_iter(system, memory_budget=args.memory_budget)
         with Progress(n, mech.name) as progress:
@@ -129,7 +134,7 @@ def _rocking(mech: Any) -> Any:
     mech = rocking(mech)
     lo, hi = mech.options.get("sweep", (None, None))
     if lo is not None:
-        print(f"{mech.name}: {mech.drivers[0].symbol} rocks between its limits {lo:.10g} and {hi:.10g}")
+        print(f"{mech.name}: rocks between the limits of {mech.drivers[0].range_text(lo, hi, mech.units)}")
     return mech
 
 
@@ -173,7 +178,9 @@ def health_notes(result: Result, redundancy: bool = True) -> list[str]:
     if redundancy and "redundancy" in result.meta:
         lines.append("  " + result.meta["redundancy"])
     for cp in result.meta.get("change_points", []):
-        inputs = ", ".join(f"{k} = {v:.10g}" for k, v in cp["inputs"].items())
+        inputs = ", ".join(
+            f"{k} = {angle_text(v) if k.startswith('θ_') else f'{v:.10g}'}" for k, v in cp["inputs"].items()
+        )
         if cp.get("kind") == "singular":
             lines.append(
                 f"  singular configuration passed: loop {cp['loop']} ({cp['label']}) at t = {cp['time']:.10g} s, "
@@ -222,18 +229,20 @@ def _view_page(mech: Any, result: Any, folder: Path, error: str | None = None, f
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped)."""
+    """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped). The page
+    is bounded by its bytes: a long run's page carries every k-th sample (and says so)."""
     from .files.output import OutputSet
     from .views.view import solve_for_view
 
     mech = _load(args)
-    result, error = solve_for_view(mech)
-    out = _out_folder(args, mech)
-    with OutputSet(out) as files:
+    with OutputSet(_out_folder(args, mech)) as files:
+        result, error = solve_for_view(mech)
         forces = _solve_forces(mech, result)
         _view_page(mech, result, files.stage, error, forces)
     (page,) = files.published
-    print(f"{mech.name}: {len(result)} samples, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
+    shown = result.meta.get("page")
+    samples = f"{shown['of']} samples (the page carries {len(result)})" if shown else f"{len(result)} samples"
+    print(f"{mech.name}: {samples}, t = {result.t[0]:g}..{result.t[-1]:g} s; wrote {page}")
     if args.open:
         import webbrowser
 
@@ -255,7 +264,7 @@ def cmd_loops(args: argparse.Namespace) -> int:
     from .compiler import compile_system
     from .method.equations import describe
 
-    print(describe(compile_system(_load(args)), latex=args.latex))
+    print(describe(compile_system(_load(args)), latex=args.latex, exact=args.exact))
     return 0
 
 
@@ -277,12 +286,16 @@ def _info_parts(mech: Any) -> list[str]:
     kinds = {1: "guide", 2: "binary", 3: "ternary", 4: "quaternary"}
     lines = [
         f"{mech.name}: {mech.title}" if mech.title else mech.name,
-        f"  source: {mech.source}   units: {mech.units}",
+        f"  source: {mech.source}   units: {mech.units}"
+        + ("   written from dimensions (coordinates: the t = 0 assembly)" if mech.from_dimensions else ""),
     ]
     lines.append(f"\nlinks ({len(mech.links)}, plus {len(mech.sliders)} slider blocks):")
     for name, lk in mech.links.items():
         kind = "ground" if lk.ground else kinds.get(len(lk.joints), f"{len(lk.joints)}-joint")
         extra = f", length {bodies[name].local[lk.joints[1]][0]:.6g}" if len(lk.joints) == 2 and not lk.ground else ""
+        if lk.sides is not None:
+            angle = f", angle {lk.angle:.6g} rad" if lk.angle is not None else ""
+            extra = f", sides {', '.join(f'{x:.6g}' for x in lk.sides)}{angle}"
         lines.append(f"  {name:12s} {kind:10s} joints {', '.join(lk.joints)}{extra}")
     lines.append(f"\njoints ({len(mech.joints)}):")
     for j, (x, y) in mech.joints.items():
@@ -293,7 +306,10 @@ def _info_parts(mech: Any) -> list[str]:
         lines.append(f"\nsliders ({len(mech.sliders)}):")
         for s in mech.sliders.values():
             inv = " (inverse slider)" if not mech.links[s.guide].ground else ""
-            lines.append(f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g})")
+            stated = "".join(f", {k} {getattr(s, k):.6g}" for k in ("angle", "offset") if getattr(s, k) is not None)
+            lines.append(
+                f"  {s.name:8s} joint {s.joint} on {s.guide}{inv}, axis ({s.axis[0]:.6g}, {s.axis[1]:.6g}){stated}"
+            )
     if mech.points:
         lines.append(f"\npoints ({len(mech.points)}):")
         lines += [f"  {p.name:8s} on {p.link} at ({p.at[0]:.6g}, {p.at[1]:.6g})" for p in mech.points.values()]
@@ -302,8 +318,9 @@ def _info_parts(mech: Any) -> list[str]:
         if d.profile is not None:
             lines.append(f"  {d.symbol}: profile {d.profile.source} ({len(d.profile.t)} rows)")
         else:
+            x0 = angle_text(d.x0, 6) if d.kind == "crank" else f"{d.x0:.6g} {mech.units}"
             unit = "rad" if d.kind == "crank" else mech.units
-            lines.append(f"  {d.symbol}(t) = {d.x0:.6g} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}]")
+            lines.append(f"  {d.symbol}(t) = {x0} + {d.v0:g}·t + {d.a0:g}·t²/2 [{unit}, t in s]")
     return lines
 
 
@@ -367,318 +384,208 @@ def _info_motion(system: Any) -> list[str]:
     return lines
 
 
-# ---------------------------------------------------------------- validate
+# ---------------------------------------------------------------- validate, corpus (the harness: validators/)
 
 
-def _validate_files(args: argparse.Namespace) -> list[Path]:
-    """The FILES and DIRs given (a folder: every .toml in it, sorted), plus the catalog with --all."""
-    from .pytest_plugin import catalog
+def cmd_validate(args: argparse.Namespace) -> int:
+    """Run every engine on the files, compare, write summary.json, the comparison table and the report
+    (validators.validate: every input checked first, the outputs published as one set)."""
+    from validators.validate import validate
 
-    files: list[Path] = []
-    for f in map(Path, args.files):
-        files += sorted(f.glob("*.toml")) if f.is_dir() else [f]
-    if args.all:
-        files += catalog()
-    return files
-
-
-def _corpus_options(args: argparse.Namespace) -> str:
-    """The generator options that differ from the defaults (a reproduce command must repeat them)."""
-    from validators.corpus import FAMILIES
-
-    opts = ""
-    if args.families and [f.strip() for f in args.families.split(",")] != list(FAMILIES):
-        opts += f" --families {args.families}"
-    if args.limit_fraction != 0.1:
-        opts += f" --limit-fraction {args.limit_fraction:g}"
-    return opts
-
-
-def _families(args: argparse.Namespace) -> list[str] | None:
-    """--families: family or family/variant names (checked by validators.corpus)."""
-    from validators.corpus import _catalogue
-
-    if args.families is None:
-        return None
-    fams = [f.strip() for f in args.families.split(",") if f.strip()]
-    try:
-        _catalogue(fams or [""])
-    except ValueError as exc:
-        raise VloopError(str(exc), entry="families") from None
-    return fams
-
-
-def _check_corpus_args(args: argparse.Namespace, n: int) -> None:
-    if not 1 <= n <= 1_000_000:
-        raise VloopError(f"--n/--corpus must be between 1 and 1000000, got {n}", entry="n")
-    if args.seed is not None and not 0 <= args.seed < 2**63:
-        raise VloopError(f"--seed must be a non-negative integer below 2**63, got {args.seed}", entry="seed")
-    if not 0 <= args.start < 10**8:
-        raise VloopError(f"--start must be between 0 and 10**8, got {args.start}", entry="start")
-    if not (0.0 <= args.limit_fraction <= 1.0):
-        raise VloopError(f"--limit-fraction must be between 0 and 1, got {args.limit_fraction}", entry="limit-fraction")
+    return validate(args, getattr(args, "started", None))
 
 
 def cmd_corpus(args: argparse.Namespace) -> int:
     """vloop corpus --n N --seed S --out DIR: generate N mechanism files (and sidecars) of known structure."""
-    from validators import corpus
+    from validators.validate import corpus_files
 
-    from .files.output import default_folder
+    return corpus_files(args)
 
-    _check_corpus_args(args, args.n)
-    seed = args.seed if args.seed is not None else 0
-    out = Path(args.out) if args.out else default_folder(f"corpus-{seed}")
-    items, refused = corpus.generate(
-        args.n, seed, start=args.start, families=_families(args), limit_fraction=args.limit_fraction
-    )
-    settings = {"start": args.start, "families": _families(args), "limit_fraction": args.limit_fraction}
-    corpus.write(items, out, seed=seed, refused=refused, **settings)
-    limits = sum(1 for it in items if it.sidecar["expect"]["stop_sample"] is not None)
-    print(
-        f"wrote {len(items)} mechanisms (seed {seed}, indices {args.start}..{args.start + len(items) - 1}; "
-        f"{limits} run into a limit on purpose) to {out}"
-    )
-    if refused:
-        print(f"note: vloop refused {len(refused)} drawn mechanisms (listed in {out / 'corpus.json'})")
+
+# ---------------------------------------------------------------- assemble
+
+
+def cmd_assemble(args: argparse.Namespace) -> int:
+    """A file written from dimensions, assembled at t = 0 and written back with closed coordinates (to --out, else
+    to standard output); how each dyad's branch was chosen is printed."""
+    from .authoring import assemble_mechanism
+    from .errors import MechanismError
+    from .files.dimensions import missing_dimensions
+    from .files.fileformat import dumps, load
+    from .files.output import write_text
+
+    draft = load(args.file, allow_external_profiles=args.allow_external_profiles)
+    if not draft.from_dimensions:
+        lacks = "; ".join(missing_dimensions(draft.links, draft.sliders, draft.points, {})[:3])
+        raise MechanismError(
+            f"{args.file}: not written from dimensions ({lacks or 'its centres of mass are given by com'}): its "
+            "coordinates are its assembly (vloop info says how far the t = 0 assembly moves them)",
+            entry="file",
+        )
+    closed, report = assemble_mechanism(draft)
+    text = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n{dumps(closed)}"
+    lines = [f"{closed.name}: {line}" for line in report.lines(closed.units)]
+    if args.out is None:
+        print(text, end="")
+        print("\n".join(lines), file=sys.stderr)
+        return 0
+    write_text(args.out, text)
+    print("\n".join([*lines, f"wrote {args.out}"]))
     return 0
 
 
-def _generate_for_validate(args: argparse.Namespace, out: Path) -> tuple[list[Path], dict]:
-    """--corpus N: a fresh corpus inside the output folder; its seed (drawn if not given) goes to the summary."""
-    import secrets
-
-    from validators import corpus
-
-    _check_corpus_args(args, args.corpus)
-    seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
-    folder = out / f"corpus-{seed}"
-    items, refused = corpus.generate(
-        args.corpus, seed, start=args.start, families=_families(args), limit_fraction=args.limit_fraction
-    )
-    corpus.write(items, folder, seed=seed, refused=refused, start=args.start, limit_fraction=args.limit_fraction)
-    from validators.nightly import corpus_command
-
-    info = {
-        "seed": seed,
-        "n": len(items),
-        "start": args.start,
-        "folder": str(folder),
-        "command": corpus_command(seed, len(items), args.start, _corpus_options(args)),
-    }
-    return [folder / f"{it.name}.toml" for it in items], info
+# ---------------------------------------------------------------- export
 
 
-def cmd_validate(args: argparse.Namespace) -> int:
-    import datetime as dt
-    import json
+def cmd_export(args: argparse.Namespace) -> int:
+    """The mechanism at time --at: a drawing (SVG, PDF) or its links as parts (DXF), published as one set."""
+    from .files.output import OutputSet
+    from .views.export import export, time_at
 
-    from validators import harness, nightly
-
-    from .files.output import ensure_folder, write_text
-
-    engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
-    unknown = [e for e in engines if e not in harness.ENGINES]
-    if unknown:
-        return _fail(f"validate: unknown engine {', '.join(unknown)} (known: {', '.join(harness.ENGINES)})")
-    if args.scheduler and args.workers:
-        return _fail("validate: give --scheduler ADDRESS or --workers N, not both")
-    root = Path(args.out)
-    out = ensure_folder(nightly.dated_folder(root) if args.nightly else root)
-    files = _validate_files(args)
-    corpus_info = None
-    if args.corpus is not None:
-        generated, corpus_info = _generate_for_validate(args, out)
-        files += generated
-    if not files:
-        return _fail("validate: name mechanism files or folders, use --all, or --corpus N")
-    bar = sys.stderr.isatty()
-
-    def progress(msg: str) -> None:
-        if not bar:
-            print(msg, file=sys.stderr, flush=True)
-
-    validation = harness.run(
-        files,
-        engines,
-        progress=progress,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        timeout=args.timeout,
-        bar=bar,
-    )
-    summary = harness.to_summary(validation)
-    if "corpus" in summary:
-        _corpus_failures(summary, validation, engines, args, corpus_info, out)
-    flags: list[dict] = []
-    if args.nightly:
-        prev = Path(args.previous) if args.previous else nightly.previous_summary(root, out)
-        if prev is not None:
-            flags = nightly.compare_summaries(summary, nightly.load_summary(prev))
-        summary["nightly"] = {
-            "date": dt.date.today().isoformat(),
-            "previous": str(prev) if prev else None,
-            "flags": flags,
-        }
-    written = [write_text(out / "summary.json", json.dumps(summary, indent=1, allow_nan=False))]
-    written += _write_tables_and_pages(validation, summary, out, args)
-    print(_table(summary))
-    for f in flags:
-        print(f"FLAG {f['message']}")
-    _print_corpus_failures(summary)
-    print("wrote " + ", ".join(str(w) for w in written))
-    if validation.bad_input:
-        return 2
-    return 0 if validation.passed and not flags else 1
-
-
-def _corpus_failures(
-    summary: dict, validation: Any, engines: tuple[str, ...], args: argparse.Namespace, info: dict | None, out: Path
-) -> None:
-    """summary["corpus"]: how to regenerate it, each failure's reproduce command, the minimized failures."""
-    from validators import nightly
-
-    failures = nightly.corpus_failures(summary, engines, _corpus_options(args))
-    summary["corpus"].update(info or {}, failures=failures)
-    if failures and args.minimize_tries > 0:
-        summary["corpus"]["minimized"] = nightly.minimize_failures(
-            validation.items, engines, out, max_tries=args.minimize_tries
-        )
-
-
-def _print_corpus_failures(summary: dict) -> None:
-    for f in summary.get("corpus", {}).get("failures", []):
-        print(f"FAIL {f['mechanism']}: reproduce with: {f['reproduce']}")
-    for m in summary.get("corpus", {}).get("minimized", []):
-        if m.get("file"):
-            print(f"minimized {m['mechanism']} in {m['tries']} tries: {m['file']} (still fails: {m['still_failing']})")
-
-
-def _write_tables_and_pages(validation: Any, summary: dict, out: Path, args: argparse.Namespace) -> list[Path]:
-    """comparisons.parquet (when pyarrow is there), report.html (catalog + failing generated files), corpus.html."""
-    from validators import harness
-
-    written: list[Path] = []
-    try:
-        written.append(harness.write_parquet(summary, out / "comparisons.parquet"))
-    except VloopError as exc:
-        if "pyarrow" not in str(exc):
-            raise
-        print(f"vloop: no comparisons.parquet ({exc})", file=sys.stderr)
-    if args.no_report:
-        return written
-    try:
-        from reports.html import write_report
-    except ImportError as exc:  # the report needs Jinja2; the summary does not
-        print(f"vloop: no report ({exc})", file=sys.stderr)
-        return written
-    shown = [it for it in validation.items if it.corpus is None or not it.passed]
-    generated_failures = [it for it in shown if it.corpus is not None]
-    if len(generated_failures) > MAX_CORPUS_SECTIONS:  # a broken night must not make a 1,000-section report
-        drop = {id(it) for it in generated_failures[MAX_CORPUS_SECTIONS:]}
-        shown = [it for it in shown if id(it) not in drop]
-    if shown:
-        import dataclasses
-
-        written.append(write_report(dataclasses.replace(validation, items=shown), summary, out, animate=args.animate))
-    if "corpus" in summary:
-        from reports.corpus import write_corpus_page
-
-        written.append(write_corpus_page(summary, out))
-    return written
-
-
-MAX_CORPUS_SECTIONS = 20
-
-
-def _table(summary: dict) -> str:
-    """One line per mechanism: each engine's worst error as a fraction of what is allowed."""
-    engines = [e for e in summary["engines"] if e != "vloop"]
-    head = f"{'mechanism':32s} " + " ".join(f"{e:>17s}" for e in engines) + "  result"
-    lines = [head, "-" * len(head)]
-    generated = [m for m in summary["mechanisms"] if m.get("corpus")]
-    for m in summary["mechanisms"]:
-        if m.get("corpus") and m["passed"] and len(generated) > 30:
-            continue  # a big corpus: one line per failure here, the rest in corpus.html
-        cells = []
-        for e in engines:
-            run = m.get("runs", {}).get(e)
-            comps = [c for c in m.get("comparisons", []) if c["engine"] == e]
-            if run is None or run["status"] == "skipped":
-                cells.append("-")
-            elif run["status"] == "error":
-                cells.append("ERROR")
-            else:
-                worst = max(
-                    (
-                        (c["worst"]["max_abs"] if isinstance(c["worst"]["max_abs"], float) else float("inf"))
-                        / max(c["worst"]["allowed"], 1e-300)
-                        for c in comps
-                        if c["worst"]
-                    ),
-                    default=0.0,
-                )
-                mark = "" if all(c["passed"] for c in comps) else " FAIL"
-                cells.append(f"{worst:.1e} of tol{mark}")
-        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else "FAIL")
-        lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>17s}" for c in cells) + f"  {verdict}")
-    if generated:
-        ok = sum(1 for m in generated if m["passed"])
-        lines.append(f"generated corpus: {ok} of {len(generated)} mechanisms pass (per family: corpus.html)")
-    lines.append(f"{'all passed' if summary['passed'] else 'FAILED'} in {summary['seconds']:.1f} s")
-    return "\n".join(lines)
+    mech = _load(args)
+    at = time_at(mech, args.at)  # before any work: a bad time is one line, nothing written
+    out = _out_folder(args, mech)
+    with OutputSet(out) as files:
+        export(mech, files.stage, at, args.format)
+    print(f"{mech.name} at t = {at:g} s: wrote " + ", ".join(str(f) for f in files.published))
+    return 0
 
 
 # ---------------------------------------------------------------- study
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    """Run a design study file: every variant solved (in this process, or on Dask), tables to Parquet in --out."""
-    from .files.output import default_folder
-    from .studies.study import run
+    """Run a design study file: every variant solved (in this process, or on Dask), its tables (Parquet or CSV) and
+    pictures published as one set in --out. Exit 2 (after writing the tables) when no variant completed."""
+    from .files.output import OutputSet, default_folder
+    from .studies.study import OWNS, run
     from .studies.studyfile import load
 
+    if args.scheduler:
+        from .runner import check_scheduler
+
+        check_scheduler(args.scheduler)
     spec = load(args.file)
     out = Path(args.out) if args.out else default_folder(Path(args.file).stem)
-    res = run(spec, scheduler=args.scheduler, workers=args.workers)
-    files = res.write(out, plot=args.plot)
+    with OutputSet(out, owns=OWNS) as outset:
+        res = run(spec, scheduler=args.scheduler, workers=args.workers, memory_budget=args.memory_budget)
+        res.stage(outset, plot=args.plot, fmt=args.format)
     for line in _study_lines(res):
         print(line)
-    print("wrote " + ", ".join(str(f) for f in files))
+    print("wrote " + ", ".join(str(f) for f in outset.published))
+    if not res.counts["completed"]:
+        return _fail(f"{spec.source}: {_none_completed(res)}")
     return 0
 
 
+def _none_completed(res: Any) -> str:
+    """Why a study has no result: no variant completed its motion (the tables give each variant's reason)."""
+    c = res.counts
+    reasons = [r for r in res.table["reason"] if r]
+    first = f"; the first: {reasons[0]}" if reasons else ""
+    return (
+        f"no variant completed its motion ({c['stopped']:,} stopped, {c['not_assembled']:,} not assembled of "
+        f"{c['variants']:,}), so there is no statistic to give{first}"
+    )
+
+
 def _study_lines(res: Any) -> list[str]:
-    """The study in a few lines: counts, then per scalar output its nominal, linearized and Monte-Carlo spread."""
+    """The study in a few lines: counts, then per scalar output its nominal, linearized and Monte-Carlo spread,
+    in the plots' units (angles in degrees; the tables keep radians). A value that does not exist is said so."""
+    from .studies.studyfile import display_unit
+
     c = res.counts
     lines = [
         f"{res.spec.mechanism.name}: {c['variants']:,} variants ({c['completed']:,} completed, {c['stopped']:,} "
         f"stopped, {c['not_assembled']:,} not assembled; {c['single_runs']:,} solved one by one) in {res.seconds:.2f} s"
     ]
+    if not c["completed"]:
+        return lines
+    outs = {o.name: o for o in res.spec.outputs}
+    if any(display_unit(res.spec.mechanism, o)[1].startswith("deg") for o in res.spec.outputs):
+        lines.append("  (angles in degrees, as in the plots; the tables keep radians)")
     s = res.summary
     if len(s):
         for _, row in s[s["grid"] == 0].iterrows():
+            k, unit = display_unit(res.spec.mechanism, outs[row["output"]])
             lines.append(
-                f"  {row['output']}: nominal {row['nominal']:.6g}, linearized σ {row['linearized_sigma']:.4g}, "
-                f"Monte-Carlo σ {row['mc_sigma']:.4g} ± {row['mc_sigma_error']:.2g}"
+                f"  {row['output']} [{unit}]: nominal {_num(row['nominal'], k, '.6g')}, linearized σ "
+                f"{_num(row['linearized_sigma'], k, '.4g')}, Monte-Carlo σ {_num(row['mc_sigma'], k, '.4g')} ± "
+                f"{_num(row['mc_sigma_error'], k, '.2g')} ({row['completed']:,} of {row['draws']:,} draws completed)"
             )
         return lines
+    return lines + _grid_lines(res, outs)
+
+
+def _num(x: Any, factor: float, spec: str) -> str:
+    """A number for the summary in display units; "n/a" where there is none (a missing or non-finite value)."""
+    try:
+        v = float(x) * factor
+    except (TypeError, ValueError):
+        return "n/a"
+    return format(v, spec) if np.isfinite(v) else "n/a"
+
+
+def _grid_lines(res: Any, outs: dict) -> list[str]:
+    """A grid study's outputs over the completed variants, and the sensitivities at the nominal design."""
+    from .studies.studyfile import display_unit
+
+    lines = []
     t = res.table
     for o in res.spec.outputs:
         if o.stat == "class":
             counts = t[o.name].value_counts()
             lines.append(f"  {o.name}: " + ", ".join(f"{n:,} {c}" for c, n in counts.items()))
         elif o.stat not in ("series", "path") and t[o.name].notna().any():
-            lines.append(f"  {o.name}: {t[o.name].min():.6g} to {t[o.name].max():.6g} over the completed variants")
+            k, unit = display_unit(res.spec.mechanism, o)
+            lo, hi = _num(t[o.name].min(), k, ".6g"), _num(t[o.name].max(), k, ".6g")
+            lines.append(f"  {o.name} [{unit}]: {lo} to {hi} over the completed variants")
     sens = res.sensitivity
     for _, row in sens.iterrows() if len(sens) else ():
         d = f"d({row['output']})/d({row['parameter']})"
-        lines.append(f"  {d} = {row['derivative']:.4g} {row['unit']} at the nominal design")
+        lines.append(f"  {d} = {_num(row['derivative'], 1.0, '.4g')} {row['unit']} at the nominal design")
     return lines
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one line on stderr for a bad option (no usage block): ``vloop: error: COMMAND: ...``."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        text = " ".join(message.split())
+        self.exit(2, f"vloop: error: {self.prog.removeprefix('vloop').strip() or 'vloop'}: {text} (see --help)\n")
+
+
+def _type(name: str) -> Any:
+    """argparse's ``type=`` for an option: its parser in vloop.files.options (the one files and environment use)."""
+    from .files.options import OPTIONS
+
+    parse = OPTIONS[name].parse
+
+    def convert(text: str) -> Any:
+        try:
+            return parse(text)
+        except VloopError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--{name}: ")) from None
+
+    convert.__name__ = name  # argparse names the option's kind by it
+    return convert
+
+
+def _engines(text: str) -> tuple[str, ...]:
+    """--engines: a non-empty comma-separated list of the harness's engines."""
+    from validators.harness import ENGINES
+
+    from .files.options import choice_list
+
+    try:
+        return choice_list(text, "--engines", ENGINES)
+    except VloopError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--engines: ")) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line: one sub-parser per command, each built by its own function."""
-    p = argparse.ArgumentParser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
+    p = _Parser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
     p.add_argument("--version", action="version", version=f"vloop {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     _parser_run(sub)
@@ -688,13 +595,31 @@ def build_parser() -> argparse.ArgumentParser:
     _parser_corpus(sub)
     _parser_info(sub)
     _parser_study(sub)
+    _parser_assemble(sub)
+    _parser_export(sub)
     return p
+
+
+def _parser_export(sub: Any) -> None:
+    e = sub.add_parser("export", help="a drawing of the mechanism at time T (SVG, PDF) or its links as parts (DXF)")
+    _add_file(e)
+    e.add_argument("--at", required=True, metavar="T", help="the instant [s], within the file's run")
+    e.add_argument("--format", choices=["svg", "pdf", "dxf"], default="svg", help="svg or pdf (drawing), dxf (parts)")
+    e.add_argument("--out", help="output folder (default: out/NAME)")
+    e.set_defaults(func=cmd_export)
+
+
+def _parser_assemble(sub: Any) -> None:
+    a = sub.add_parser("assemble", help="assemble a file written from dimensions at t = 0, write it with coordinates")
+    _add_file(a)
+    a.add_argument("--out", metavar="FIXED.toml", help="the file to write (default: standard output)")
+    a.set_defaults(func=cmd_assemble)
 
 
 def _parser_run(sub: Any) -> None:
     r = sub.add_parser("run", help="solve P/V/A over the file's time span and write results.csv (and plots)")
     _add_file(r)
-    r.add_argument("--out", help="output folder (default: out/NAME)")
+    r.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME)")
     r.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png (and forces.png)")
     r.add_argument(
         "--method", choices=["auto", "newton"], default=None, help="closed-form blocks (auto) or Newton only"
@@ -722,19 +647,24 @@ def _parser_run(sub: Any) -> None:
         default="csv",
         help="results and health files: csv (default), parquet (needs pyarrow; units in the schema) or npz",
     )
-    r.add_argument(
-        "--memory-budget",
-        default=None,
-        help="refuse a run estimated to need more memory than this (e.g. 2G, 500M; default: env "
-        "VLOOP_MEMORY_BUDGET, the file's [solver] memory_budget, else half the available memory)",
-    )
+    _add_memory_budget(r, "run")
     r.set_defaults(func=cmd_run)
+
+
+def _add_memory_budget(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument(
+        "--memory-budget",
+        type=_type("memory-budget"),
+        default=None,
+        help=f"refuse a {what} estimated to need more memory than this (e.g. 2G, 500M; default: env "
+        "VLOOP_MEMORY_BUDGET, the mechanism file's [solver] memory_budget, else half the available memory)",
+    )
 
 
 def _parser_view(sub: Any) -> None:
     vw = sub.add_parser("view", help="write one offline HTML page that animates the mechanism (loops, arrows, plots)")
     _add_file(vw)
-    vw.add_argument("--out", help="output folder (default: out/NAME); the page is NAME.html")
+    vw.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME); the page is NAME.html")
     vw.add_argument("--open", action="store_true", help="open the page in the default web browser")
     vw.set_defaults(func=cmd_view)
 
@@ -743,29 +673,45 @@ def _parser_loops(sub: Any) -> None:
     lo = sub.add_parser("loops", help="print the vector-loop equations as the paper writes them")
     _add_file(lo)
     lo.add_argument("--latex", action="store_true", help="emit LaTeX")
+    lo.add_argument(
+        "--exact",
+        action="store_true",
+        help="every number to full precision (the shortest text that reads back to the same double)",
+    )
     lo.set_defaults(func=cmd_loops)
 
 
 def _parser_validate(sub: Any) -> None:
     v = sub.add_parser("validate", help="run every engine on mechanisms, compare, write summary.json and a report")
-    v.add_argument("files", nargs="*", help="mechanism files or folders of them (or --all)")
+    v.add_argument("files", nargs="*", type=_type("file"), help="mechanism files or folders of them (or --all)")
     v.add_argument("--all", action="store_true", help="every file in mechanisms/")
     v.add_argument(
         "--engines",
-        default="vloop,analytic,pinocchio,exudyn-kinematic,exudyn-dynamic",
-        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic",
+        type=_engines,
+        default=("vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"),
+        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic (at least two that "
+        "compare: a validation that compares nothing is refused)",
     )
-    v.add_argument("--out", default="validation", help="output folder (default: validation)")
+    v.add_argument("--out", type=_type("out"), default="validation", help="output folder (default: validation)")
     v.add_argument("--nightly", action="store_true", help="dated subfolder; compare with the previous run")
-    v.add_argument("--previous", help="summary.json to compare with (default: the newest under --out)")
-    v.add_argument("--no-report", action="store_true", help="summary.json only")
+    v.add_argument(
+        "--previous",
+        type=_type("previous"),
+        help="summary.json to compare with (default with --nightly: the newest "
+        "under --out); checked before anything runs",
+    )
+    v.add_argument("--no-report", action="store_true", help="summary.json and the comparison table only")
     v.add_argument("--animate", action="store_true", help="add an animated GIF per mechanism to the report")
+    v.add_argument(
+        "--format", choices=["parquet", "csv"], default="parquet",
+        help="the comparison table: comparisons.parquet (default; needs pyarrow) or comparisons.csv (a units row)",
+    )  # fmt: skip
     _add_runner_options(v)
-    v.add_argument("--corpus", type=int, metavar="N", help="also generate and validate N random mechanisms")
+    v.add_argument("--corpus", type=_type("corpus"), metavar="N", help="also generate and validate N random mechanisms")
     _add_corpus_options(v)
     v.add_argument(
         "--minimize-tries",
-        type=int,
+        type=_type("minimize-tries"),
         default=40,
         metavar="T",
         help="shrink each failing generated mechanism with up to T rebuilt files (0: off; default 40)",
@@ -775,8 +721,8 @@ def _parser_validate(sub: Any) -> None:
 
 def _parser_corpus(sub: Any) -> None:
     c = sub.add_parser("corpus", help="generate random mechanism files of known structure (validation corpus)")
-    c.add_argument("--n", type=int, required=True, help="how many mechanisms")
-    c.add_argument("--out", help="output folder (default: out/corpus-SEED)")
+    c.add_argument("--n", type=_type("n"), required=True, help="how many mechanisms")
+    c.add_argument("--out", type=_type("out"), help="output folder (default: out/corpus-SEED)")
     _add_corpus_options(c)
     c.set_defaults(func=cmd_corpus)
 
@@ -789,43 +735,77 @@ def _parser_info(sub: Any) -> None:
 
 def _parser_study(sub: Any) -> None:
     st = sub.add_parser("study", help="a design study: grids and tolerances over many variants, with sensitivities")
-    st.add_argument("file", help="study file (TOML; README: Design studies)")
-    st.add_argument("--out", help="output folder (default: out/STUDY)")
+    st.add_argument("file", type=_type("file"), help="study file (TOML; README: Design studies)")
+    st.add_argument("--out", type=_type("out"), help="output folder (default: out/STUDY)")
     st.add_argument("--plot", action="store_true", help="also write the pictures (bands, histograms, maps)")
-    st.add_argument("--scheduler", metavar="ADDRESS", help="run the chunks on this Dask scheduler (tcp://host:8786)")
-    st.add_argument("--workers", type=int, metavar="N", help="run the chunks on a local Dask cluster of N processes")
+    st.add_argument(
+        "--format", choices=["parquet", "csv"], default="parquet",
+        help="the tables: parquet (default; needs pyarrow) or csv (a units row under the header)",
+    )  # fmt: skip
+    _add_memory_budget(st, "study")
+    _add_where(st, "chunks")
     st.set_defaults(func=cmd_study)
 
 
-def _add_runner_options(p: argparse.ArgumentParser) -> None:
+def _add_where(p: argparse.ArgumentParser, what: str) -> None:
+    """--scheduler ADDRESS | --workers N: where the tasks (validate) or chunks (study) run (vloop.runner)."""
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--scheduler", metavar="ADDRESS", help="run the tasks on this Dask scheduler (tcp://host:8786)")
-    where.add_argument("--workers", type=int, metavar="N", help="run the tasks on a local Dask cluster of N processes")
-    p.add_argument(
-        "--timeout", type=float, default=600.0, metavar="S", help="seconds per task before it counts as hung (600)"
+    where.add_argument(
+        "--scheduler", type=_type("scheduler"), metavar="ADDRESS",
+        help=f"run the {what} on this Dask scheduler (tcp://host:8786)",
+    )  # fmt: skip
+    where.add_argument(
+        "--workers", type=_type("workers"), metavar="N", help=f"run the {what} on a local Dask cluster of N processes"
     )
+
+
+def _add_runner_options(p: argparse.ArgumentParser) -> None:
+    _add_where(p, "tasks")
+    p.add_argument(
+        "--timeout", type=_type("timeout"), default=600.0, metavar="S",
+        help="seconds per task before it counts as hung (600)",
+    )  # fmt: skip
 
 
 def _add_corpus_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, help="corpus seed (vloop corpus: 0; validate --corpus: a fresh random one)")
-    p.add_argument("--start", "--corpus-start", dest="start", type=int, default=0, help="first mechanism index")
+    p.add_argument(
+        "--seed", type=_type("seed"), help="corpus seed (vloop corpus: 0; validate --corpus: a fresh random one)"
+    )
+    p.add_argument(
+        "--start", "--corpus-start", dest="start", type=_type("start"), default=0, help="first mechanism index"
+    )
     p.add_argument("--families", help="families or family/variant pairs, e.g. fourbar/kite,watt2 (default: all)")
     p.add_argument(
-        "--limit-fraction", type=float, default=0.1, help="fraction of runs driven into a limit on purpose (0.1)"
-    )
+        "--limit-fraction", type=_type("limit-fraction"), default=0.1,
+        help="fraction of runs driven into a limit on purpose (0.1)",
+    )  # fmt: skip
+
+
+def _interrupted() -> int:
+    print("vloop: interrupted (nothing half-written was left behind)", file=sys.stderr)
+    return 130
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; every failure a user can cause ends in one line on stderr and its exit code."""
-    args = build_parser().parse_args(argv)
+    started = time.perf_counter()
     try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a bad option (one line already printed)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    except KeyboardInterrupt:  # while an option's parser imported what it checks against
+        return _interrupted()
+    args.started = started
+    try:
+        from .files.options import check_environment
+
+        check_environment()
         with np.errstate(all="ignore"):
             return int(args.func(args))
     except VloopError as exc:
         return _fail(str(exc))
     except KeyboardInterrupt:
-        print("vloop: interrupted (nothing half-written was left behind)", file=sys.stderr)
-        return 130
+        return _interrupted()
     except BrokenPipeError:  # the reader went away (vloop ... | head): nothing left to say
         sys.stderr.close()
         return 0

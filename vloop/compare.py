@@ -129,6 +129,8 @@ def compare(
     *,
     floor: float | dict[str, float] = 1e-12,
     columns: list[str] | None = None,
+    floor_t: dict[str, np.ndarray] | None = None,
+    atol_t: dict[str, np.ndarray] | None = None,
 ) -> Comparison:
     """Compare ``a`` against reference ``b`` on their shared columns.
 
@@ -136,39 +138,80 @@ def compare(
     ``"acceleration"``, ``"angle"``, ``"angular velocity"``, ``"angular acceleration"``);
     so is ``floor``, the absolute allowance as a fraction of the group's peak (an integrator's
     error on a quantity that is zero in theory is of the order of its group's error, not zero).
-    The sample times must agree (to 1e-9 of the run's length).
+    ``floor_t`` adds a floor per sample and group (arrays as long as the Results, fractions of the
+    group's peak): an allowance that depends on the configuration, such as the conditioning next to a
+    change point; ``atol_t`` an absolute allowance per sample and group (an engine's own reported error
+    bound). The sample times must agree (to 1e-9 of the run's length).
     """
     if len(a.t) != len(b.t) or (len(a.t) and not np.allclose(a.t, b.t, rtol=0, atol=1e-9 * max(1.0, np.ptp(b.t)))):
         raise ValueError(
             f"{a.engine} and {b.engine} were sampled at different times ({len(a.t)} vs {len(b.t)} samples)"
         )
     cols = columns if columns is not None else [c for c in b.columns if c in a.columns and _field(c) in _GROUP]
-    peaks = {c: float(max(np.max(np.abs(a[c]), initial=0.0), np.max(np.abs(b[c]), initial=0.0))) for c in cols}
+    groups = [_GROUP[_field(c)][0] for c in cols]
+    n = len(b.t)
+    if not cols:
+        return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, [])
+    # every column at once (rows = columns): the differences, angles modulo 2π, and each column's peak
+    A = np.array([np.asarray(a[c][:n], float) for c in cols]).reshape(len(cols), n)
+    B = np.array([np.asarray(b[c][:n], float) for c in cols]).reshape(len(cols), n)
+    D = A - B
+    angle = np.array([g == "angle" for g in groups])
+    D[angle] = (D[angle] + math.pi) % (2 * math.pi) - math.pi
+    E = np.abs(D)
+    peaks = np.maximum(np.max(np.abs(A), axis=1, initial=0.0), np.max(np.abs(B), axis=1, initial=0.0))
     group_scale: dict[str, float] = {}
-    for c in cols:
-        g = _GROUP[_field(c)][0]
-        group_scale[g] = max(group_scale.get(g, 0.0), peaks[c])
+    for g, pk in zip(groups, peaks.tolist(), strict=True):
+        group_scale[g] = max(group_scale.get(g, 0.0), pk)
     # an angular acceleration is a difference of O(ω²) terms: its natural magnitude is the angular velocities'
     # peak squared, the scale its error is measured against when its own peak is smaller (a parallelogram at
     # constant ω has α ≡ 0: 1e-9 of that is not round-off)
     natural = {"angular acceleration": group_scale.get("angular velocity", 0.0) ** 2}
-    errors = []
-    for c in cols:
-        g = _GROUP[_field(c)][0]
-        e = error_series(a, b, c)
-        e = np.where(np.isfinite(e), e, np.inf)
-        k = int(np.argmax(e)) if len(e) else 0
-        mx = float(e[k]) if len(e) else 0.0
-        r = rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol
-        f = floor.get(g, 1e-12) if isinstance(floor, dict) else floor
-        scale = max(peaks[c], natural.get(g, 0.0))
-        tol = f * max(group_scale[g], natural.get(g, 0.0)) + r * scale
-        # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
-        ref = max(scale, ZERO_FLOOR * group_scale[g])
-        rel = mx / ref if ref > 0 else (0.0 if mx == 0 else math.inf)
-        rms = float(np.sqrt(np.mean(e * e))) if len(e) else 0.0
-        errors.append(QuantityError(c, g, mx, peaks[c], rel, rms, float(b.t[k]) if len(b.t) else 0.0, tol, mx <= tol))
+    E = np.where(np.isfinite(E), E, np.inf)
+    scale = np.array([max(pk, natural.get(g, 0.0)) for g, pk in zip(groups, peaks.tolist(), strict=True)])
+    gpeak = np.array([max(group_scale[g], natural.get(g, 0.0)) for g in groups])
+    tol_t = _allowed(groups, scale, gpeak, rtol, floor, floor_t, atol_t, n)
+    # per column, the sample whose error is the largest fraction of its allowance (one allowance: the largest error)
+    k = np.argmax(E / np.maximum(tol_t, 1e-300), axis=1) if n else np.zeros(len(cols), int)
+    rows = np.arange(len(cols))
+    mx = E[rows, k] if n else np.zeros(len(cols))
+    tol = tol_t[rows, k] if n else _allowed(groups, scale, gpeak, rtol, floor, None, None, 1)[:, 0]
+    rms = np.sqrt(np.mean(E * E, axis=1)) if n else np.zeros(len(cols))
+    # a quantity that stays at zero (a ground pin's velocity) is measured against its group instead
+    ref = np.maximum(scale, ZERO_FLOOR * np.array([group_scale[g] for g in groups]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(ref > 0, mx / np.where(ref > 0, ref, 1.0), np.where(mx == 0, 0.0, np.inf))
+    t_at = b.t[k] if n else np.zeros(len(cols))
+    errors = [
+        QuantityError(c, g, float(m_), float(pk), float(re), float(rm), float(tt), float(tl), bool(m_ <= tl))
+        for c, g, m_, pk, re, rm, tt, tl in zip(cols, groups, mx, peaks, rel, rms, t_at, tol, strict=True)
+    ]
     return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, errors)
+
+
+def _allowed(
+    groups: list[str],
+    scale: np.ndarray,
+    gpeak: np.ndarray,
+    rtol: float | dict[str, float],
+    floor: float | dict[str, float],
+    floor_t: dict[str, np.ndarray] | None,
+    atol_t: dict[str, np.ndarray] | None,
+    n: int,
+) -> np.ndarray:
+    """(columns, samples): floor·group peak + rtol·scale, plus the per-sample floors and allowances."""
+    f = np.array([floor.get(g, 1e-12) if isinstance(floor, dict) else floor for g in groups])
+    r = np.array([rtol.get(g, 0.0) if isinstance(rtol, dict) else rtol for g in groups])
+    tol_t = np.broadcast_to((f * gpeak + r * scale)[:, None], (len(groups), n))
+    if floor_t is None and atol_t is None:
+        return tol_t
+    tol_t = tol_t.copy()
+    for row, g in enumerate(groups):
+        if floor_t is not None and g in floor_t:
+            tol_t[row] += np.asarray(floor_t[g], float)[:n] * gpeak[row]
+        if atol_t is not None and g in atol_t:
+            tol_t[row] += np.asarray(atol_t[g], float)[:n]
+    return tol_t
 
 
 def assert_histories_close(

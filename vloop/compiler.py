@@ -2,6 +2,9 @@
 
     graph → loops → unknowns → assembly at t = 0 → block structure → branches asked for in the file
 
+(:func:`loop_system` is the first steps alone: :mod:`vloop.authoring` assembles a mechanism written from
+dimensions from there.)
+
 Each step is a function of its own module (:mod:`vloop.method.graph`, :mod:`vloop.method.assembly`,
 :mod:`vloop.method.structure`); this module only strings them together. The last step re-assembles
 t = 0 with the solver's closed forms when the file asks for another assembly branch.
@@ -18,7 +21,7 @@ from .errors import MechanismError
 from .method.assembly import assemble, moved
 from .method.graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
 from .method.loops import Block, LoopSystem, branch_name
-from .method.structure import analyse, block_structure
+from .method.structure import Structure, analyse, block_structure
 from .model import Body, Mechanism
 
 
@@ -29,17 +32,30 @@ def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:
     "newton" (one Newton block for the whole system); default from the file's [solver] table, else "auto".
     """
     method = method or mech.options.get("method", "auto")
-    _check_size(mech)
-    bodies = mech.bodies()
-    mg = build_graph(mech, bodies)
-    loops, C = build_loops(mg, mech, cycle_basis(mg.adj, mg.forest))
-    system = _unknowns(mech, mg, loops, C, bodies)
-    structure = analyse(system)
+    if mech.unplaced:
+        raise MechanismError(
+            f"{mech.source}: [joints] {', '.join(mech.unplaced[:5])} {'has' if len(mech.unplaced) == 1 else 'have'} no "
+            "coordinates: a mechanism written from dimensions is assembled first (vloop.load does it; "
+            "vloop.authoring.assemble_mechanism)",
+            entry="joints",
+        )
+    system, structure = loop_system(mech)
     q0, report, z0 = assemble(system, structure)
     blocks = block_structure(system, structure, q0, method, z0)
     if mech.options.get("branches"):
         blocks, q0, report = _choose_branches(system, blocks, q0, report)
     return dataclasses.replace(system, blocks=blocks, q0=q0, assembly=report, method=method, cache={})
+
+
+def loop_system(mech: Mechanism) -> tuple[LoopSystem, Structure]:
+    """Graph → loops → unknowns → block-triangular structure: the LoopSystem before its t = 0 assembly (no blocks;
+    its ``q0`` the coordinates' variables) and the groups its equations are solved in."""
+    _check_size(mech)
+    bodies = mech.bodies()
+    mg = build_graph(mech, bodies)
+    loops, C = build_loops(mg, mech, cycle_basis(mg.adj, mg.forest))
+    system = _unknowns(mech, mg, loops, C, bodies)
+    return system, analyse(system)
 
 
 SIZES = (1e-60, 1e60)  # mechanism sizes (in its units) whose lengths can be squared twice in double precision
@@ -50,11 +66,12 @@ def _check_size(mech: Mechanism) -> None:
     squared lengths (size⁴), which overflows beyond ~1e77 and loses its digits below ~1e-77 (measured: the
     textbook four-bar solves identically scaled from 1e-68 to 1e72 and fails to assemble at 1e78)."""
     lo, hi = SIZES
-    if len(mech.joints) > 1 and not lo <= mech.scale <= hi:
+    size = max(mech.scale, mech.largest_dimension)
+    if len(mech.joints) > 1 and not lo <= size <= hi:
         raise MechanismError(
-            f"{mech.source}: [joints] the mechanism spans {mech.scale:.3g} {mech.units}: only sizes from {lo:g} to "
+            f"{mech.source}: [joints] the mechanism spans {size:.3g} {mech.units}: only sizes from {lo:g} to "
             f"{hi:g} of the units can be solved in double precision (lengths are squared twice); state the "
-            f"coordinates in {'larger' if mech.scale > hi else 'smaller'} units",
+            f"coordinates in {'larger' if size > hi else 'smaller'} units",
             entry="joints",
         )
 
@@ -74,7 +91,7 @@ def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray, 
     return LoopSystem(
         mech, mg.angle_links, mg.slider_names, ang, sl, r, delta, tuple(mg.terms.label), loops, C,
         mech.tracked_points, point_paths(mg.adj, mech, len(r), mg.forest), link_outputs, driven, unknowns, (), coords_q,
-        coords_q, mg.parts,
+        coords_q, mg.parts, chords=tuple(mg.terms.parts.items()),
     )  # fmt: skip
 
 

@@ -11,18 +11,19 @@ from typing import Any
 import numpy as np
 
 from .errors import MechanismError
-from .model import Driver, Mechanism
+from .model import Driver, Mechanism, Profile
 
 
 def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Input value, rate and acceleration at times ``t`` [s].
 
-    Without a profile: x = x0 + v0·t + a0·t²/2. With a profile: values at the
-    profile's own times are used as given; between them θ (or s) follows a cubic
-    Hermite spline through the given rates when the profile has them, else a
-    not-a-knot cubic spline, and rates/accelerations are its derivatives unless
-    the profile gives them (then they are interpolated the same way).
-    Raises MechanismError if ``t`` leaves the profile's time range.
+    Without a profile: x = x0 + v0·t + a0·t²/2. With a profile: one interpolant x(t) through the
+    rows, and the rate and acceleration are its derivatives ẋ(t), ẍ(t) (so that every engine, a time
+    integrator included, sees one motion, not three tables). At the profile's own times x, ẋ, ẍ are
+    the given columns: θ (or s) only, a not-a-knot cubic spline; with ω (or v), a cubic Hermite spline
+    (ẍ then jumps at the rows); with ω and α (or v and a), a quintic Hermite spline (C², the columns'
+    motion to O(h⁶) for smooth data); with α but no ω, the quintic Hermite spline through the rates of
+    the cubic spline at the rows. Raises MechanismError if ``t`` leaves the profile's time range.
     """
     t = np.asarray(t, float)
     p = driver.profile
@@ -39,19 +40,46 @@ def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
             entry=driver.entry,
             time=float(t[k]),
         )
-    from scipy.interpolate import CubicHermiteSpline, CubicSpline  # only profiles need scipy (slow import)
+    xs = _interpolant(p)
+    out = [xs(t), xs(t, 1), xs(t, 2)]
+    k = np.clip(np.searchsorted(p.t, t), 0, len(p.t) - 1)
+    on_row = p.t[k] == t  # the given columns exactly, not the polynomial's round-off
+    for values, column in zip(out, (p.x, p.v, p.a), strict=True):
+        if column is not None:
+            values[on_row] = column[k[on_row]]
+    return out[0], out[1], out[2]
 
-    if p.v is not None:
-        xs = CubicHermiteSpline(p.t, p.x, p.v)
-        if p.a is not None:
-            vs = CubicHermiteSpline(p.t, p.v, p.a)
-            return xs(t), vs(t), vs(t, 1)
-        return xs(t), xs(t, 1), xs(t, 2)
-    xs = CubicSpline(p.t, p.x)
-    x, v, a = xs(t), xs(t, 1), xs(t, 2)
-    if p.a is not None:
-        a = CubicSpline(p.t, p.a)(t)
-    return x, v, a
+
+def _interpolant(p: Profile) -> Any:
+    """The profile's x(t) as a piecewise polynomial (callable as ``xs(t, order)``), built once per profile."""
+    hit = _BUILT.get(id(p))
+    if hit is not None and hit[0] is p:
+        return hit[1]
+    from scipy.interpolate import CubicHermiteSpline, CubicSpline, PPoly  # only profiles need scipy (slow import)
+
+    if p.a is None:
+        xs = CubicSpline(p.t, p.x) if p.v is None else CubicHermiteSpline(p.t, p.x, p.v)
+    else:
+        v = CubicSpline(p.t, p.x)(p.t, 1) if p.v is None else p.v
+        xs = PPoly(_quintic_hermite(p.t, p.x, v, p.a), p.t)
+    if len(_BUILT) >= 64:
+        _BUILT.clear()
+    _BUILT[id(p)] = (p, xs)  # the profile is kept alive with it, so its id is not reused
+    return xs
+
+
+_BUILT: dict[int, tuple[Profile, Any]] = {}
+
+
+def _quintic_hermite(t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """PPoly coefficients (highest power first) of the quintic through x, ẋ, ẍ at both ends of every interval."""
+    h = np.diff(t)
+    x0, x1, v0, v1, a0, a1 = x[:-1], x[1:], v[:-1], v[1:], a[:-1], a[1:]
+    dx = x1 - x0
+    c3 = (20 * dx - (8 * v1 + 12 * v0) * h - (3 * a0 - a1) * h**2) / (2 * h**3)
+    c4 = (-30 * dx + (14 * v1 + 16 * v0) * h + (3 * a0 - 2 * a1) * h**2) / (2 * h**4)
+    c5 = (12 * dx - 6 * (v1 + v0) * h - (a0 - a1) * h**2) / (2 * h**5)
+    return np.stack([c5, c4, c3, 0.5 * a0, v0, x0])
 
 
 def polynomial(x0: Any, v0: Any, a0: Any, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

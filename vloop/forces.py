@@ -47,7 +47,7 @@ import numpy as np
 
 from .errors import VloopError
 from .model import Load, Mechanism, length_factor
-from .result import Result
+from .result import Result, html_table
 
 SHAKING = "shaking"
 RANK_TOL = 1e-9  # singular values below this fraction of the largest count as zero (redundant path)
@@ -80,8 +80,9 @@ def reaction_names(mech: Mechanism) -> list[tuple[str, str, str]]:
 
 
 def body_com(mech: Mechanism, body: str) -> tuple[float, float]:
-    """Centre of mass in the body frame [file units]: the file's ``com`` (world, t = 0) carried into
-    the frame, or the mean of the body's joints in the frame for a massless body."""
+    """Centre of mass in the body frame [file units]: the file's ``com`` (world, t = 0) carried into the frame
+    (unstated: the mean of the body's joints as assembled, :class:`vloop.model.MassProperties`), or the mean of
+    the body's joints in the frame for a massless body."""
     b = mech.bodies()[body]
     mp = mech.masses.get(body)
     if mp is None:
@@ -439,6 +440,22 @@ class ForceResult:
     def __len__(self) -> int:
         return len(self.t)
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: per column its unit, its range and the time of its largest magnitude."""
+        import html
+
+        n = len(self.t)
+        span = f"t = {self.t[0]:g} … {self.t[-1]:g} s" if n else "no sample"
+        head = f"<p><b>ForceResult</b> of {html.escape(f'{self.mechanism} by {self.engine}')}: {n:,} samples, {span}"
+        if self.indeterminate:
+            head += f"; indeterminate: {html.escape(', '.join(self.indeterminate))}"
+        rows = []
+        for name, x in self.columns.items() if n else ():
+            unit = "N·m" if name.endswith((".torque", ".moment")) else "N"
+            k = int(np.argmax(np.abs(x)))
+            rows.append([name, unit, float(np.min(x)), float(np.max(x)), float(self.t[k])])
+        return head + "</p>" + html_table(rows, ["column", "unit", "min", "max", "t of |max| [s]"])
+
     def __getitem__(self, key: str) -> np.ndarray:
         return self.t if key == "t" else self.columns[key]
 
@@ -500,14 +517,14 @@ class ForceResult:
                 )
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write ``t`` and every column (``%.17g``) atomically; only finite numbers (else ForceError)."""
+        """Write ``t`` and every column atomically, each number the shortest text that reads back to the same
+        double (:func:`vloop.result.write_csv`); only finite numbers (else ForceError)."""
         from .files.output import atomic_write
+        from .result import write_csv
 
         self.check_finite()
-        names = ["t", *self.columns]
-        arr = np.column_stack([self.t, *self.columns.values()]) if len(self.t) else np.zeros((0, len(names)))
-        with atomic_write(path) as fh:
-            np.savetxt(fh, arr, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        with atomic_write(path, "wb") as fh:
+            write_csv(fh, ["t", *self.columns], [self.t, *self.columns.values()])
         return Path(path)
 
     def to_dataframe(self) -> Any:

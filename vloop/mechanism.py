@@ -32,6 +32,7 @@ from .model import (
     Point,
     Profile,
     Slider,
+    angle_text,
     length_factor,
     mobility_message,
 )
@@ -52,6 +53,7 @@ __all__ = [
     "Point",
     "Profile",
     "Slider",
+    "angle_text",
     "dumps",
     "from_dict",
     "length_factor",

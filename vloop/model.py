@@ -28,31 +28,52 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Link:
-    """A rigid link. ``length`` is an optional stated length (binary links only)."""
+    """A rigid link. ``length`` is an optional stated length (binary links only).
+
+    A ternary link (joints J0, J1, J2) may be given by its ``sides``: (|J0J1|, |J1J2|, |J2J0|), the triangle
+    turned as its coordinates draw it, or (|J0J1|, |J0J2|) with ``angle``, the angle at J0 from J0→J1 to J0→J2
+    [rad, CCW positive].
+    """
 
     name: str
     joints: tuple[str, ...]
     ground: bool = False
     length: float | None = None
+    sides: tuple[float, ...] | None = None
+    angle: float | None = None
+
+    @property
+    def dimensioned(self) -> bool:
+        """Whether its shape comes from stated dimensions (a length or sides), not from coordinates."""
+        return self.length is not None or self.sides is not None
 
 
 @dataclass(frozen=True)
 class Slider:
-    """A block carrying pin ``joint`` that slides along ``axis`` (unit, world, t = 0) of ``guide``."""
+    """A block carrying pin ``joint`` that slides along ``axis`` (unit, world, t = 0) of ``guide``.
+
+    Stated dimensions (optional): ``angle``, the axis direction in the guide's frame [rad] (``axis`` is then that
+    direction at t = 0); ``offset``, the sliding line's signed distance from the guide's origin, positive to the
+    left of the axis [length] (without it the line passes through the joint's coordinates).
+    """
 
     name: str
     joint: str
     guide: str
     axis: tuple[float, float]
+    angle: float | None = None
+    offset: float | None = None
 
 
 @dataclass(frozen=True)
 class Point:
-    """A tracer point fixed to ``link`` (a link or a slider block), at ``at`` when t = 0."""
+    """A tracer point fixed to ``link`` (a link or a slider block), at ``at`` when t = 0; ``local``: its stated
+    coordinates in that body's frame (``at`` then follows from the body's position)."""
 
     name: str
     link: str
     at: tuple[float, float]
+    local: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -84,10 +105,35 @@ class Driver:
     pivot: str | None = None
     profile: Profile | None = None
     entry: str = "drivers"
+    from_coordinates: bool = field(default=False, compare=False)  # x0 taken from the coordinates (not stated)
 
     @property
     def symbol(self) -> str:
         return f"θ_{self.target}" if self.kind == "crank" else f"s_{self.target}"
+
+    def value_text(self, x: float, units: str, digits: int = 10) -> str:
+        """``symbol = value``: a crank's angle as :func:`angle_text` prints it, a slider's s in ``units``."""
+        return f"{self.symbol} = {angle_text(x, digits) if self.kind == 'crank' else f'{x:.{digits}g} {units}'}"
+
+    def range_text(self, lo: float, hi: float, units: str) -> str:
+        """The input's range from ``lo`` to ``hi`` (lo <= hi): a crank's as two angles in [0°, 360°) and the
+        counter-clockwise travel between them, a slider's as an interval in ``units``."""
+        if self.kind != "crank":
+            return f"{self.symbol} from {lo:.10g} to {hi:.10g} {units}"
+        return (
+            f"{self.symbol} from {angle_text(lo)} counter-clockwise to {angle_text(hi)}, a travel of "
+            f"{math.degrees(hi - lo):.4f}°"
+        )
+
+
+def angle_text(x: float, digits: int = 10) -> str:
+    """An angle as vloop prints it: rad (``digits`` significant) and degrees (4 decimals), wrapped into
+    [0, 2π) = [0°, 360°) — an unwrapped θ of 384.1468° prints as 24.1468°; one within the printed precision
+    of a full turn prints as 0."""
+    w = float(x) % (2 * math.pi)
+    if round(math.degrees(w), 4) >= 360.0:
+        w = 0.0
+    return f"{w:.{digits}g} rad ({math.degrees(w):.4f}°)"
 
 
 @dataclass(frozen=True)
@@ -114,11 +160,14 @@ class Body:
 @dataclass(frozen=True)
 class MassProperties:
     """Mass [kg], inertia [kg·m²] about the centre of mass, and the centre of mass (x, y) in world
-    coordinates at t = 0 [the file's length units]."""
+    coordinates at t = 0 [the file's length units], carried into the body's frame by the frame the coordinates
+    give. Unstated, it is the mean of the body's joints as the body is assembled (in its frame, a stated link
+    length applied), not of the typed coordinates. ``local``: the centre of mass stated in the body's frame."""
 
     mass: float
     inertia: float
     com: tuple[float, float]
+    local: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,6 +227,10 @@ class Mechanism:
     masses: dict[str, MassProperties] = field(default_factory=dict)
     gravity: tuple[float, float] | None = None  # m/s², world frame
     loads: tuple[Load, ...] = ()
+    # written from dimensions (README "Mechanisms from dimensions"): the coordinates of moving joints are hints,
+    # and ``unplaced`` joints have none (placed provisionally until vloop.authoring assembles the mechanism)
+    from_dimensions: bool = False
+    unplaced: tuple[str, ...] = ()
 
     # ----- derived views (pure functions of the description) -----
     @cached_property
@@ -230,8 +283,59 @@ class Mechanism:
         return n_bodies, n_joints, 3 * (n_bodies - 1) - 2 * n_joints
 
     def bodies(self) -> dict[str, Body]:
-        """Body frames and local joint coordinates (stated binary-link lengths applied)."""
+        """Body frames and local joint coordinates (stated lengths, sides and local coordinates applied)."""
         return _bodies(self)
+
+    def _repr_html_(self) -> str:
+        """A notebook's summary: what it is (mobility, drivers, run), then its bodies, sliders, points, drivers."""
+        import html
+
+        from .result import html_table
+
+        L, J, M = self.gruebler()
+        t = self.times
+        run = f"{len(t):,} samples, t = {t[0]:g} … {t[-1]:g} s" if len(t) else "no sample"
+        how = "written from dimensions" if self.from_dimensions else "coordinates at t = 0"
+        head = (
+            f"<p><b>{html.escape(self.title or self.name)}</b> ({html.escape(self.name)}; {html.escape(self.units)}, "
+            f"{how}): L = {L} bodies, J = {J} joints, Gruebler M = {M}; {len(self.drivers)} driver(s); {run}</p>"
+        )
+        return head + html_table(self._html_rows(), ["name", "kind", "joints", "dimensions"], "bodies and inputs")
+
+    def _html_rows(self) -> list[list[str]]:
+        """One row per link, slider, tracer point and driver."""
+        rows = []
+        for n, lk in self.links.items():
+            dims = f"length {lk.length:g}" if lk.length is not None else ""
+            if lk.sides is not None:
+                dims = f"sides {', '.join(f'{x:g}' for x in lk.sides)}" + (
+                    f", angle {lk.angle:g} rad" if lk.angle else ""
+                )
+            coords = "pivots at their coordinates" if lk.ground else "from the coordinates"
+            rows.append([n, "ground" if lk.ground else "link", " – ".join(lk.joints), dims or coords])
+        for n, sl in self.sliders.items():
+            dims = f"axis ({sl.axis[0]:.4g}, {sl.axis[1]:.4g})" + (f", offset {sl.offset:g}" if sl.offset else "")
+            rows.append([n, f"slider on {sl.guide}", sl.joint, dims])
+        rows += [[n, f"point on {p.link}", "", f"at ({p.at[0]:.4g}, {p.at[1]:.4g})"] for n, p in self.points.items()]
+        for d in self.drivers:
+            unit = "rad" if d.kind == "crank" else self.units
+            motion = "profile" if d.profile is not None else f"{d.x0:.6g} {unit} + {d.v0:g}·t + {d.a0:g}·t²/2"
+            rows.append([d.target, f"driver ({d.kind})", d.pivot or "", motion])
+        return rows
+
+    def mean_of_joints(self, body: str) -> tuple[float, float]:
+        """The mean of a body's joints at t = 0 (the default centre of mass)."""
+        joints = self.links[body].joints if body in self.links else (self.sliders[body].joint,)
+        xs, ys = zip(*(self.joints[j] for j in joints), strict=True)
+        return sum(xs) / len(xs), sum(ys) / len(ys)
+
+    @cached_property
+    def largest_dimension(self) -> float:
+        """The largest stated dimension (link lengths and sides, slider offsets, local coordinates), 0 if none."""
+        sizes = [x for lk in self.links.values() for x in (lk.length or 0.0, *(lk.sides or ()))]
+        sizes += [abs(s.offset or 0.0) for s in self.sliders.values()]
+        sizes += [math.hypot(*p.local) for p in self.points.values() if p.local is not None]
+        return max(sizes, default=0.0)
 
     @cached_property
     def scale(self) -> float:
@@ -255,6 +359,26 @@ def _angle(v: tuple[float, float]) -> float:
     return math.atan2(v[1], v[0]) % (2 * math.pi)
 
 
+def to_world(body: Body, local: tuple[float, float]) -> tuple[float, float]:
+    """World coordinates at t = 0 of a point given in a body's frame."""
+    c, s = math.cos(body.theta0), math.sin(body.theta0)
+    return body.origin[0] + c * local[0] - s * local[1], body.origin[1] + s * local[0] + c * local[1]
+
+
+def third_corner(lk: Link, p: list[tuple[float, float]]) -> tuple[float, float]:
+    """J2 of a ternary link stated by its sides, in the link's frame (J0 at the origin, J1 on +x); with three sides
+    on the side of J0→J1 where the coordinates ``p`` (of J0, J1, J2) draw it."""
+    assert lk.sides is not None
+    if len(lk.sides) == 2:
+        c, phi = lk.sides[1], lk.angle or 0.0
+        return c * math.cos(phi), c * math.sin(phi)
+    a, b, c = lk.sides
+    x = (a * a + c * c - b * b) / (2 * a)
+    y = math.sqrt(max(c * c - x * x, 0.0))
+    turn = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0])
+    return x, y if turn >= 0 else -y
+
+
 def _bodies(m: Mechanism) -> dict[str, Body]:
     out: dict[str, Body] = {}
     guided: dict[str, list[Slider]] = {}
@@ -274,7 +398,8 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
     for name, lk in m.links.items():
         members = on_body(name, lk.joints)
         if lk.ground:
-            out[name] = Body(name, "ground", lk.joints, (0.0, 0.0), 0.0, {j: pos(j) for j in members})
+            local = _stated_points(m, carried.get(name, ()), {j: pos(j) for j in members})
+            out[name] = Body(name, "ground", lk.joints, (0.0, 0.0), 0.0, local)
             continue
         o = pos(lk.joints[0])
         if len(lk.joints) >= 2:
@@ -289,8 +414,11 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
             dx, dy = x - o[0], y - o[1]
             local[j] = (c * dx + s * dy, -s * dx + c * dy)
         if len(lk.joints) >= 2:  # the x axis points at the second joint by definition
-            local[lk.joints[1]] = (lk.length if lk.length is not None else math.dist(o, pos(lk.joints[1])), 0.0)
-        out[name] = Body(name, "link", lk.joints, o, th, local)
+            stated = lk.length if lk.length is not None else (lk.sides[0] if lk.sides else None)
+            local[lk.joints[1]] = (stated if stated is not None else math.dist(o, pos(lk.joints[1])), 0.0)
+        if lk.sides is not None:
+            local[lk.joints[2]] = third_corner(lk, [pos(j) for j in lk.joints])
+        out[name] = Body(name, "link", lk.joints, o, th, _stated_points(m, carried.get(name, ()), local))
     for name, sl in m.sliders.items():
         o = pos(sl.joint)
         th = _angle(sl.axis)
@@ -300,8 +428,16 @@ def _bodies(m: Mechanism) -> dict[str, Body]:
             x, y = pos(j)
             dx, dy = x - o[0], y - o[1]
             local[j] = (c * dx + s * dy, -s * dx + c * dy)
-        out[name] = Body(name, "block", (sl.joint,), o, th, local, guide=sl.guide)
+        out[name] = Body(name, "block", (sl.joint,), o, th, _stated_points(m, carried.get(name, ()), local), sl.guide)
     return out
+
+
+def _stated_points(m: Mechanism, points: tuple[str, ...], local: dict) -> dict:
+    """A body's local coordinates with its points' stated ``local`` coordinates applied."""
+    for p in points:
+        if m.points[p].local is not None:
+            local[p] = m.points[p].local
+    return local
 
 
 # ---------------------------------------------------------------- units and mobility

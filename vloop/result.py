@@ -8,16 +8,95 @@ only gives some links); comparison works on the columns two Results share.
 
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
 LINK_FIELDS = ("theta", "omega", "alpha")
 POINT_FIELDS = ("x", "y", "vx", "vy", "ax", "ay")
 SLIDER_FIELDS = ("s", "v", "a")
+CSV_BLOCK = 65536  # rows formatted at a time by the fallback writer (bounds its memory)
+
+
+def arrow_array(a: np.ndarray) -> Any:
+    """A numpy column as an Arrow array over the same memory (pa.array would import pandas to inspect it)."""
+    import pyarrow as pa
+
+    a = np.ascontiguousarray(a)
+    kind = {"f8": pa.float64(), "f4": pa.float32(), "i8": pa.int64(), "i1": pa.int8()}[a.dtype.str[1:]]
+    return pa.Array.from_buffers(kind, len(a), [None, pa.py_buffer(a)])
+
+
+def write_csv(fh: IO[bytes], names: list[str] | None, columns: list[np.ndarray]) -> None:
+    """Write a header row (``names``, unless None) and one comma-separated row per sample to a binary file.
+
+    Every number is the shortest text that reads back to the same value (``repr(float)`` semantics: 0.35,
+    never 0.35000000000000003 for the double 0.35): float64 to the same double, float32 to the same float32,
+    integers as integers. pyarrow formats them where installed (fast), else Python's float repr.
+    """
+    if names is not None:
+        fh.write((",".join(names) + "\n").encode())
+    columns = [c if c.dtype.isnative else c.astype(c.dtype.newbyteorder("=")) for c in map(np.asarray, columns)]
+    if not columns or not len(columns[0]):
+        return
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+    except ImportError:
+        for k in range(0, len(columns[0]), CSV_BLOCK):
+            parts = [_texts(c[k : k + CSV_BLOCK]) for c in columns]
+            fh.write(("\n".join(map(",".join, zip(*parts, strict=True))) + "\n").encode())
+        return
+    arrays = [arrow_array(c if c.dtype.str[1:] in ("f8", "f4", "i8", "i1") else c.astype(float)) for c in columns]
+    table = pa.Table.from_arrays(arrays, names=[f"c{i}" for i in range(len(arrays))])
+    pcsv.write_csv(table, fh, pcsv.WriteOptions(include_header=False))
+
+
+def _texts(c: np.ndarray) -> list[str]:
+    """The shortest round-trip text of each value of a column (the fallback of :func:`write_csv`)."""
+    if c.dtype == np.float32:
+        return c.astype(str).tolist()  # numpy's shortest text of a float32
+    if np.issubdtype(c.dtype, np.integer):
+        return list(map(str, c.tolist()))
+    return list(map(repr, c.astype(float).tolist()))
+
+
+UNIT_OF_FIELD = {
+    "theta": "rad",
+    "omega": "rad/s",
+    "alpha": "rad/s^2",
+    "x": "L",
+    "y": "L",
+    "s": "L",
+    "vx": "L/s",
+    "vy": "L/s",
+    "v": "L/s",
+    "ax": "L/s^2",
+    "ay": "L/s^2",
+    "a": "L/s^2",
+}
+
+
+def column_units(columns: list[str], length: str) -> dict[str, str]:
+    """The unit of each output column: ``t`` s, angles rad (rates per s, s²), lengths ``length`` (the file's units;
+    rates per s, s²); anything else "1"."""
+    return {c: "s" if c == "t" else UNIT_OF_FIELD.get(c.rsplit(".", 1)[-1], "1").replace("L", length) for c in columns}
+
+
+def html_table(rows: list[list[Any]], header: list[str] | None = None, caption: str = "") -> str:
+    """A small HTML table for notebooks (every cell escaped; numbers to 6 significant digits)."""
+
+    def cell(x: Any) -> str:
+        return html.escape(f"{x:.6g}" if isinstance(x, float) else str(x))
+
+    head = "<tr>" + "".join(f"<th>{cell(h)}</th>" for h in header) + "</tr>" if header else ""
+    body = "".join("<tr>" + "".join(f"<td>{cell(x)}</td>" for x in row) + "</tr>" for row in rows)
+    cap = f"<caption style='text-align:left'>{cell(caption)}</caption>" if caption else ""
+    return f"<table class='vloop'>{cap}<thead>{head}</thead><tbody>{body}</tbody></table>"
 
 
 @dataclass
@@ -106,22 +185,61 @@ class Result:
 
     # ----- export
     def to_csv(self, path: str | Path, *, health: bool = False) -> None:
-        """Write one row per sample: ``t`` then the columns (``%.17g``, full precision)."""
+        """Write one row per sample: ``t`` then the columns, each number the shortest text that reads back to
+        the same double (:func:`write_csv`)."""
         names = ["t", *self.columns]
         data = [self.t, *self.columns.values()]
         if health:
             names += [f"health.{k}" for k in self.health]
             data += list(self.health.values())
-        arr = np.column_stack(data) if len(self.t) else np.zeros((0, len(names)))
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savetxt(path, arr, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        with open(path, "wb") as fh:
+            write_csv(fh, names, [np.asarray(c, float) for c in data])
 
-    def to_dataframe(self) -> Any:
-        """A pandas DataFrame indexed by nothing, with a ``t`` column first."""
+    def to_pandas(self, length: str | None = None) -> Any:
+        """A pandas DataFrame, one row per sample: ``t`` [s] first, then every column; ``df.attrs["units"]`` maps
+        each column to its unit (angles rad, rad/s, rad/s^2; lengths in the file's units — ``meta["units"]``,
+        which vloop's runs record — or ``length``; "L" where neither says)."""
         import pandas as pd
 
-        return pd.DataFrame({"t": self.t, **self.columns})
+        df = pd.DataFrame({"t": self.t, **self.columns})
+        df.attrs["units"] = column_units(list(df.columns), length or self.meta.get("units", "L"))
+        return df
+
+    to_dataframe = to_pandas  # the name the file-format contract gives it
+
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the run, then per link, slider and point the range of each quantity (units)."""
+        n = len(self.t)
+        span = f"t = {self.t[0]:g} … {self.t[-1]:g} s" if n else "no sample"
+        who = html.escape(f"{self.mechanism} by {self.engine}")
+        head = f"<p><b>Result</b> of {who}: {n:,} samples, {span}</p>"
+        if not n:
+            return head
+        length = self.meta.get("units", "L")
+        rows = [self._html_row(name, kind, length) for kind in ("link", "slider", "point") for name in self.names(kind)]
+        table = html_table(rows, ["name", "kind", "position", "velocity", "acceleration"], "ranges over the run")
+        notes = [f"{k}: max {float(np.max(v)):.3g}" for k, v in self.health.items() if k in ("residual", "cond")]
+        return head.replace("</p>", f"{'; ' + '; '.join(notes) if notes else ''}</p>") + table
+
+    def _html_row(self, name: str, kind: str, length: str) -> list[str]:
+        def span(col: str) -> str:
+            x = self.columns[f"{name}.{col}"]
+            unit = UNIT_OF_FIELD[col].replace("L", length)
+            return f"{col} {float(np.min(x)):.4g} … {float(np.max(x)):.4g} {unit}"
+
+        if kind == "point":
+            speed = float(np.max(np.hypot(self.columns[f"{name}.vx"], self.columns[f"{name}.vy"])))
+            acc = float(np.max(np.hypot(self.columns[f"{name}.ax"], self.columns[f"{name}.ay"])))
+            return [
+                name,
+                kind,
+                f"{span('x')}; {span('y')}",
+                f"|v| ≤ {speed:.4g} {length}/s",
+                f"|a| ≤ {acc:.4g} {length}/s^2",
+            ]
+        return [name, kind, *(span(f) for f in (LINK_FIELDS if kind == "link" else SLIDER_FIELDS))]
 
     @classmethod
     def read_csv(cls, path: str | Path, *, mechanism: str = "", engine: str = "csv") -> Result:

@@ -30,12 +30,14 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 import signal
 import socket
 import sys
 import threading
 import time
 import uuid
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -48,7 +50,8 @@ POLL = 0.2  # s between checks of running tasks for a timeout
 # that one crashes the process (two in flight gained within the noise of a loaded 2-core machine).
 IN_FLIGHT = 1
 MAX_LOCAL_WORKERS = 256  # a LocalCluster larger than this is a typo, not a plan
-CONNECT_TIMEOUT = 30.0  # s to reach a scheduler
+CONNECT_TIMEOUT = 10.0  # s for Dask to reach a scheduler that answered check_scheduler
+REACH_TIMEOUT = 3.0  # s for a TCP connection to the scheduler's port (check_scheduler)
 
 
 class RunnerError(VloopError):
@@ -72,6 +75,58 @@ class TaskOutcome:
     @property
     def ok(self) -> bool:
         return not self.error
+
+
+_HOST = re.compile(r"[A-Za-z0-9][A-Za-z0-9.-]{0,252}|\[[0-9A-Fa-f:.]{2,45}\]")
+SCHEMES = ("tcp", "tls")
+
+
+def parse_address(value: Any, where: str = "--scheduler") -> str:
+    """A Dask scheduler's address ``[tcp://|tls://]HOST:PORT`` (the port is required), as ``SCHEME://HOST:PORT``;
+    RunnerError naming ``where`` otherwise."""
+    text = value.strip() if isinstance(value, str) and len(value) <= 300 else ""
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    host, colon, port = rest.rpartition(":")
+    ok = scheme in SCHEMES and colon and _HOST.fullmatch(host) and re.fullmatch(r"[0-9]{1,5}", port)
+    if not ok or not 1 <= int(port) <= 65535:
+        shown = repr(value)[:40]
+        raise RunnerError(
+            f"{where}: must be a Dask scheduler address such as tcp://host:8786 (with its port, 1 to 65535), "
+            f"got {shown}",
+            entry="scheduler",
+        )
+    return f"{scheme}://{host}:{int(port)}"
+
+
+def check_scheduler(address: str, timeout: float = REACH_TIMEOUT) -> None:
+    """Refuse (RunnerError, one line) a scheduler address that does not parse, whose port does not accept a
+    connection within ``timeout`` seconds, or (tcp) that sends no Dask handshake in that time — before any work,
+    instead of Dask's wait (forever, for a server that is not a scheduler) and its traceback."""
+    addr = parse_address(address)
+    scheme, rest = addr.split("://", 1)
+    host, port = rest.rsplit(":", 1)
+    try:
+        conn = socket.create_connection((host.strip("[]"), int(port)), timeout=timeout)
+    except OSError as exc:
+        why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc)).lower()
+        raise RunnerError(
+            f"--scheduler {address}: cannot reach a Dask scheduler at {addr} ({why} within {timeout:g} s); "
+            "start one (dask scheduler) or use --workers N",
+            entry="scheduler",
+        ) from None
+    with conn:
+        try:
+            greeted = scheme != "tcp" or bool(conn.recv(1))  # a Dask scheduler sends its handshake at once
+        except OSError:
+            greeted = False
+    if not greeted:
+        raise RunnerError(
+            f"--scheduler {address}: {addr} accepts connections but is not a Dask scheduler (no handshake within "
+            f"{timeout:g} s)",
+            entry="scheduler",
+        )
 
 
 def local_worker_name() -> str:
@@ -217,22 +272,52 @@ def _client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     # allowed-failures 0: a task that kills its worker is not retried; worker-saturation 1.0: a worker is given
     # one task per thread, the rest wait on the scheduler, so "processing" means running (the timeout's clock)
     settings = {"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0}
-    with dask.config.set(settings):
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.CRITICAL,
-        )
+    warnings.filterwarnings("ignore", message=r"Port \d+ is already in use", category=UserWarning)
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()  # started later (by the cluster's thread) it would unblock SIGINT there
+    held = _hold_interrupts()
     try:
+        with dask.config.set(settings):
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+            )
+    except BaseException:
+        _release_interrupts(held)
+        raise
+    try:
+        _release_interrupts(held)  # a Ctrl-C held while the cluster started is raised here (the cluster is closed)
         client = Client(cluster, set_as_default=False)
         try:
             yield client
         finally:
             client.close()
     finally:
-        cluster.close()
+        held = _hold_interrupts()  # a second Ctrl-C waits until the workers are gone
+        try:
+            cluster.close()
+        finally:
+            _release_interrupts(held)
+
+
+def _hold_interrupts() -> Any:
+    """Block SIGINT in this thread (a Ctrl-C waits, pending) and return the previous signal mask.
+
+    A terminal sends Ctrl-C to the whole process group: the workers, started while it is blocked, inherit the
+    mask (every thread and process they start does) and never see it — no KeyboardInterrupt traceback from a
+    worker process; this process alone handles it, and closes the cluster."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return None
+    return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def _release_interrupts(mask: Any) -> None:
+    if mask is not None:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _stop_hung(client: Any, fut: Any) -> str:

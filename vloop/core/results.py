@@ -64,6 +64,7 @@ def chunk_result(run: Run, state: State, grid: Grid, n_ok: int, solved: Solved) 
         {
             "blocks": [b.kind for b in system.blocks],
             "assembly": system.assembly,
+            "units": mech.units,  # the lengths' unit (Result.to_pandas)
             **_events_meta(run, span),
             **_redundancy(system),
         },
@@ -156,10 +157,7 @@ def motion_error(
     n_req = grid.total or len(grid.out)
     j = grid.requested_before(f.sample)
     jg = j + grid.offset  # in the whole run
-    drv = ", ".join(
-        f"{d.symbol} = {X[f.sample, i]:.6g} {'rad' if d.kind == 'crank' else mech.units}"
-        for i, d in enumerate(mech.drivers)
-    )
+    drv = ", ".join(d.value_text(X[f.sample, i], mech.units, 6) for i, d in enumerate(mech.drivers))
     if f.sample < grid.first:
         where = "before the first requested time (on the way from the t = 0 assembly)"
     elif j < len(grid.out) and grid.out[j] == f.sample:
@@ -169,10 +167,7 @@ def motion_error(
     kept = f"{jg} earlier sample{'s' if jg != 1 else ''} kept" if jg else "no sample kept"
     lim = ""
     if limit is not None:
-        vals = ", ".join(
-            f"{d.symbol} = {limit[1][i]:.10g} {'rad' if d.kind == 'crank' else mech.units}"
-            for i, d in enumerate(mech.drivers)
-        )
+        vals = ", ".join(d.value_text(limit[1][i], mech.units) for i, d in enumerate(mech.drivers))
         lim = f" (last assembled at t = {limit[0]:.10g} s, {vals})"
     at = f": loop {f.loop + 1} ({system.loops[f.loop].label})" if f.loop is not None else ""
     err = MotionError(

@@ -70,6 +70,22 @@ def _locate_failure(run: Run, state: State, t_grid: np.ndarray, k: int, X: np.nd
 
 def assemble_blocks(system: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarray:
     """The t = 0 configuration the closed-form blocks give with their (possibly flipped) branches."""
+    q, why = close_at_start(system, blocks, q0)
+    if q is None:
+        raise MechanismError(
+            f"{system.mechanism.source}: [solver] branches: the mechanism cannot be assembled on the requested branch "
+            f"at t = 0 ({why})",
+            entry="solver",
+        )
+    return q
+
+
+def close_at_start(
+    system: LoopSystem, blocks: tuple, q0: np.ndarray, upto: int | None = None
+) -> tuple[np.ndarray | None, str]:
+    """The t = 0 configuration that blocks 0..``upto`` (default: all) give from ``q0``: each closed-form dyad on its
+    branch σ, a Newton block as ``q0`` holds it (assembled already), the drivers at their t = 0 values. Returns
+    (the variables, free angles in [0, 2π), "") or (None, why not)."""
     trial_system = dataclasses.replace(system, blocks=blocks, q0=q0, cache={})
     na, ns = system.n_angles, len(system.slider_names)
     state = State(1, na, ns)
@@ -80,17 +96,13 @@ def assemble_blocks(system: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.nda
     run = Run(trial_system, Inputs(mech), mech.scale, DEFAULT_TOL, DEFAULT_MAX_ITER, DEFAULT_RTOL, detect=False)
     run.blocks = run_blocks
     impose_drivers(system, state, *run.inputs(np.zeros(1)))
-    solved = run_blocks(run, state, np.zeros(1), 1)
+    solved = run_blocks(run, state, np.zeros(1), 1, upto)
     if solved.n_ok < 1:
-        raise MechanismError(
-            f"{mech.source}: [solver] branches: the mechanism cannot be assembled on the requested branch at t = 0 "
-            f"({solved.failure.why if solved.failure else 'no solution'})",
-            entry="solver",
-        )
+        return None, solved.failure.why if solved.failure else "no solution"
     th = state.theta[0].copy()
     free = np.array([v not in system.drivers for v in range(na)], bool)
     th[free] %= TWO_PI  # the file's convention at t = 0: θ in [0, 2π)
-    return np.concatenate([th, state.s[0, :ns]])
+    return np.concatenate([th, state.s[0, :ns]]), ""
 
 
 LEAD_STEP = math.pi / 180  # lead-in path step: 1° of crank (or 1/180 of the size of a slider input)

@@ -26,8 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import MechanismError
+from ..method.graph import loop_row
 from ..method.loops import LoopSystem
-from ..model import Driver, Link, Mechanism, Point, Slider
+from ..model import Driver, Link, Mechanism, Point, Slider, third_corner
 
 TWO_PI = 2.0 * math.pi
 FD_STEP = 6e-6  # central-difference step, relative to a parameter's typical size (≈ ε^(1/3))
@@ -119,9 +120,11 @@ def _resolve_slider(mech: Mechanism, name: str, target: str, fld: str, entry: st
         raise MechanismError(f"[{entry}] {name}: no slider {_show(target)} ({_known(mech.sliders)})", entry=entry)
     _check_field(name, "sliders", fld, entry)
     sl = mech.sliders[target]
-    if fld == "angle":
-        return ParamRef(name, "sliders", target, fld, "rad", math.atan2(sl.axis[1], sl.axis[0]), 1.0)
-    return ParamRef(name, "sliders", target, fld, "length", _nominal_offset(mech, sl), mech.scale)
+    if fld == "angle":  # a stated angle is in the guide's frame; else the axis direction at t = 0
+        nominal = sl.angle if sl.angle is not None else math.atan2(sl.axis[1], sl.axis[0])
+        return ParamRef(name, "sliders", target, fld, "rad", nominal, 1.0)
+    offset = sl.offset if sl.offset is not None else _nominal_offset(mech, sl)
+    return ParamRef(name, "sliders", target, fld, "length", offset, mech.scale)
 
 
 def _resolve_driver(mech: Mechanism, name: str, target: str, fld: str, entry: str) -> ParamRef:
@@ -320,8 +323,8 @@ class VariantModel:
                 points[p.target] = dataclasses.replace(points[p.target], at=(at[0], at[1]))
             elif p.section == "links":
                 links[p.target] = dataclasses.replace(links[p.target], length=x)
-            elif p.section == "sliders" and p.field == "angle":
-                sliders[p.target] = dataclasses.replace(sliders[p.target], axis=(math.cos(x), math.sin(x)))
+            elif p.section == "sliders":
+                sliders[p.target] = _varied_slider(sliders[p.target], p.field, x)
         d = self.designs(values[None, :])
         if positions is not None:
             joints = {j: (positions[j].real, positions[j].imag) for j in joints}
@@ -337,6 +340,15 @@ class VariantModel:
         return out
 
     def _turned_axis(self, sl: Slider, d: Designs, q0: np.ndarray) -> Slider:
+        """A slider's t = 0 axis at the variant's assembly ``q0`` (a guide that moves turns it)."""
+        if sl.angle is not None:  # stated in the guide's frame: the axis is the guide's θ at the assembly plus it
+            th = sl.angle + (
+                float(q0[self.system.angle_links.index(sl.guide)]) if sl.guide in self.system.angle_links else 0.0
+            )
+            return dataclasses.replace(sl, axis=(math.cos(th), math.sin(th)))
+        return self._turned_world_axis(sl, d, q0)
+
+    def _turned_world_axis(self, sl: Slider, d: Designs, q0: np.ndarray) -> Slider:
         """A slider on a moving guide: its world axis turned as the guide turned from its coordinates to the
         assembly (the axis is fixed to the guide)."""
         system = self.system
@@ -362,9 +374,10 @@ class _Geometry:
         self.V = V
         self.P = {j: np.full(V, complex(*xy)) for j, xy in mech.joints.items()}
         self.P.update({n: np.full(V, complex(*pt.at)) for n, pt in mech.points.items()})
-        self.length = {n: (np.full(V, lk.length) if lk.length is not None else None) for n, lk in mech.links.items()}
+        self.length = {n: _stated_length(lk, V) for n, lk in mech.links.items()}
         self.axis = {n: np.full(V, math.atan2(s.axis[1], s.axis[0])) for n, s in mech.sliders.items()}
-        self.offset: dict[str, np.ndarray] = {}
+        self.angle = {n: np.full(V, s.angle) for n, s in mech.sliders.items() if s.angle is not None}  # guide frame
+        self.offset = {n: np.full(V, s.offset) for n, s in mech.sliders.items() if s.offset is not None}
         for k, p in enumerate(model.params):
             x = values[:, k]
             if p.section in ("joints", "points"):
@@ -372,7 +385,8 @@ class _Geometry:
             elif p.section == "links":
                 self.length[p.target] = x.copy()
             elif p.section == "sliders":
-                (self.axis if p.field == "angle" else self.offset)[p.target] = x.copy()
+                stated = self.angle if p.target in self.angle else self.axis
+                (stated if p.field == "angle" else self.offset)[p.target] = x.copy()
         self.frames = {b: self._frame(b) for b in mech.body_names}
 
     def _frame(self, body: str) -> tuple[np.ndarray, np.ndarray]:
@@ -382,6 +396,8 @@ class _Geometry:
             return np.zeros(self.V, complex), np.zeros(self.V)
         if body in mech.sliders:
             sl = mech.sliders[body]
+            if body in self.angle:  # turned with its guide (a one-joint guide never states an angle)
+                return self.P[sl.joint], (self._frame(sl.guide)[1] + self.angle[body]) % TWO_PI
             return self.P[sl.joint], self.axis[body] % TWO_PI
         lk = mech.links[body]
         o = self.P[lk.joints[0]]
@@ -394,15 +410,30 @@ class _Geometry:
     def local(self, body: str, member: str) -> np.ndarray:
         """A member's coordinates in its body's frame (complex), as Body.local gives them."""
         mech = self.model.mechanism
+        if member in mech.points and mech.points[member].local is not None:
+            return np.full(self.V, complex(*mech.points[member].local))
         if body == mech.ground:
             return self.P[member]
         o, th = self.frames[body]
-        if body in mech.links and len(mech.links[body].joints) >= 2 and member == mech.links[body].joints[1]:
+        lk = mech.links.get(body)
+        if lk is not None and len(lk.joints) >= 2 and member == lk.joints[1]:
             stated = self.length[body]
             return (stated if stated is not None else np.abs(self.P[member] - o)) + 0j
+        if lk is not None and lk.sides is not None and member == lk.joints[2]:
+            return self._third_corner(lk)
         c, s = np.cos(th), np.sin(th)
         d = self.P[member] - o
         return (c * d.real + s * d.imag) + 1j * (-s * d.real + c * d.imag)
+
+    def _third_corner(self, lk: Link) -> np.ndarray:
+        """J2 of a ternary link stated by its sides, in its frame (:func:`vloop.model.third_corner` per variant: three
+        sides on the side of J0→J1 where each variant's coordinates draw J2)."""
+        x, y = third_corner(lk, [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)])  # two sides: the angle fixes it
+        if len(lk.sides or ()) == 2:
+            return np.full(self.V, complex(x, y))
+        p0, p1, p2 = (self.P[j] for j in lk.joints)
+        turn = ((p1 - p0).conjugate() * (p2 - p0)).imag
+        return x + 1j * np.where(turn >= 0, y, -y)
 
     def frame_offset(self, body: str) -> np.ndarray:
         """The constant angle of a body's frame from the angle variable that turns it (blocks: axis − guide)."""
@@ -419,7 +450,7 @@ class _Geometry:
         d = self.P[sl.joint] - o
         cg, sg = np.cos(th), np.sin(th)
         lx, ly = cg * d.real + sg * d.imag, -sg * d.real + cg * d.imag
-        alpha = self.axis[sl.name] - th
+        alpha = self.angle[sl.name] if sl.name in self.angle else self.axis[sl.name] - th
         s0 = lx * np.cos(alpha) + ly * np.sin(alpha)
         e = self.offset.get(sl.name, -lx * np.sin(alpha) + ly * np.cos(alpha))
         return alpha, s0, e
@@ -431,6 +462,10 @@ class _Geometry:
         delta = np.zeros((self.V, nt))
         lines = {}
         for t, role in enumerate(self.model.roles):
+            if role[0] == "chord":  # after its parts (chords are added to the terms last)
+                z = sum(c * r[:, p] * np.exp(1j * delta[:, p]) for p, c in role[1])
+                r[:, t], delta[:, t] = np.abs(z), np.angle(z)
+                continue
             if role[0] == "body":
                 loc = self.local(role[1], role[2])
                 r[:, t] = np.hypot(loc.real, loc.imag)
@@ -461,8 +496,15 @@ class _Geometry:
         return np.stack(cols, axis=1) if cols else np.zeros((self.V, 0))
 
 
+def _stated_length(lk: Link, V: int) -> np.ndarray | None:
+    """A link's stated distance from its first joint to its second (a length, or a ternary's first side)."""
+    stated = lk.length if lk.length is not None else (lk.sides[0] if lk.sides else None)
+    return None if stated is None else np.full(V, stated)
+
+
 def _term_roles(mech: Mechanism, system: LoopSystem) -> list[tuple]:
-    """What each term is: ("body", body, member), ("slider", i) or ("offset", i), read from the graph's edges."""
+    """What each term is: ("body", body, member), ("slider", i) or ("offset", i), read from the graph's edges, or
+    ("chord", parts): a body's vectors that a loop crosses, summed (:func:`vloop.graph.crossings`)."""
     roles: list[tuple | None] = [None] * len(system.t_r)
     slider_index = {n: i for i, n in enumerate(mech.sliders)}
     for u, v, data in system.graph.edges(data=True):
@@ -477,6 +519,8 @@ def _term_roles(mech: Mechanism, system: LoopSystem) -> list[tuple]:
                 roles[tid] = ("slider", i) if system.t_sl[tid] >= 0 else ("offset", i)
     for t, extra in system.cache.get("study_offset_terms", {}).items():
         roles[t] = ("offset", extra)
+    for t, parts in system.chords:
+        roles[t] = ("chord", parts)
     if any(r is None for r in roles):
         raise RuntimeError("vloop.core.variants cannot tell what every vector term is (graph changed?)")
     return roles  # type: ignore[return-value]
@@ -489,12 +533,13 @@ def _with_zero_terms(system: LoopSystem) -> LoopSystem:
     variables do not change."""
     C = np.zeros_like(system.C)
     for li, lp in enumerate(system.loops):
-        cyc = list(lp.nodes)
-        for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
-            data = system.graph.edges[u, v]
-            sign = 1.0 if data["start"] == u else -1.0
-            for tid, s in data["terms"]:
-                C[li, tid] += sign * s
+        for tid, c, _ in loop_row(system.graph.adj, list(lp.nodes)):
+            C[li, tid] += c
+    for t, parts in system.chords:  # a chord stands for its parts in the loops that cross its body that way
+        for li in np.flatnonzero(system.C[:, t]):
+            for p, c in parts:
+                C[li, p] -= system.C[li, t] * c
+            C[li, t] += system.C[li, t]
     restored = (C != system.C) & (system.t_r == 0) & (system.t_sl < 0) & (system.t_ang < 0)
     if not restored.any():
         return system
@@ -541,3 +586,13 @@ def _with_offset_terms(mech: Mechanism, system: LoopSystem, params: tuple[ParamR
 
 
 __all__ = ["Designs", "Driver", "Link", "ParamRef", "Point", "Slider", "VariantModel", "resolve"]
+
+
+def _varied_slider(sl: Slider, fld: str, x: float) -> Slider:
+    """A slider with its angle or offset varied: a stated one replaced, else the axis (the offset of a slider that
+    states none is in its joint's coordinates)."""
+    if fld == "offset":
+        return dataclasses.replace(sl, offset=x) if sl.offset is not None else sl
+    if sl.angle is not None:
+        return dataclasses.replace(sl, angle=x)
+    return dataclasses.replace(sl, axis=(math.cos(x), math.sin(x)))

@@ -16,51 +16,23 @@ beyond the time grid (8 bytes per sample).
 
 from __future__ import annotations
 
-import math
 import os
-import re
 import resource
 import time
 from dataclasses import dataclass
 from typing import Any
 
 from ..errors import VloopError
+from .options import parse_size
 
 ENV = "VLOOP_MEMORY_BUDGET"
 DEFAULT_FRACTION = 0.5  # of the memory available to the process
 IN_MEMORY_COPIES = 2  # a solve() keeps the chunks and their joined copy at once
 HEALTH_BYTES = 26  # per sample: residual, cond, branch (8 bytes each), two 1-byte flags
-_UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
-_SIZE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([KMGT]?)(?:I?B)?\s*$", re.IGNORECASE)
 
 
 class MemoryBudgetError(VloopError):
     """A run would need more memory than its budget (the message says how much, the budget and what to do)."""
-
-
-def parse_size(value: Any, where: str = "memory budget") -> int:
-    """Bytes from a number of bytes or a text such as "2G", "500 MB", "1.5GiB"; ValueError naming ``where``."""
-    if isinstance(value, bool):
-        raise ValueError(f"{where}: must be a size such as 2G or 500M, got {value!r}")
-    if isinstance(value, int | float):
-        try:
-            number, unit = float(value), ""
-        except OverflowError:  # an integer too large for a float
-            number, unit = math.inf, ""
-    elif isinstance(value, str):
-        m = _SIZE.match(value)
-        if not m:
-            raise ValueError(f"{where}: must be a size such as 2G, 500M or a number of bytes, got {value[:40]!r}")
-        number, unit = float(m.group(1)), m.group(2).upper()
-    else:
-        raise ValueError(f"{where}: must be a size such as 2G or 500M, got {type(value).__name__}")
-    try:
-        size = number * _UNITS[unit]
-    except OverflowError:
-        size = math.inf
-    if not math.isfinite(size) or size < 1 or size > 1 << 60:
-        raise ValueError(f"{where}: {str(value)[:40]} is not a usable size (1 byte to 1 EiB)")
-    return int(size)
 
 
 def fmt_size(n: float) -> str:
@@ -124,10 +96,7 @@ def budget(explicit: Any = None, options: dict | None = None) -> tuple[int, str]
         return parse_size(explicit, "--memory-budget"), "--memory-budget"
     env = os.environ.get(ENV)
     if env:
-        try:
-            return parse_size(env, ENV), ENV
-        except ValueError as exc:
-            raise MemoryBudgetError(str(exc), entry="memory_budget") from None
+        return parse_size(env, ENV), ENV
     if options and options.get("memory_budget") is not None:
         return int(options["memory_budget"]), "[solver] memory_budget"
     return int(DEFAULT_FRACTION * available_memory()), "half the memory available"

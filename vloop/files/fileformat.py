@@ -8,6 +8,7 @@ files, profiles outside the mechanism's folder (unless allowed), oversized input
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import stat
@@ -21,6 +22,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..model import (
     LENGTH_UNITS,
+    Body,
     Driver,
     Link,
     Load,
@@ -31,6 +33,15 @@ from ..model import (
     Profile,
     Slider,
     mobility_message,
+    to_world,
+)
+from .dimensions import (
+    axes_from_angles,
+    check_lengths,
+    check_ternaries,
+    dimension_mode,
+    place_joints,
+    points_from_local,
 )
 from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
 
@@ -54,6 +65,8 @@ def _time_limit(n: float) -> str | None:
 MAX_FILE_BYTES = 64 * 2**20  # a mechanism file larger than this is refused before reading
 MAX_PROFILE_BYTES = 2**30  # a profile CSV larger than this is refused before reading
 MAX_PROFILE_ROWS = 10_000_000
+FAR = 1e5  # a coordinate or length this many times the joints' span from them is a typing error (see check_extent)
+MAX_ANGLE = 1e6  # rad: a larger angle's floating-point spacing (≥ 1.2e-10 rad) nears the solver's rtol
 COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
 BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
 CHANGE_POINT_CHOICES = ("smooth", "other")
@@ -105,13 +118,18 @@ def from_dict(
     check_keys(data, "file", "file", probs, extra=TOP_LEVEL)
     name, title, units = read_meta(data, source, probs)
     joints = read_joints(data.get("joints"), probs)
-    links = read_links(data.get("links"), joints, probs)
-    sliders = read_sliders(data.get("sliders", {}), joints, links, probs)
-    points = read_points(data.get("points", {}), joints, links, sliders, probs)
+    missing: dict[str, str] = {}  # joints named without coordinates → the entry naming them first
+    links = read_links(data.get("links"), joints, probs, missing)
+    sliders = read_sliders(data.get("sliders", {}), joints, links, probs, missing)
+    points = read_points(data.get("points", {}), joints, links, sliders, probs, set(missing))
     probs.raise_if_any()
-    proto = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    read = Mechanism(name, joints, links, sliders, points, (), np.zeros(1), title, units, source)
+    proto = _geometry(data, read, missing, probs)
+    check_extent(proto, probs)
+    probs.raise_if_any()
     check_topology(proto, probs)
     probs.raise_if_any()
+    proto = dataclasses.replace(proto, points=points_from_local(proto, proto.points))  # through its body frames
     drivers = read_drivers(data.get("drivers"), proto, ctx, probs)
     probs.raise_if_any()
     times = read_time(data.get("time"), drivers, probs)
@@ -119,12 +137,31 @@ def from_dict(
     dynamics = read_dynamics(data, proto, ctx, probs)
     probs.raise_if_any()
     times.flags.writeable = False
-    mech = Mechanism(
-        name, joints, links, sliders, points, tuple(drivers), times, title, units, source, options, **dynamics
-    )
+    mech = dataclasses.replace(proto, drivers=tuple(drivers), times=times, options=options, **dynamics)
     if mech.gruebler()[2] > len(drivers):  # fewer drivers than Gruebler's count: never enough to fix the motion
         raise MechanismError(mobility_message(mech), entry="drivers")
     return mech  # Gruebler's count below the drivers may be a redundant linkage: the compiler decides by rank
+
+
+def _geometry(data: dict, m: Mechanism, missing: dict[str, str], probs: Problems) -> Mechanism:
+    """The mechanism's t = 0 geometry: written from dimensions or not (:mod:`vloop.files.dimensions`), joints
+    without coordinates placed provisionally, slider axes from their angles (points given by their local coordinates
+    are placed once the topology is checked)."""
+    dims, lacks = dimension_mode(m.links, m.sliders, m.points, data, probs)
+    ground = m.ground if any(lk.ground for lk in m.links.values()) else None
+    for j, entry in missing.items():
+        if not dims or (ground is not None and j in m.links[ground].joints):
+            known = ", ".join(list(m.joints)[:20]) or "none"
+            why = "a ground joint needs its coordinates"
+            if not dims:
+                why = f"only a file written from dimensions may leave a joint without coordinates; here {lacks}"
+            probs.add(entry, f"unknown joint {show(j)} (known: {known}; {why})")
+    check_ternaries(m.links, m.joints, probs)
+    probs.raise_if_any()
+    joints = place_joints(m.joints, m.links, m.sliders, missing, probs) if missing else m.joints
+    probs.raise_if_any()
+    sliders = axes_from_angles(m.sliders, m.links, joints)
+    return dataclasses.replace(m, joints=joints, sliders=sliders, from_dimensions=dims, unplaced=tuple(missing))
 
 
 def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
@@ -142,12 +179,16 @@ def _read_text_file(path: Path, limit: int, *, what: str, entry: str) -> str:
     if st.st_size > limit:
         raise MechanismError(f"{path}: {st.st_size:,} bytes, more than the {limit:,} vloop reads", entry=entry)
     try:
-        with open(path, "rb") as fh:
-            raw = fh.read(limit + 1)
+        with open(path, "rb") as fh:  # a buffer of the file's size, not of the limit (64 MB for every small file)
+            raw = fh.read(st.st_size + 1)
+            if len(raw) > st.st_size:  # it grew since: read on, up to the limit
+                raw += fh.read(limit + 1 - len(raw))
     except OSError as exc:
         raise MechanismError(
             f"{path}: cannot read {what} ({(exc.strerror or str(exc)).lower()})", entry=entry
         ) from None
+    if len(raw) > limit:
+        raise MechanismError(f"{path}: more than the {limit:,} bytes vloop reads", entry=entry)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -196,14 +237,15 @@ def read_joints(raw: Any, probs: Problems) -> dict[str, tuple[float, float]]:
     return joints
 
 
-def read_links(raw: Any, joints: dict, probs: Problems) -> dict[str, Link]:
-    """[links] NAME = { joints, ground, length } (masses are read with the dynamics)."""
+def read_links(raw: Any, joints: dict, probs: Problems, missing: dict[str, str]) -> dict[str, Link]:
+    """[links] NAME = { joints, ground, length, sides, angle } (masses are read with the dynamics). Joints named
+    without coordinates go to ``missing`` (joint → entry): only a file written from dimensions may have them."""
     if not isinstance(raw, dict) or not raw:
         probs.add("links", "missing or empty: give each link as NAME = { joints = [...] }")
         return {}
     links: dict[str, Link] = {}
     for ln, val in _names(raw, "links", probs).items():
-        link = _read_link(ln, {"joints": val} if isinstance(val, list) else val, joints, probs)
+        link = _read_link(ln, {"joints": val} if isinstance(val, list) else val, joints, probs, missing)
         if link is not None:
             links[ln] = link
     grounds = [n for n, lk in links.items() if lk.ground]
@@ -214,7 +256,7 @@ def read_links(raw: Any, joints: dict, probs: Problems) -> dict[str, Link]:
     return links
 
 
-def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
+def _read_link(ln: str, val: Any, joints: dict, probs: Problems, missing: dict[str, str]) -> Link | None:
     entry = f"links.{ln}"
     if not isinstance(val, dict):
         probs.add(entry, f"expected a table {{ joints = [...] }}, got {show(val)}")
@@ -232,7 +274,7 @@ def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
         return None
     for j in jl:
         if j not in joints:
-            probs.add(entry, f"unknown joint {show(j)} (known: {', '.join(list(joints)[:20]) or 'none'})")
+            _missing_joint(j, entry, joints, probs, missing)
     ground = val.get("ground", False)
     if not isinstance(ground, bool):
         probs.add(entry, "'ground' must be true or false")
@@ -244,25 +286,69 @@ def _read_link(ln: str, val: Any, joints: dict, probs: Problems) -> Link | None:
     elif length is not None and length <= 0:
         probs.add(entry, f"'length' must be positive, got {length:g}")
         length = None
-    return Link(ln, tuple(jl), ground, length)
+    sides, angle = _read_sides(val, jl, entry, probs)
+    if ground and (length is not None or sides is not None):
+        probs.add(entry, "the ground's dimensions are its joints' coordinates: it takes no length or sides")
+    return Link(ln, tuple(jl), ground, length, sides, angle)
 
 
-def read_sliders(raw: Any, joints: dict, links: dict[str, Link], probs: Problems) -> dict[str, Slider]:
-    """[sliders] NAME = { joint, guide, axis }."""
+def _missing_joint(j: str, entry: str, joints: dict, probs: Problems, missing: dict[str, str]) -> None:
+    """A joint named without coordinates: kept in ``missing`` if its name is valid (a file written from dimensions
+    may leave it out; :func:`_geometry` decides)."""
+    if name_problem(j):
+        probs.add(entry, f"unknown joint {show(j)} (known: {', '.join(list(joints)[:20]) or 'none'})")
+    else:
+        missing.setdefault(j, entry)
+
+
+def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple[float, ...] | None, float | None]:
+    """A ternary link's ``sides`` (three, or two with ``angle``), checked: positive, a triangle."""
+    raw, angle = val.get("sides"), number(val, "angle", entry, probs)
+    if raw is None:
+        if angle is not None:
+            probs.add(entry, "'angle' goes with two sides: sides = [|J0J1|, |J0J2|]")
+        return None, None
+    if len(jl) != 3 or "length" in val:
+        probs.add(entry, "'sides' is for ternary links (three joints), instead of 'length'")
+        return None, None
+    if not isinstance(raw, list) or len(raw) not in (2, 3):
+        probs.add(entry, f"'sides' must be [a, b, c] or [a, c] with 'angle', got {show(raw)}")
+        return None, None
+    sides = [real(x, "sides", entry, probs) for x in raw]
+    if None in sides:
+        return None, None
+    if min(sides) <= 0:  # type: ignore[type-var]
+        probs.add(entry, f"'sides' must be positive, got {show(raw)}")
+        return None, None
+    if (len(sides) == 2) != (angle is not None):
+        probs.add(entry, "two sides need the 'angle' between them; three sides take no angle")
+        return None, None
+    a, b, c = sides if len(sides) == 3 else (sides[0], 1.0, 1.0)  # type: ignore[misc]
+    if len(sides) == 3 and not (a < b + c and b < a + c and c < a + b):
+        why = "each must be shorter than the other two together; a straight ternary link: two sides, angle = 0 or pi"
+        probs.add(entry, f"sides {a:g}, {b:g}, {c:g} of {'-'.join(jl)} cannot form a triangle ({why})")
+        return None, None
+    return tuple(sides), angle  # type: ignore[arg-type]
+
+
+def read_sliders(
+    raw: Any, joints: dict, links: dict[str, Link], probs: Problems, missing: dict[str, str]
+) -> dict[str, Slider]:
+    """[sliders] NAME = { joint, guide, axis | angle, offset }."""
     if not isinstance(raw, dict):
         probs.add("sliders", "must be a table of NAME = { joint, guide, axis }")
         return {}
     ground = next((n for n, lk in links.items() if lk.ground), None)
     sliders: dict[str, Slider] = {}
     for sn, val in _names(raw, "sliders", probs).items():
-        slider = _read_slider(sn, val, joints, links, ground, probs)
+        slider = _read_slider(sn, val, joints, links, ground, probs, missing)
         if slider is not None:
             sliders[sn] = slider
     return sliders
 
 
 def _read_slider(
-    sn: str, val: Any, joints: dict, links: dict[str, Link], ground: str | None, probs: Problems
+    sn: str, val: Any, joints: dict, links: dict[str, Link], ground: str | None, probs: Problems, missing: dict
 ) -> Slider | None:
     entry = f"sliders.{sn}"
     if not isinstance(val, dict):
@@ -273,9 +359,11 @@ def _read_slider(
         probs.add(entry, f"duplicate name: '{sn}' is also a link (a slider's name is its block's name)")
         return None
     j = val.get("joint")
-    if not isinstance(j, str) or j not in joints:
-        probs.add(entry, f"unknown joint {show(j)}" if isinstance(j, str) else "missing 'joint'")
+    if not isinstance(j, str):
+        probs.add(entry, "missing 'joint'")
         return None
+    if j not in joints:
+        _missing_joint(j, entry, joints, probs, missing)
     guide = val.get("guide", "ground")
     if guide == "ground" and ground is not None:
         guide = ground
@@ -287,15 +375,24 @@ def _read_slider(
             entry, f"the guide '{guide}' names the slider's joint '{j}': a block cannot be pinned to its own guide"
         )
         return None
-    if "axis" not in val:
-        probs.add(entry, "missing 'axis'")
+    offset = number(val, "offset", entry, probs)
+    if ("axis" in val) == ("angle" in val):
+        probs.add(entry, "give 'axis' (its direction at t = 0) or 'angle' (in the guide's frame), one of them")
         return None
+    if "angle" in val:
+        angle = number(val, "angle", entry, probs)
+        if angle is not None and len(links[guide].joints) == 1 and not links[guide].ground:
+            probs.add(entry, f"the one-joint guide '{guide}' turns with the slider's axis: give 'axis', not 'angle'")
+            return None
+        return None if angle is None else Slider(sn, j, guide, (1.0, 0.0), angle, offset)
     axis = direction(val["axis"], "axis", entry, probs)
-    return None if axis is None else Slider(sn, j, guide, axis)
+    return None if axis is None else Slider(sn, j, guide, axis, None, offset)
 
 
-def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems) -> dict[str, Point]:
-    """[points] NAME = { link, at }."""
+def read_points(
+    raw: Any, joints: dict, links: dict, sliders: dict, probs: Problems, unplaced: set[str] | None = None
+) -> dict[str, Point]:
+    """[points] NAME = { link, at | local } (a point given by ``local`` is placed on its body by :func:`_geometry`)."""
     if not isinstance(raw, dict):
         probs.add("points", "must be a table of NAME = { link, at }")
         return {}
@@ -306,17 +403,64 @@ def read_points(raw: Any, joints: dict, links: dict, sliders: dict, probs: Probl
             probs.add(entry, f"expected a table {{ link, at }}, got {show(val)}")
             continue
         check_keys(val, "points", entry, probs)
-        if pn in joints:
+        if pn in joints or pn in (unplaced or ()):
             probs.add(entry, f"duplicate name: '{pn}' is also a joint")
             continue
         lk = val.get("link")
         if not isinstance(lk, str) or (lk not in links and lk not in sliders):
             probs.add(entry, f"unknown link {show(lk)}")
             continue
-        at = pair(val.get("at"), "at", entry, probs)
-        if at is not None:
-            points[pn] = Point(pn, lk, at)
+        if ("at" in val) == ("local" in val):
+            probs.add(entry, "give 'at' (its position at t = 0) or 'local' (in its body's frame), one of them")
+            continue
+        key = "at" if "at" in val else "local"
+        xy = pair(val[key], key, entry, probs)
+        if xy is not None:
+            on = links[lk].joints[0] if lk in links else sliders[lk].joint
+            near = joints.get(on, (0.0, 0.0))  # until placed on its body: its body's first joint (the size stays right)
+            points[pn] = Point(pn, lk, xy) if key == "at" else Point(pn, lk, near, xy)
     return points
+
+
+def joint_span(m: Mechanism) -> tuple[float, tuple[float, float]]:
+    """(diagonal of the joints' bounding box [file units], its centre): the linkage's own size, which tracer
+    points, centres of mass and stated lengths are measured against."""
+    xs, ys = [x for x, _ in m.joints.values()], [y for _, y in m.joints.values()]
+    span = math.hypot(max(xs) - min(xs), max(ys) - min(ys)) if xs else 0.0
+    return span, ((max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2) if xs else (0.0, 0.0)
+
+
+def far_problem(m: Mechanism, what: str, value: float | tuple[float, float]) -> str:
+    """Why a tracer point, centre of mass (a pair, world) or length (a number) is refused ("" if it is fine): it lies
+    more than FAR times the joints' span from them. Every relative tolerance (coincident joints, closure, the
+    force balance's rank) is taken of the mechanism's size, and the force balance loses digits as
+    ε·(distance/size)² (measured: a centre of mass 1.2e5 sizes away balances the power to 2e-11 of peak, 1.2e7
+    sizes away to 2e-8, 1.2e15 sizes away not at all) — such a number is a typing error, not a design."""
+    span, (cx, cy) = joint_span(m)
+    if span <= 0:
+        return ""
+    dist = abs(value) if isinstance(value, float) else max(abs(value[0] - cx), abs(value[1] - cy))
+    if dist <= FAR * span:
+        return ""
+    length = isinstance(value, float)
+    shown = f"{value:.6g}" if length else f"[{value[0]:.6g}, {value[1]:.6g}]"
+    return (
+        f"'{what}' = {shown} {'is' if length else 'lies'} {dist / span:.2g} times the linkage's size "
+        f"{'' if length else 'away from it '}({span:.6g} {m.units}, the span of its joints): at most {FAR:g} times "
+        "(a typing error?)"
+    )
+
+
+def check_extent(m: Mechanism, probs: Problems) -> None:
+    """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`)."""
+    for p in m.points.values():
+        problem = far_problem(m, "at", p.at)
+        if problem:
+            probs.add(f"points.{p.name}", problem)
+    for lk in m.links.values():
+        problem = far_problem(m, "length", lk.length) if lk.length is not None else ""
+        if problem:
+            probs.add(f"links.{lk.name}", problem)
 
 
 def check_topology(m: Mechanism, probs: Problems) -> None:
@@ -327,8 +471,13 @@ def check_topology(m: Mechanism, probs: Problems) -> None:
         if j not in named:
             probs.add(f"joints.{j}", "is named by no link or slider")
     guides = {s.guide for s in m.sliders.values()}
+    if m.from_dimensions:
+        check_lengths(m, COINCIDENT_TOL, probs)
     for lk in m.links.values():
-        pts = [m.joints[j] for j in lk.joints]
+        if m.from_dimensions and not lk.ground:  # its shape is its dimensions (checked above), not its coordinates
+            pts = []
+        else:
+            pts = [m.joints[j] for j in lk.joints]
         for i in range(len(pts)):
             for k in range(i + 1, len(pts)):
                 if math.dist(pts[i], pts[k]) <= COINCIDENT_TOL * scale:
@@ -431,7 +580,9 @@ def _read_crank(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, prob
         return None
     keys, cols = ("theta0", "omega", "alpha"), ("t", "theta", "omega", "alpha")
     x0, v0, a0, prof = _motion(d, keys, cols, bodies[ln].theta0, entry, ctx, probs)
-    return Driver("crank", ln, x0, v0, a0, pivot, prof, entry)
+    return Driver(
+        "crank", ln, x0, v0, a0, pivot, prof, entry, _from_coordinates(d, keys[0], lk.joints[:2], m, entry, probs)
+    )
 
 
 def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, probs: Problems) -> Driver | None:
@@ -446,7 +597,19 @@ def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, p
     p = m.joints[sl.joint]
     s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
     x0, v0, a0, prof = _motion(d, ("s0", "v", "a"), ("t", "s", "v", "a"), s_coords, entry, ctx, probs)
-    return Driver("slider", sn, x0, v0, a0, None, prof, entry)
+    on = (sl.joint, *([] if gb.kind == "ground" else m.links[sl.guide].joints[:2]))
+    return Driver("slider", sn, x0, v0, a0, None, prof, entry, _from_coordinates(d, "s0", on, m, entry, probs))
+
+
+def _from_coordinates(d: dict, key: str, joints: tuple[str, ...], m: Mechanism, entry: str, probs: Problems) -> bool:
+    """Whether a driver's t = 0 value is taken from the coordinates of ``joints`` (it states none); refused where
+    one of them has none."""
+    if key in d or "profile" in d:
+        return False
+    without = [j for j in joints if j in m.unplaced]
+    if without:
+        probs.add(entry, f"give {key} (the input's value at t = 0): {', '.join(without)} has no coordinates to take it")
+    return True
 
 
 def _motion(
@@ -460,6 +623,9 @@ def _motion(
 ) -> tuple[float, float, float, Profile | None]:
     """A driver's x0 (default: from the coordinates), rate and acceleration, or its profile."""
     x0 = number(d, keys[0], entry, probs, x_coords)
+    if keys[0] == "theta0" and abs(x0) > MAX_ANGLE:
+        probs.add(entry, f"'theta0' = {x0:.6g} rad cannot be resolved: beyond ±{MAX_ANGLE:g} rad an angle's "
+                  f"floating-point spacing is {math.ulp(x0):.2g} rad (give the angle modulo 2π)")  # fmt: skip
     v0 = number(d, keys[1], entry, probs, 0.0)
     a0 = number(d, keys[2], entry, probs, 0.0)
     prof = None
@@ -525,20 +691,41 @@ def _read_csv(spec: str, entry: str, ctx: _Context, probs: Problems) -> dict[str
 
 
 def _profile_path(spec: str, entry: str, ctx: _Context, probs: Problems) -> Path | None:
+    """The profile's path: ``spec`` relative to the mechanism file's folder, or absolute. Without
+    ``allow_external_profiles`` it must lie inside that folder once both are resolved the same way (symbolic
+    links and ``..`` followed): an absolute path into the folder is read, a link out of it is refused."""
     if "\x00" in spec or not spec.strip():
         probs.add(entry, f"profile path {show(spec)} is not a file name")
         return None
-    path = ctx.base / spec
+    path = ctx.base / spec  # an absolute spec replaces the base
     if not ctx.allow_external_profiles:
-        outside = Path(spec).is_absolute() or not path.resolve().is_relative_to(ctx.base.resolve())
+        try:
+            outside = not Path(os.path.realpath(path)).is_relative_to(os.path.realpath(ctx.base))
+        except (OSError, ValueError):  # a path the system cannot resolve (too long, a link loop)
+            outside = True
         if outside:
             probs.add(
                 entry,
-                f"profile {show(spec)} is outside the mechanism file's folder: vloop reads only files beside it "
-                "(allow others with --allow-external-profiles, or load(..., allow_external_profiles=True))",
+                f"profile {show(spec)} is outside the mechanism file's folder {show(str(ctx.base))}: vloop reads only "
+                "files inside it (allow others with --allow-external-profiles, or load(..., "
+                "allow_external_profiles=True))",
             )
             return None
     return path
+
+
+def _column_ok(table: dict[str, np.ndarray], k: str, n: int, entry: str, probs: Problems, source: str) -> bool:
+    """A profile column as long as its time column and finite; else a problem naming the file, column and row."""
+    col = table[k]
+    where = f"profile {show(source)} column '{k}'" if source != "inline" else f"profile column '{k}'"
+    if len(col) != n:
+        probs.add(entry, f"{where} has {len(col)} values for {n} times")
+        return False
+    bad = np.flatnonzero(~np.isfinite(col))
+    if len(bad):
+        probs.add(entry, f"{where} has a missing or non-finite value at data row {int(bad[0]) + 1}")
+        return False
+    return True
 
 
 def _profile(
@@ -552,8 +739,7 @@ def _profile(
     t = table[tcol]
     n = len(t)
     for k in (tcol, xcol, vcol, acol):
-        if k in table and (len(table[k]) != n or not np.all(np.isfinite(table[k]))):
-            probs.add(entry, f"profile column '{k}' has missing or non-finite values")
+        if k in table and not _column_ok(table, k, n, entry, probs, source):
             return None
     if n < 2:
         probs.add(entry, "profile needs at least two rows")
@@ -601,10 +787,25 @@ def read_time(raw: Any, drivers: list[Driver], probs: Problems) -> np.ndarray:
         probs.add("time", f"step {step:g} over [{start:g}, {stop:g}] gives {why}")
         return np.zeros(1)
     n = math.floor(count + 1e-9) + 1  # up to and including stop, never past it
-    t = start + step * np.arange(n)
+    t = time_grid(start, step, n)
     if n > 1 and np.any(np.diff(t) <= 0):
         probs.add("time", f"step {step:g} is too small to separate samples near t = {start:g}")
     return t
+
+
+def time_grid(start: float, step: float, n: int) -> np.ndarray:
+    """The samples start + k·step, k = 0 … n − 1 [s], each the double nearest the decimal value the file's
+    numbers state (start and step read as their shortest decimal text: 7 × 0.05 gives 0.35, where the floating
+    product is 0.35000000000000003). Exact by integer arithmetic where the numerators and the common
+    denominator are exact doubles (one correctly rounded division); otherwise start + k·step in floating point."""
+    from fractions import Fraction
+
+    a, b = Fraction(repr(float(start))), Fraction(repr(float(step)))
+    den = math.lcm(a.denominator, b.denominator)
+    first, inc = a.numerator * (den // a.denominator), b.numerator * (den // b.denominator)
+    if den < 2**1000 and float(den) == den and max(abs(first), abs(inc), abs(first + inc * (n - 1))) < 2**53:
+        return (first + inc * np.arange(n, dtype=np.int64)).astype(float) / den
+    return start + step * np.arange(n)
 
 
 def _explicit_times(ts: Any, probs: Problems) -> np.ndarray:
@@ -699,12 +900,17 @@ def read_dynamics(data: dict, m: Mechanism, ctx: _Context, probs: Problems) -> d
 
 
 def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProperties]:
-    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks."""
+    """``mass`` [kg], ``inertia`` [kg·m² about the centre of mass], ``com = [x, y]`` on links and blocks.
+
+    Without ``com`` the centre of mass is the mean of the body's joints as the body is assembled — in its own
+    frame, where a stated ``length`` places the second joint (the typed coordinates may be rounded) — stored, as
+    a stated ``com`` is, in world coordinates at t = 0 through the body's frame."""
     out: dict[str, MassProperties] = {}
     tables = [("links", n, v) for n, v in (data.get("links") or {}).items() if n in m.links]
     tables += [("sliders", n, v) for n, v in (data.get("sliders") or {}).items() if n in m.sliders]
+    bodies = m.bodies() if tables else {}
     for section, name, val in tables:
-        if not isinstance(val, dict) or not {"mass", "inertia", "com"} & set(val):
+        if not isinstance(val, dict) or not {"mass", "inertia", "com", "com_local"} & set(val):
             continue
         entry = f"{section}.{name}"
         if section == "links" and m.links[name].ground:
@@ -713,14 +919,31 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
         mass = real(val.get("mass", 0.0), "mass", entry, probs)
         inertia = real(val.get("inertia", 0.0), "inertia", entry, probs)
         joints = m.links[name].joints if section == "links" else (m.sliders[name].joint,)
-        mean = (sum(m.joints[j][0] for j in joints) / len(joints), sum(m.joints[j][1] for j in joints) / len(joints))
-        com = pair(val["com"], "com", entry, probs) if "com" in val else mean
+        if "com" in val and "com_local" in val:
+            probs.add(entry, "give 'com' (world, t = 0) or 'com_local' (in the body's frame), one of them")
+            continue
+        local = pair(val["com_local"], "com_local", entry, probs) if "com_local" in val else None
+        com = pair(val["com"], "com", entry, probs) if "com" in val else _joint_mean(bodies[name], joints)
+        com = to_world(bodies[name], local) if local is not None else com
+        far = far_problem(m, "com", com) if com is not None else ""
+        if far:
+            probs.add(entry, far)
+            continue
         for what, x in (("mass", mass), ("inertia", inertia)):
             if x is not None and x < 0:
                 probs.add(entry, f"'{what}' must not be negative, got {x:g}")
         if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
-            out[name] = MassProperties(mass, inertia, com)
+            out[name] = MassProperties(mass, inertia, com, local)
     return out
+
+
+def _joint_mean(body: Body, joints: tuple[str, ...]) -> tuple[float, float]:
+    """The mean of ``joints`` in the body's frame (as assembled: rigid, its stated length applied), in world
+    coordinates through the frame at t = 0."""
+    lx = sum(body.local[j][0] for j in joints) / len(joints)
+    ly = sum(body.local[j][1] for j in joints) / len(joints)
+    c, s = math.cos(body.theta0), math.sin(body.theta0)
+    return (body.origin[0] + c * lx - s * ly, body.origin[1] + s * lx + c * ly)
 
 
 def read_loads(raw: Any, m: Mechanism, ctx: _Context, probs: Problems) -> list[Load]:
@@ -808,13 +1031,11 @@ def _load_profile(
     if any(c not in table for c in columns):
         probs.add(entry, "a force profile needs columns 't', 'fx' and 'fy'")
         return None
-    prof = _profile({"t": table["t"], "x": table[columns[0]]}, ("t", "x", "", ""), entry, probs)
-    if prof is None or any(len(table[c]) != len(prof.t) or not np.all(np.isfinite(table[c])) for c in columns):
-        if prof is not None:
-            probs.add(entry, f"profile columns {', '.join(columns)} have missing or non-finite values")
+    source = spec if isinstance(spec, str) else "inline"
+    prof = _profile({"t": table["t"], columns[0]: table[columns[0]]}, ("t", columns[0], "", ""), entry, probs, source)
+    if prof is None or not all(_column_ok(table, c, len(prof.t), entry, probs, source) for c in columns):
         return None
     values = np.column_stack([table[c] for c in columns])
-    source = spec if isinstance(spec, str) else "inline"
     return Load(kind, body, None, point, LoadProfile(prof.t, values, columns, source), entry)
 
 
@@ -831,14 +1052,15 @@ def to_dict(mech: Mechanism) -> dict[str, Any]:
     if mech.title:
         out["title"] = mech.title
     out["units"] = mech.units
-    out["joints"] = {j: list(xy) for j, xy in mech.joints.items()}
+    out["joints"] = {j: list(xy) for j, xy in mech.joints.items() if j not in mech.unplaced}
     out["links"] = {n: _link_dict(lk) for n, lk in mech.links.items()}
     if mech.sliders:
-        out["sliders"] = {
-            n: {"joint": s.joint, "guide": s.guide, "axis": list(s.axis)} for n, s in mech.sliders.items()
-        }
+        out["sliders"] = {n: _slider_dict(s) for n, s in mech.sliders.items()}
     if mech.points:
-        out["points"] = {n: {"link": p.link, "at": list(p.at)} for n, p in mech.points.items()}
+        out["points"] = {
+            n: {"link": p.link, **({"at": list(p.at)} if p.local is None else {"local": list(p.local)})}
+            for n, p in mech.points.items()
+        }
     out["drivers"] = [_driver_dict(d) for d in mech.drivers]
     out["time"] = {"times": mech.times.tolist()}
     if mech.options:
@@ -856,6 +1078,18 @@ def _link_dict(lk: Link) -> dict[str, Any]:
         entry["ground"] = True
     if lk.length is not None:
         entry["length"] = lk.length
+    if lk.sides is not None:
+        entry["sides"] = list(lk.sides)
+    if lk.angle is not None:
+        entry["angle"] = lk.angle
+    return entry
+
+
+def _slider_dict(s: Slider) -> dict[str, Any]:
+    entry: dict[str, Any] = {"joint": s.joint, "guide": s.guide}
+    entry.update({"axis": list(s.axis)} if s.angle is None else {"angle": s.angle})
+    if s.offset is not None:
+        entry["offset"] = s.offset
     return entry
 
 
@@ -880,7 +1114,11 @@ def _dynamics_to_dict(mech: Mechanism, out: dict[str, Any]) -> None:
     """Add masses (on their link/slider tables), gravity and loads to a to_dict structure."""
     for name, mp in mech.masses.items():
         table = out["links"][name] if name in mech.links else out["sliders"][name]
-        table.update(mass=mp.mass, inertia=mp.inertia, com=list(mp.com))
+        table.update(mass=mp.mass, inertia=mp.inertia)
+        if mp.local is not None:
+            table["com_local"] = list(mp.local)
+        elif not mech.from_dimensions:  # written from dimensions, the centre of mass is the mean of the joints
+            table["com"] = list(mp.com)
     if mech.gravity is not None:
         out["gravity"] = list(mech.gravity)
     loads = []
@@ -901,10 +1139,17 @@ def _dynamics_to_dict(mech: Mechanism, out: dict[str, Any]) -> None:
 
 
 def dumps(mech: Mechanism) -> str:
-    """The mechanism as TOML text (see :func:`to_dict`)."""
+    """The mechanism as TOML text (see :func:`to_dict`), short arrays (coordinates, a link's joints) on one line."""
+    import re
+
     import tomli_w
 
-    return tomli_w.dumps(to_dict(mech))
+    short = re.compile(r"\[\n((?:[ ]+[^\[\]{}\n]+,\n){1,4})[ ]*\]")
+
+    def one_line(m: re.Match) -> str:
+        return "[" + ", ".join(x.strip().rstrip(",") for x in m.group(1).splitlines()) + "]"
+
+    return short.sub(one_line, tomli_w.dumps(to_dict(mech)))
 
 
 def save(mech: Mechanism, path: str | Path) -> None:

@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fnmatch
 import os
 import re
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -134,19 +135,24 @@ def _unlink_quietly(path: str | Path) -> None:
 
 
 class OutputSet:
-    """A run's output files, published together.
+    """A run's output files (and folders), published together.
 
-        with OutputSet(folder) as out:
+        with OutputSet(folder, owns=("report.html", "viewer")) as out:
             result.to_csv(out.stage / "results.csv")       # any writer, into the private staging folder
             out.write_text("notes.txt", "...")
-        # on leaving without an exception: every staged file renamed into folder, under a folder lock
+        # on leaving without an exception: every staged entry renamed into folder, under a folder lock
 
     If the block raises (Ctrl-C included), nothing staged is published and the stage is removed,
-    so the folder keeps the previous run's complete set (or nothing). ``published`` lists the paths.
+    so the folder keeps the previous run's complete set (or nothing). Publishing is one step for a
+    user: Ctrl-C during the renames is held until they are done (the new set is then complete, and the
+    interrupt is raised after). ``owns`` names the entries (files or folders, ``fnmatch`` patterns) this
+    kind of set may hold: those of the previous set that the new one does not have are removed, so the
+    folder never holds a new summary beside an old report. ``published`` lists the paths.
     """
 
-    def __init__(self, folder: str | Path) -> None:
+    def __init__(self, folder: str | Path, owns: Iterable[str] = ()) -> None:
         self.folder = ensure_folder(folder)
+        self.owns = tuple(owns)
         self.published: list[Path] = []
         try:
             self.stage = Path(tempfile.mkdtemp(prefix=".vloop-stage-", dir=self.folder))
@@ -170,13 +176,22 @@ class OutputSet:
     def write_text(self, name: str, text: str) -> Path:
         return self.write(name, lambda fh: fh.write(text))
 
+    def final(self, path: str | Path) -> Path:
+        """Where a staged path will be once published (a path outside the stage is returned as it is)."""
+        path = Path(path)
+        try:
+            return self.folder / path.relative_to(self.stage)
+        except ValueError:
+            return path
+
     def publish(self) -> list[Path]:
-        """Rename every staged file into the folder, holding an exclusive lock on the folder."""
+        """Rename every staged entry into the folder (a staged folder replaces one of its name), and remove
+        the previous set's entries this one does not have, holding an exclusive lock on the folder."""
         import fcntl
 
         names = sorted(p.name for p in self.stage.iterdir())
         for name in names:
-            if (self.folder / name).is_dir():
+            if (self.folder / name).is_dir() and not (self.stage / name).is_dir():
                 self.discard()
                 raise OutputError(
                     f"cannot write {self.folder / name}: a folder of that name is in the way", entry="out"
@@ -185,9 +200,8 @@ class OutputSet:
             fd = os.open(self.folder, os.O_RDONLY)  # the folder itself is the lock: no lock file left behind
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX)
-                for name in names:
-                    os.replace(self.stage / name, self.folder / name)
-                    self.published.append(self.folder / name)
+                with _interrupts_held():
+                    self._rename(names)
             finally:
                 os.close(fd)  # closing releases the lock
         except OSError as exc:
@@ -195,6 +209,19 @@ class OutputSet:
         finally:
             self.discard()
         return self.published
+
+    def _rename(self, names: list[str]) -> None:
+        old = [self.stage / f".old-{n}" for n in names]
+        for name, aside in zip(names, old, strict=True):
+            target = self.folder / name
+            if (self.stage / name).is_dir() and target.is_dir():
+                os.replace(target, aside)  # a folder cannot replace a non-empty one: move the old one aside first
+            os.replace(self.stage / name, target)
+            self.published.append(target)
+        for entry in self.folder.iterdir():
+            stale = entry.name not in names and any(fnmatch.fnmatchcase(entry.name, p) for p in self.owns)
+            if stale and not entry.name.startswith(".vloop-stage-"):
+                _remove(entry)
 
     def discard(self) -> None:
         shutil.rmtree(self.stage, ignore_errors=True)
@@ -207,3 +234,29 @@ class OutputSet:
             self.publish()
         else:
             self.discard()
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink()
+
+
+@contextlib.contextmanager
+def _interrupts_held() -> Iterator[None]:
+    """Hold SIGINT (Ctrl-C) until the block is done, then raise KeyboardInterrupt if one came (main thread only)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda signum, frame: came.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old if old is not None else signal.default_int_handler)
+    if came:
+        raise KeyboardInterrupt

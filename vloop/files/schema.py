@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import MechanismError
+from .options import show
 
 NAME_MAX = 64
 _NAME = re.compile(r"[^\W_][\w-]*|_[\w-]*")  # letters, digits, '_' and '-' (Unicode letters and digits too)
@@ -47,9 +48,18 @@ class Section:
 
 
 MASS_KEYS = (
-    Key("mass", "number ≥ 0", "0 (massless)", "kg", "mass of the body", 1.5),
+    Key("mass", "number ≥ 0", "0 (massless)", "kg", "mass of the body, at its centre of mass `com`", 1.5),
     Key("inertia", "number ≥ 0", "0", "kg·m²", "moment of inertia about the centre of mass", 0.02),
-    Key("com", "[x, y]", "mean of the body's joints", "length", "centre of mass at t = 0, world frame", [1.0, 1.0]),
+    Key(
+        "com",
+        "[x, y]",
+        "mean of the body's joints as assembled",
+        "length",
+        "centre of mass at t = 0, world frame (default: the mean of the joints in the body as assembled, a stated "
+        "`length` applied, not of the typed coordinates)",
+        [1.0, 1.0],
+    ),
+    Key("com_local", "[u, v]", "none", "length", "centre of mass in the body's frame instead of com", [0.5, 0.0]),
 )
 
 SECTIONS: tuple[Section, ...] = (
@@ -74,8 +84,17 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "joints",
         "[joints] NAME = [x, y]",
-        "every pin or slider point at t = 0",
-        (Key("NAME", "[x, y]", "required", "length", "position at t = 0", [0.0, 0.0]),),
+        "every pin or slider point at t = 0 (written from dimensions: the ground's, and rough hints)",
+        (
+            Key(
+                "NAME",
+                "[x, y]",
+                "required (from dimensions: ground joints)",
+                "length",
+                "position at t = 0 (from dimensions: a hint for moving joints)",
+                [0.0, 0.0],
+            ),
+        ),
     ),
     Section(
         "links",
@@ -92,6 +111,15 @@ SECTIONS: tuple[Section, ...] = (
             ),
             Key("ground", "bool", "false", "", "this link is the frame", None),
             Key("length", "number > 0", "from the coordinates", "length", "stated length (binary links only)", None),
+            Key(
+                "sides",
+                "[a, b, c] or [a, c] > 0",
+                "from the coordinates",
+                "length",
+                "ternary J0-J1-J2: |J0J1|, |J1J2|, |J2J0|; or |J0J1|, |J0J2| with angle",
+                [4.0, 3.5],
+            ),
+            Key("angle", "number", "none", "rad", "with two sides: angle at J0 from J0→J1 to J0→J2, CCW", -2.0),
             *MASS_KEYS,
         ),
     ),
@@ -102,7 +130,16 @@ SECTIONS: tuple[Section, ...] = (
         (
             Key("joint", "joint name", "required", "", "the pin the block carries", None),
             Key("guide", "link name", '"ground"', "", "the guide (a moving link: an inverse slider)", None),
-            Key("axis", "[ux, uy]", "required", "", "sliding direction at t = 0 (normalised)", None),
+            Key("axis", "[ux, uy]", "required (or angle)", "", "sliding direction at t = 0 (normalised)", None),
+            Key("angle", "number", "from axis", "rad", "sliding direction in the guide's frame, CCW from its θ", 0.1),
+            Key(
+                "offset",
+                "number",
+                "through the joint",
+                "length",
+                "sliding line's distance from the guide's origin, + to the left of the axis",
+                0.2,
+            ),
             *MASS_KEYS,
         ),
     ),
@@ -112,7 +149,8 @@ SECTIONS: tuple[Section, ...] = (
         "tracer points fixed to a link or slider block",
         (
             Key("link", "link or slider name", "required", "", "the body carrying the point", None),
-            Key("at", "[x, y]", "required", "length", "position at t = 0", None),
+            Key("at", "[x, y]", "required (or local)", "length", "position at t = 0", None),
+            Key("local", "[u, v]", "none", "length", "position in the body's frame instead of at", [1.0, 0.5]),
         ),
     ),
     Section(
@@ -122,7 +160,14 @@ SECTIONS: tuple[Section, ...] = (
         (
             Key("link", "link name", "required", "", "the driven link", None),
             Key("pivot", "joint name", "the link's first joint", "", "must be the link's first joint", None),
-            Key("theta0", "number", "the coordinates' angle", "rad", "θ at t = 0", 0.5),
+            Key(
+                "theta0",
+                "number",
+                "the coordinates' angle",
+                "rad",
+                "θ at t = 0 (state it when coordinates are hints)",
+                0.5,
+            ),
             Key("omega", "number", "0", "rad/s", "angular velocity at t = 0", 2.0),
             Key("alpha", "number", "0", "rad/s²", "angular acceleration", 0.1),
             Key("profile", "CSV path or table", "none", "", "columns t, theta[, omega, alpha] instead", None),
@@ -134,7 +179,14 @@ SECTIONS: tuple[Section, ...] = (
         "a driven slider: s(t) = s0 + v·t + a·t²/2",
         (
             Key("slider", "slider name", "required", "", "the driven slider", None),
-            Key("s0", "number", "from the coordinates", "length", "s at t = 0", None),
+            Key(
+                "s0",
+                "number",
+                "from the coordinates",
+                "length",
+                "s at t = 0 (state it when coordinates are hints)",
+                None,
+            ),
             Key("v", "number", "0", "length/s", "velocity", None),
             Key("a", "number", "0", "length/s²", "acceleration", None),
             Key("profile", "CSV path or table", "none", "", "columns t, s[, v, a] instead", None),
@@ -143,7 +195,8 @@ SECTIONS: tuple[Section, ...] = (
     Section(
         "time",
         "[time]",
-        "the samples: start + k·step up to and including stop, or an explicit list",
+        "the samples: start + k·step up to and including stop (the decimals as written: 7 × 0.05 is 0.35), "
+        "or an explicit list",
         (
             Key("start", "number", "0", "s", "first sample", 0.0),
             Key("stop", "number", "required", "s", "last sample (within half a step)", 1.0),
@@ -173,7 +226,7 @@ SECTIONS: tuple[Section, ...] = (
                 "{ N = choice }",
                 "none",
                 "",
-                'per loop N: "open", "crossed", "flip", "keep" at t = 0',
+                'per loop N: "open", "crossed", "flip", "keep" at t = 0 (from dimensions: the assembly)',
                 {"1": "keep"},
             ),
             Key(
@@ -245,15 +298,6 @@ class Problems:
             text = "; ".join(f"[{e}] {m}" for e, m in self.items[:8])
             more = f" (and {len(self.items) - 8} more)" if len(self.items) > 8 else ""
             raise MechanismError(f"{self.where}: {text}{more}", entry=entry)
-
-
-def show(value: Any, limit: int = 60) -> str:
-    """A short, safe repr of a user value for a message (deep nesting, huge strings, control characters)."""
-    try:
-        text = repr(value)
-    except (RecursionError, ValueError):
-        text = f"<{type(value).__name__} nested too deeply>"
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def check_keys(table: dict, section: str, entry: str, probs: Problems, extra: set[str] | None = None) -> None:

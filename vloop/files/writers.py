@@ -1,15 +1,23 @@
-"""A run's results streamed to disk chunk by chunk: ``results.{csv,parquet,npz}`` and ``health.{...}``.
+"""Every table vloop writes: a run's results streamed to disk chunk by chunk (``results.{csv,parquet,npz}``,
+``health.{...}``), and whole tables (a study's, a validation's comparisons: :func:`write_table`).
 
 Every file is staged by an :class:`vloop.files.output.OutputSet` and published with the others when the
 run ends (complete, or stopped by a limit position with its rows so far): nothing half-written ever
 appears, and Ctrl-C leaves the previous complete set (or nothing).
 
-* ``csv``: one row per sample, ``t`` then the columns, every number to full precision (it reads
-  back to the same double; written by pyarrow when installed, else ``%.17g``).
+* ``csv``: one row per sample, ``t`` then the columns, every number the shortest text that reads back
+  to the same double (:func:`vloop.result.write_csv`; float32 health columns to the same float32).
 * ``parquet`` (needs pyarrow, ``pip install vloop[parquet]``): one row group per chunk, float64
   columns; each field's unit in its metadata (``unit``) and all of them as JSON under the schema
   metadata key ``vloop.units``.
 * ``npz``: one float64 array per column (``np.load(path)["l3.theta"]``), ``t`` included.
+
+A whole table (:func:`write_table`, a pandas DataFrame) is Parquet or CSV. Parquet: as above, each field's
+unit in its metadata. CSV: a header row, then a units row (``-`` where a column has no unit: a count, a
+flag, text), then one row per record; numbers as the shortest text that reads back to the same double, list
+cells (a series, a path) as JSON arrays, booleans ``true``/``false``. In both, a number that is not finite
+(a motion that did not complete, a spread of fewer than two draws, an error that overflowed) is a null — an
+empty cell — never NaN or inf.
 
 Health is compact: one row per sample with ``t``, ``health.residual`` and ``health.cond`` as float32
 (7 significant digits: they are diagnostics), ``health.branch`` (integer signature of the assembly
@@ -29,8 +37,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from ..result import Result
-from .output import OutputError, OutputSet
+from ..result import Result, arrow_array, column_units, write_csv
+from .output import OutputError, OutputSet, atomic_write
 
 FORMATS = ("csv", "parquet", "npz")
 HEALTH = (("residual", np.float32), ("cond", np.float32), ("branch", np.int64))
@@ -38,32 +46,6 @@ FLAGS = ("ill_conditioned", "change_point")
 CSV_BYTES = 24  # per value, an upper estimate of a full-precision decimal and its comma
 
 
-def units(columns: list[str], length: str) -> dict[str, str]:
-    """The unit of each output column (``t``: s; angles rad; lengths the file's units)."""
-    per = {
-        "theta": "rad",
-        "omega": "rad/s",
-        "alpha": "rad/s^2",
-        "x": length,
-        "y": length,
-        "s": length,
-        "vx": f"{length}/s",
-        "vy": f"{length}/s",
-        "v": f"{length}/s",
-        "ax": f"{length}/s^2",
-        "ay": f"{length}/s^2",
-        "a": f"{length}/s^2",
-    }
-    return {c: "s" if c == "t" else per.get(c.rsplit(".", 1)[-1], "1") for c in columns}
-
-
-def _arrow(a: np.ndarray) -> object:
-    """A numpy column as an Arrow array over the same memory (pa.array would import pandas to inspect it)."""
-    import pyarrow as pa
-
-    a = np.ascontiguousarray(a)
-    kind = {"f8": pa.float64(), "f4": pa.float32(), "i8": pa.int64(), "i1": pa.int8()}[a.dtype.str[1:]]
-    return pa.Array.from_buffers(kind, len(a), [None, pa.py_buffer(a)])
 
 
 def health_columns(res: Result) -> dict[str, np.ndarray]:
@@ -108,37 +90,18 @@ class _Table:
         self.rows += len(cols["t"])
 
     def _write_csv(self, cols: dict[str, np.ndarray]) -> None:
-        if not len(cols["t"]):
-            return
-        try:
-            import pyarrow as pa
-            import pyarrow.csv as pcsv
-        except ImportError:
-            fmt = [
-                "%.17g"
-                if np.issubdtype(cols[n].dtype, np.float64)
-                else ("%.7g" if cols[n].dtype == np.float32 else "%d")
-                for n in self.names
-            ]
-            np.savetxt(self._fh, np.column_stack([cols[n].astype(float) for n in self.names]), fmt=fmt, delimiter=",")
-            return
-        table = pa.Table.from_arrays([_arrow(cols[n]) for n in self.names], names=self.names)
-        pcsv.write_csv(table, self._fh, pcsv.WriteOptions(include_header=False))
+        write_csv(self._fh, None, [cols[n] for n in self.names])
 
     def _write_parquet(self, cols: dict[str, np.ndarray]) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        arrays = [_arrow(cols[n]) for n in self.names]
+        arrays = [arrow_array(cols[n]) for n in self.names]
         if self._pq is None:
             fields = [
                 pa.field(n, a.type, metadata={"unit": self.units[n]}) for n, a in zip(self.names, arrays, strict=True)
             ]
-            meta = {
-                "vloop.units": json.dumps(self.units),
-                **{f"vloop.{k}": json.dumps(v) for k, v in self.meta.items()},
-            }
-            self._pq = pq.ParquetWriter(self.path, pa.schema(fields, metadata=meta))
+            self._pq = pq.ParquetWriter(self.path, pa.schema(fields, metadata=_metadata(self.units, self.meta)))
         self._pq.write_table(pa.Table.from_arrays(arrays, schema=self._pq.schema))
 
     def _write_npz(self, cols: dict[str, np.ndarray]) -> None:
@@ -173,6 +136,106 @@ class _Table:
                     np.lib.format.write_array_header_2_0(out, header)
                     shutil.copyfileobj(src, out, 1 << 20)
                 raw.unlink()
+
+
+def _metadata(units_: dict[str, str], meta: dict) -> dict[str, str]:
+    """A Parquet file's schema metadata: every column's unit, and the table's own facts (JSON values)."""
+    return {"vloop.units": json.dumps(units_), **{f"vloop.{k}": json.dumps(v) for k, v in meta.items()}}
+
+
+TABLE_FORMATS = ("csv", "parquet")
+CSV_ROWS = 65536
+NO_UNIT = "-"
+
+
+def write_table(
+    df: Any, path: str | Path, fmt: str, units_: dict[str, str] | None = None, meta: dict | None = None
+) -> Path:
+    """Write a whole table (a pandas DataFrame) as ``fmt`` ("csv" or "parquet") to ``path`` (see the module
+    docstring); ``units_`` maps a column to its unit (others: no unit). Non-finite numbers become nulls."""
+    path = Path(path)
+    df = finite_or_null(df)
+    units_ = {c: (units_ or {}).get(c) or NO_UNIT for c in map(str, df.columns)}
+    if fmt not in TABLE_FORMATS:
+        raise OutputError(f"{path}: unknown table format {fmt!r} (csv or parquet)", entry="format")
+    if fmt == "parquet":
+        with atomic_write(path, "wb") as fh:
+            _table_parquet(df, fh, path, units_, meta or {})
+    else:
+        with atomic_write(path) as fh:
+            _table_csv(df, fh, units_)
+    return path
+
+
+def finite_or_null(df: Any) -> Any:
+    """``df`` with its non-finite numbers (nan, ±inf; in list cells too) as nulls: ``df`` itself when it has none
+    besides nulls already, else a copy (the caller's table is never changed)."""
+    fixed: dict[str, Any] = {}
+    for col in df.columns:
+        kind = df[col].dtype.kind
+        if kind == "f":
+            v = df[col].to_numpy(dtype=float, na_value=np.nan)
+            if np.any(np.isinf(v)):
+                fixed[col] = np.where(np.isfinite(v), v, np.nan)
+        elif kind == "O":
+            cells = [_finite_cell(x) for x in df[col]]
+            if any(a is not b for a, b in zip(cells, df[col], strict=True)):
+                fixed[col] = cells
+    if not fixed:
+        return df
+    df = df.copy()
+    for col, values in fixed.items():
+        df[col] = values
+    return df
+
+
+def _finite_cell(x: Any) -> Any:
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    if isinstance(x, list | tuple | np.ndarray) and len(x) and not np.all(np.isfinite(np.asarray(x, float))):
+        return None  # a series with a gap is no series: the row's reason says why
+    return x
+
+
+def _table_parquet(df: Any, fh: IO[bytes], path: Path, units_: dict[str, str], meta: dict) -> None:
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise OutputError(
+            f"{path}: writing Parquet needs pyarrow: pip install 'vloop[parquet]' (or use --format csv)", entry="format"
+        ) from None
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    fields = [f.with_metadata({"unit": units_[f.name]}) for f in table.schema]
+    keep = {k.decode(): v.decode() for k, v in (table.schema.metadata or {}).items()}  # pandas' own (dtypes)
+    pq.write_table(table.cast(pa.schema(fields, metadata={**keep, **_metadata(units_, meta)})), fh)
+
+
+def _table_csv(df: Any, fh: IO[str], units_: dict[str, str]) -> None:
+    import csv
+
+    import pandas as pd
+
+    out = csv.writer(fh, lineterminator="\n")
+    out.writerow(list(map(str, df.columns)))
+    out.writerow([units_[str(c)] for c in df.columns])
+    for lo in range(0, len(df), CSV_ROWS):  # a block of rows at a time: memory stays bounded
+        part = df.iloc[lo : lo + CSV_ROWS]
+        cells = [[_csv_cell(x, pd.NA) for x in part[c].tolist()] for c in part.columns]
+        out.writerows(zip(*cells, strict=True))
+
+
+def _csv_cell(x: Any, na: Any) -> str:
+    """One cell: shortest round-trip numbers, JSON arrays for lists, true/false, empty for a null (``na``)."""
+    if x is None or x is na or (isinstance(x, float) and x != x):
+        return ""
+    if isinstance(x, bool | np.bool_):
+        return "true" if x else "false"
+    if isinstance(x, float | np.floating):
+        return repr(float(x))
+    if isinstance(x, list | tuple | np.ndarray):
+        return json.dumps([float(v) for v in x], allow_nan=False)
+    return str(x)
 
 
 @dataclass
@@ -242,7 +305,7 @@ def stream(
     names = ["t", *columns]
     hnames = ["t", *(f"health.{n}" for n, _ in HEALTH), *(f"health.{n}" for n in FLAGS)]
     meta = {"mechanism": mechanism}
-    results = _Table(outset, "results", fmt, names, units(names, length), meta)
+    results = _Table(outset, "results", fmt, names, column_units(names, length), meta)
     health = _Table(outset, "health", fmt, hnames, {n: "s" if n == "t" else "1" for n in hnames}, meta)
     summary, kept = RunSummary(), []
     failure: Exception | None = None

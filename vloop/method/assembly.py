@@ -19,6 +19,7 @@ from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size
+CLOSED = 1e-11  # loops closed to this fraction of the mechanism's size count as assembled
 SINGULAR_RCOND = 1e-10  # smallest/largest singular value below this: singular Jacobian
 
 
@@ -32,7 +33,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     mech = sys.mechanism
     q = sys.coords_q.copy()
     if mech.drivers:
-        q[list(sys.drivers)] = _inputs_at_start(mech)
+        q[list(sys.drivers)] = inputs_at_start(mech)
     if not sys.loops:
         return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}, None
     every = TermIndex(sys)
@@ -53,7 +54,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
         iterations += steps
     z, e = every.at(q) if groups else (z_typed, e_typed)
     closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
-    if closure > 1e-11:
+    if closure > CLOSED:
         raise MechanismError(
             f"{mech.source}: [joints] cannot assemble the mechanism at t = 0 from the given coordinates "
             f"(closure {closure:.2g} of its size after {iterations} Newton steps){_over_note(sys)}",
@@ -68,7 +69,7 @@ def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, n
     return q, report, z
 
 
-def _inputs_at_start(mech: Mechanism) -> list[float]:
+def inputs_at_start(mech: Mechanism) -> list[float]:
     """The drivers' inputs at t = 0: x0 + v0·t + a0·t²/2 by drivers.evaluate's operations in the same order (the
     same bits, without its arrays), a profile by drivers.evaluate itself."""
     t = 0.0
@@ -196,6 +197,15 @@ class _Dyad:
                 q[u0], q[u1] = x[u0], x[u1]
                 return it
         return None
+
+
+def close_group(sys: LoopSystem, loops: list[int], unknowns: list[int], q: np.ndarray) -> bool:
+    """Close ``loops`` for ``unknowns`` from ``q`` (written into it), the other variables held, by the same Newton
+    as the assembly's; whether they close to 1e-11 of the mechanism's size."""
+    g = LoopGroup(sys, loops, unknowns)
+    _close(g, q, unknowns)
+    F = np.abs(g.residual(g.at(q)[0]))
+    return bool(np.all(np.isfinite(F)) and F.max(initial=0.0) <= CLOSED * sys.mechanism.scale)
 
 
 def _max_abs(xs: list[float]) -> float:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 import string
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -32,102 +34,171 @@ def _letter(i: int) -> str:
     return _LETTERS[i] if i < n else _LETTERS[i % n] + str(i // n)
 
 
-def fmt_angle(x: float, latex: bool = False) -> str:
-    """A constant angle as 0, π/2, π, 3π/2 when it is one, else in radians to 4 decimals."""
+def fmt_angle(x: float, latex: bool = False, exact: bool = False) -> str:
+    """A constant angle in [0, 2π) as 0, π/2, π, 3π/2 when it is one (within 1e-9 rad, ``exact``: 1e-12), else in
+    radians to 4 decimals (``exact``: the shortest text that reads back to the same double)."""
     x = x % (2 * math.pi)
     pi = r"\pi" if latex else "π"
+    tol = 1e-12 if exact else 1e-9
     for k, s in ((0, "0"), (1, f"{pi}/2"), (2, pi), (3, f"3{pi}/2"), (4, "0")):
-        if abs(x - k * math.pi / 2) < 1e-9:
+        if abs(x - k * math.pi / 2) < tol:
             return s
-    return f"{x:.4f}"
+    return repr(x) if exact else f"{x:.4f}"
 
 
-def _num(x: float) -> str:
-    return f"{x:.6g}"
+def _num(x: float, exact: bool = False) -> str:
+    return repr(float(x)) if exact else f"{x:.6g}"
 
 
-def describe(sys: LoopSystem, latex: bool = False) -> str:
-    """Loop equations, legend and solving order as text (or a LaTeX ``align*`` block)."""
-    mech = sys.mechanism
-    na = sys.n_angles
+@dataclass(frozen=True)
+class Vector:
+    """One vector of a loop equation, (r + s)·e^{j(θ_link + δ)}, the loop's sign folded into δ (−v = v·e^{jπ}).
+
+    ``letter``: its magnitude's symbol; ``link``: the link whose θ turns it (None: fixed to the ground);
+    ``slider``: the slider whose s is its magnitude (None: a rigid vector of length ``r``); ``delta`` in [0, 2π)."""
+
+    term: int
+    letter: str
+    link: str | None
+    slider: str | None
+    r: float
+    delta: float
+
+
+@dataclass(frozen=True)
+class LoopEquation:
+    """One loop equation Σ vectors = 0 and how it is solved: its unknowns, the inputs it takes from the drivers,
+    what earlier loops supply (``earlier``: their numbers and the symbols) and the block's method."""
+
+    number: int
+    label: str
+    vectors: tuple[Vector, ...]
+    unknown: tuple[str, ...] = ()
+    inputs: tuple[str, ...] = ()
+    earlier: tuple[tuple[int, ...], tuple[str, ...]] = ((), ())
+    kind: str = ""
+
+
+@dataclass(frozen=True)
+class Legend:
+    """What a letter stands for: a slider's displacement (``slider``) or the length ``r`` of the vector ``what``."""
+
+    letter: str
+    what: str
+    r: float = 0.0
+    slider: str | None = None
+
+
+def vector_loops(sys: LoopSystem) -> tuple[list[LoopEquation], list[Legend]]:
+    """The loop equations as one structure that both the text and the LaTeX are written from (in solving order;
+    vectors of zero length left out), and the legend of their letters (in order of first appearance)."""
     letters: dict[object, str] = {}
-    legend: list[str] = []
-    slider_letter: dict[int, str] = {}
+    legend: list[Legend] = []
+    scale = sys.mechanism.scale
 
-    def theta(a: int) -> str:
-        name = sys.angle_links[a]
-        return rf"\theta_{{\mathrm{{{name}}}}}" if latex else f"θ_{name}"
-
-    def var_sym(v: int) -> str:
-        if v < na:
-            return theta(v)
-        return slider_letter.get(v - na, f"s_{sys.slider_names[v - na]}")
-
-    def term_text(t: int, sign: float) -> str:
+    def vector(t: int, sign: float) -> Vector | None:
         ang, sl, r = int(sys.t_ang[t]), int(sys.t_sl[t]), float(sys.t_r[t])
-        delta = float(sys.t_delta[t]) + (math.pi if sign < 0 else 0.0)
+        if sl < 0 and r <= 1e-14 * scale:  # a chord whose parts cancel (the Whitworth's second ground vector)
+            return None
         key = ("s", sl) if sl >= 0 else ("r", round(r, 12), sys.t_label[t])
         if key not in letters:
             letters[key] = _letter(len(letters))
-            sym = letters[key]
-            if sl >= 0:
-                slider_letter[sl] = sym
-                legend.append(f"{sym} = s_{sys.slider_names[sl]} (slider {sys.slider_names[sl]})")
-            else:
-                legend.append(f"{sym} = |{sys.t_label[t]}| = {_num(r)}")
-        sym = letters[key]
-        if ang < 0:
-            arg = fmt_angle(delta, latex)
-        else:
-            off = fmt_angle(delta, latex)
-            arg = theta(ang) if off == "0" else f"{theta(ang)} + {off}"
-            if off != "0":
-                arg = f"({arg})" if not latex else arg
-        if latex:
-            return f"{sym}\\,e^{{j {arg}}}"
-        return f"{sym}·e^{{j{arg}}}"
+            name = sys.slider_names[sl] if sl >= 0 else None
+            legend.append(Legend(letters[key], f"slider {name}" if name else sys.t_label[t], r, name))
+        delta = (float(sys.t_delta[t]) + (math.pi if sign < 0 else 0.0)) % (2 * math.pi)
+        link = sys.angle_links[ang] if ang >= 0 else None
+        return Vector(t, letters[key], link, sys.slider_names[sl] if sl >= 0 else None, r, delta)
 
-    solved_in: dict[int, int] = {}
-    for b in sys.blocks:
-        for v in b.unknowns:
-            solved_in[v] = b.loops[0]
-    lines: list[str] = []
-    eqs: list[str] = []
-    for b in sys.blocks or ():
-        for li in b.loops:
-            lp = sys.loops[li]
-            body = " + ".join(term_text(t, s) for t, s in zip(lp.terms, lp.signs, strict=True))
-            unknown = [var_sym(v) for v in lp.variables if v in b.unknowns]
-            inputs = [var_sym(v) for v in lp.variables if v in sys.drivers]
-            earlier = [var_sym(v) for v in lp.variables if v not in b.unknowns and v not in sys.drivers]
-            if latex:
-                eqs.append(f"{body} &= 0 && \\text{{loop {li + 1} ({lp.label})}}")
-            else:
-                lines.append(f"loop {li + 1} ({lp.label}):  {body} = 0")
-                detail = [f"unknown: {', '.join(unknown)}"]
-                if inputs:
-                    detail.append(f"input: {', '.join(inputs)}")
-                if earlier:
-                    src = sorted({solved_in[v] + 1 for v in lp.variables if v in solved_in and v not in b.unknowns})
-                    detail.append(f"from loop {', '.join(map(str, src))}: {', '.join(earlier)}")
-                detail.append(_KIND[b.kind])
-                lines.append("    " + "; ".join(detail))
-    if not sys.blocks:
-        for lp in sys.loops:
-            body = " + ".join(term_text(t, s) for t, s in zip(lp.terms, lp.signs, strict=True))
-            lines.append(f"loop {lp.index + 1} ({lp.label}):  {body} = 0")
+    def equation(li: int, block: Any = None) -> LoopEquation:
+        lp = sys.loops[li]
+        vectors = tuple(v for t, sg in zip(lp.terms, lp.signs, strict=True) if (v := vector(t, sg)) is not None)
+        if block is None:
+            return LoopEquation(li + 1, lp.label, vectors)
+        sym = {v: _symbol(sys, v, letters) for v in lp.variables}
+        earlier = [v for v in lp.variables if v not in block.unknowns and v not in sys.drivers]
+        sources = tuple(sorted({solved_in[v] + 1 for v in earlier if v in solved_in}))
+        return LoopEquation(
+            li + 1, lp.label, vectors,
+            tuple(sym[v] for v in lp.variables if v in block.unknowns),
+            tuple(sym[v] for v in lp.variables if v in sys.drivers),
+            (sources, tuple(sym[v] for v in earlier)), block.kind,
+        )  # fmt: skip
+
+    solved_in = {v: b.loops[0] for b in sys.blocks for v in b.unknowns}
+    if sys.blocks:
+        loops = [equation(li, b) for b in sys.blocks for li in b.loops]
+    else:
+        loops = [equation(lp.index) for lp in sys.loops]
+    return loops, legend
+
+
+def _symbol(sys: LoopSystem, v: int, letters: dict) -> str:
+    """A variable's symbol: θ_NAME for an angle, a slider's letter (s_NAME before it has one)."""
+    na = sys.n_angles
+    if v < na:
+        return f"θ_{sys.angle_links[v]}"
+    return letters.get(("s", v - na), f"s_{sys.slider_names[v - na]}")
+
+
+def _theta(name: str, latex: bool) -> str:
+    return rf"\theta_{{\mathrm{{{name.replace('_', chr(92) + '_')}}}}}" if latex else f"θ_{name}"
+
+
+def exponent(v: Vector, latex: bool = False, exact: bool = False) -> str:
+    """The exponent of a vector's e^{…}: jθ, j(θ + δ) or jδ — one expression, written as text or LaTeX."""
+    off = fmt_angle(v.delta, latex, exact)
+    j = "j " if latex else "j"
+    if v.link is None:
+        return f"{j}{off}"
+    th = _theta(v.link, latex)
+    return f"{j}{th}" if off == "0" else f"{j}({th} + {off})"
+
+
+def vector_text(v: Vector, latex: bool = False, exact: bool = False) -> str:
+    """``a·e^{jθ_l2}`` (text) or ``a\\,e^{j\\theta_{\\mathrm{l2}}}`` (LaTeX)."""
+    return f"{v.letter}{chr(92) + ',' if latex else '·'}e^{{{exponent(v, latex, exact)}}}"
+
+
+def equation_text(eq: LoopEquation, latex: bool = False, exact: bool = False) -> str:
+    """The left side of a loop equation, Σ vectors (= 0)."""
+    return " + ".join(vector_text(v, latex, exact) for v in eq.vectors)
+
+
+def legend_text(item: Legend, exact: bool = False) -> str:
+    if item.slider is not None:
+        return f"{item.letter} = s_{item.slider} (slider {item.slider})"
+    return f"{item.letter} = |{item.what}| = {_num(item.r, exact)}"
+
+
+def describe(sys: LoopSystem, latex: bool = False, exact: bool = False) -> str:
+    """Loop equations, legend and solving order as text (or a LaTeX ``align*`` block), both written from
+    :func:`vector_loops`. ``exact``: every number to full precision (the shortest text that reads back to the same
+    double), angles that are multiples of π/2 within 1e-12 rad as such."""
+    mech = sys.mechanism
+    loops, legend = vector_loops(sys)
     L, J, M = mech.gruebler()
     head = (
         f"{mech.name}: {len(sys.loops)} vector loop{'s' if len(sys.loops) != 1 else ''} "
         f"(J − L + 1 = {J} − {L} + 1), mobility M = {M}, {len(sys.unknowns)} unknowns"
     )
+    notes = [legend_text(x, exact) for x in legend]
     if latex:
-        out = ["% " + head, r"\begin{align*}"]
-        out.append(" \\\\\n".join(eqs))
-        out.append(r"\end{align*}")
-        out.append("% " + "; ".join(legend))
-        return "\n".join(out)
-    return "\n".join([head, "", *lines, "", "where", *(f"  {x}" for x in legend)])
+        eqs = [f"{equation_text(eq, True, exact)} &= 0 && \\text{{loop {eq.number} ({eq.label})}}" for eq in loops]
+        return "\n".join(
+            ["% " + head, r"\begin{align*}", " \\\\\n".join(eqs), r"\end{align*}", "% " + "; ".join(notes)]
+        )
+    lines: list[str] = []
+    for eq in loops:
+        lines.append(f"loop {eq.number} ({eq.label}):  {equation_text(eq, False, exact)} = 0")
+        if eq.kind:
+            detail = [f"unknown: {', '.join(eq.unknown)}"]
+            if eq.inputs:
+                detail.append(f"input: {', '.join(eq.inputs)}")
+            if eq.earlier[1]:
+                detail.append(f"from loop {', '.join(map(str, eq.earlier[0]))}: {', '.join(eq.earlier[1])}")
+            detail.append(_KIND[eq.kind])
+            lines.append("    " + "; ".join(detail))
+    return "\n".join([head, "", *lines, "", "where", *(f"  {x}" for x in notes)])
 
 
 def grashof(sys: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, float]]]:

@@ -6,11 +6,14 @@ edge between the nodes of the bodies that share a pin (a star per pin); an edge 
 reference node to the block it carries (the slider vector, plus the constant offset of the
 sliding line). Every edge carries *terms*, complex vectors z = (r + s)·e^{j(φ_a + δ)} with φ_a the
 angle of rotating link a (φ ≡ 0 for the ground) and s a slider displacement (absent for rigid
-vectors). A cycle basis gives J − L + 1 independent loops.
+vectors). A cycle basis gives J − L + 1 independent loops. Each loop is written with one vector per
+body it crosses (the body's star vectors and slider-line offsets along the way summed into a chord,
+a term of its own), so a four-bar's ground vector is O2→O4 wherever the world origin lies.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -38,8 +41,11 @@ class Terms:
     r: list[float] = field(default_factory=list)  # constant magnitude
     delta: list[float] = field(default_factory=list)  # constant angle offset [rad]
     label: list[str] = field(default_factory=list)
+    body: list[str] = field(default_factory=list)  # the body the term is fixed in (a slider's: its guide)
+    ends: list[tuple[str, str]] = field(default_factory=list)  # the points it runs from and to (names)
+    parts: dict[int, tuple[tuple[int, float], ...]] = field(default_factory=dict)  # chord → Σ c·z of these terms
 
-    def add(self, ang: int, sl: int, r: float, delta: float, label: str) -> int:
+    def add(self, ang: int, sl: int, r: float, delta: float, label: str, body: str = "", ends: tuple = ("", "")) -> int:
         if r < 0:
             r, delta = -r, delta + math.pi
         self.ang.append(ang)
@@ -47,6 +53,8 @@ class Terms:
         self.r.append(r)
         self.delta.append(delta % (2 * math.pi))
         self.label.append(label)
+        self.body.append(body)
+        self.ends.append(ends)
         return len(self.r) - 1
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -163,7 +171,8 @@ def _body_stars(
             if node == ref[bname]:
                 continue
             start = origin if ref[bname][1] == ORIGIN else ref[bname][1]
-            tid = terms.add(ang, -1, math.hypot(lx, ly), math.atan2(ly, lx) + off, f"{start}→{m} ({bname})")
+            r, delta = math.hypot(lx, ly), math.atan2(ly, lx) + off
+            tid = terms.add(ang, -1, r, delta, f"{start}→{m} ({bname})", bname, (start, m))
             edges.append((ref[bname], node, {"terms": ((tid, 1.0),), "start": ref[bname], "kind": "link"}))
     return edges
 
@@ -186,13 +195,16 @@ def _add_slider_edges(
         dx, dy = px - g.origin[0], py - g.origin[1]
         cg, sg = math.cos(g.theta0), math.sin(g.theta0)
         lx, ly = cg * dx + sg * dy, -sg * dx + cg * dy
-        alpha = math.atan2(sl.axis[1], sl.axis[0]) - g.theta0
+        alpha = math.atan2(sl.axis[1], sl.axis[0]) - g.theta0 if sl.angle is None else sl.angle
         s0 = lx * math.cos(alpha) + ly * math.sin(alpha)
-        e = -lx * math.sin(alpha) + ly * math.cos(alpha)
+        e = -lx * math.sin(alpha) + ly * math.cos(alpha) if sl.offset is None else sl.offset  # stated: dimensions
         coords_s.append(s0)
-        edge = [(terms.add(ang, i, 0.0, alpha, f"s_{sl.name}"), 1.0)]
+        start = origin_name(mech) if ref[sl.guide][1] == ORIGIN else ref[sl.guide][1]
+        line = f"line of {sl.name}"  # its point s = 0
+        edge = [(terms.add(ang, i, 0.0, alpha, f"s_{sl.name}", sl.guide, (line, sl.joint)), 1.0)]
         if abs(e) > 1e-15 * mech.scale:
-            edge.append((terms.add(ang, -1, e, alpha + math.pi / 2, f"offset of {sl.name}"), 1.0))
+            offset = terms.add(ang, -1, e, alpha + math.pi / 2, f"offset of {sl.name}", sl.guide, (start, line))
+            edge.insert(0, (offset, 1.0))  # along the edge: from the guide's reference to the line, then along it
         data = {"terms": tuple(edge), "start": ref[sl.guide], "kind": "slider"}
         edges.append((ref[sl.guide], (sl.name, sl.joint), data))
     return coords_s
@@ -407,57 +419,131 @@ def point_paths(
 
 @dataclass(frozen=True)
 class Loop:
-    """One vector loop: its traversal, terms with signs, and the variables it involves."""
+    """One vector loop: its traversal, terms with signs, and the variables it involves.
+
+    Each body the loop crosses adds one vector, from the joint where the loop enters it to the joint where it
+    leaves (a chord of the body: the sum of the body's star vectors and its slider lines' offsets along the
+    way), as textbooks write a loop: one ground vector O2→O4 for a four-bar, wherever the world origin is.
+    ``corners`` are the nodes where the loop's vectors meet (``nodes`` less those a chord passes over)."""
 
     index: int
-    label: str  # joints along the loop, e.g. "O–A–B"
-    nodes: tuple[tuple[str, str], ...]  # (body, joint) along the traversal
+    label: str  # joints along the loop, e.g. "O2–A–B–O4"
+    nodes: tuple[tuple[str, str], ...]  # (body, joint) along the traversal, from a corner
     terms: tuple[int, ...]
     signs: tuple[float, ...]
     variables: tuple[int, ...]  # variable ids involved (angles and sliders)
+    corners: tuple[tuple[str, str], ...] = ()
 
 
 def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tuple[tuple[Loop, ...], np.ndarray]:
-    """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal)."""
+    """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal), one vector per
+    body crossed (:func:`crossings`; chords are added to ``mg.terms``)."""
     ang, sl, r = mg.terms.ang, mg.terms.sl, mg.terms.r
     na = len(mg.angle_links)
     loops = []
     at_l, at_t, coef = [], [], []  # the nonzero coefficients C[l, t]
-    adj = mg.adj
     origin = origin_name(mech)
+    chords: dict[tuple, int] = {}
+    order = {n: i for i, n in enumerate(mg.adj)}
     for li, cyc in enumerate(cycles):
-        row: dict[int, float] = {}  # term → coefficient, in traversal order
-        for u, v in zip(cyc, cyc[1:] + cyc[:1], strict=True):
-            data = adj[u][v]
-            sign = 1.0 if data["start"] == u else -1.0
-            for tid, s in data["terms"]:
-                row[tid] = row.get(tid, 0.0) + sign * s
-        for t in row:
-            if r[t] == 0 and sl[t] < 0:
-                row[t] = 0.0  # zero-length vectors (coincident pins) add nothing
-        used = [t for t, c in row.items() if c != 0]
+        cyc, row, corners = crossings(mg, cyc, chords, order, origin)
+        used = list(row)
         variables: set[int] = set()
         for tid in used:
-            if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0):
+            if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0 or tid in mg.terms.parts):
                 variables.add(ang[tid])
             if sl[tid] >= 0:
                 variables.add(na + sl[tid])
-        label = loop_label(cyc, mech, origin)
+        label = loop_label(corners, mech, origin)
         at_l += [li] * len(used)
         at_t += used
         coef += [row[t] for t in used]
-        loops.append(Loop(li, label, tuple(cyc), tuple(used), tuple(row[t] for t in used), tuple(sorted(variables))))
+        loops.append(
+            Loop(li, label, tuple(cyc), tuple(used), tuple(row.values()), tuple(sorted(variables)), tuple(corners))
+        )
     C = np.zeros((len(cycles), len(r)))
     C[at_l, at_t] = coef
     return tuple(loops), C
 
 
-def loop_label(cyc: list, mech: Mechanism, origin: str | None = None) -> str:
-    """Joint names along the loop; the world origin takes the name of a ground joint placed there (``origin``,
+def loop_row(adj: dict, cyc: list) -> list[tuple[int, float, int]]:
+    """The terms along a cycle: (term, coefficient, k) for edge k from cyc[k] to cyc[k + 1], in the order they
+    lie along the traversal (a slider edge: its line's offset, then the slider along it)."""
+    out = []
+    for k, (u, v) in enumerate(zip(cyc, cyc[1:] + cyc[:1], strict=True)):
+        data = adj[u][v]
+        sign = 1.0 if data["start"] == u else -1.0
+        out += [(tid, sign * c, k) for tid, c in (data["terms"] if sign > 0 else data["terms"][::-1])]
+    return out
+
+
+def crossings(mg: MechanismGraph, cyc: list, chords: dict, order: dict, origin: str) -> tuple[list, dict, list]:
+    """A cycle as one vector per body crossed: (the cycle from a corner, its row {term: ±1} in traversal
+    order, its corners). Vectors of zero length (a ground joint at the world origin) are left out; a body's
+    consecutive rigid vectors (sl < 0) become one chord (:func:`_chord`)."""
+    t = mg.terms
+    items = [(tid, c, k) for tid, c, k in loop_row(mg.adj, cyc) if c != 0 and not (t.r[tid] == 0 and t.sl[tid] < 0)]
+    runs = _runs([t.body[tid] if t.sl[tid] < 0 else None for tid, _, _ in items])
+    size = len(cyc)
+    interior: set[int] = set()  # nodes a chord passes over: between two consecutive vectors of one body
+    for run in runs:
+        for i, j in itertools.pairwise(run):
+            m = items[i][2]
+            while m != items[j][2]:
+                m = (m + 1) % size
+                interior.add(m)
+    start = next((m for m in range(size) if m not in interior), 0)
+    row: dict[int, float] = {}
+    for run in sorted(runs, key=lambda run: ((items[run[0]][2] - start) % size, run[0])):
+        if len(run) == 1:
+            tid, c = items[run[0]][0], items[run[0]][1]
+        else:
+            tid, c = _chord(mg, [items[i] for i in run], chords, order)
+        row[tid] = row.get(tid, 0.0) + c
+    corners = [cyc[m % size] for m in range(start, start + size) if m % size not in interior]
+    return cyc[start:] + cyc[:start], {k: v for k, v in row.items() if v != 0}, corners
+
+
+def _runs(keys: list) -> list[list[int]]:
+    """Indices of consecutive equal keys (cyclic; None never joins a run), from the first boundary."""
+    n = len(keys)
+    first = next((i for i in range(n) if keys[i] is None or keys[i] != keys[i - 1]), 0)
+    runs: list[list[int]] = []
+    for i in (x % n for x in range(first, first + n)):
+        if runs and keys[i] is not None and keys[runs[-1][-1]] == keys[i]:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return runs
+
+
+def _chord(mg: MechanismGraph, run: list, chords: dict, order: dict) -> tuple[int, float]:
+    """The term for a body's consecutive rigid vectors ``run`` [(term, coefficient, edge)] — their sum, fixed in
+    the body — and its coefficient ±1 in the loop. Added to ``mg.terms`` once (``chords``: its parts → term),
+    oriented from the joint earlier in the node ``order`` to the later one (from a joint to a slider's line)."""
+    t = mg.terms
+    z = sum(c * t.r[tid] * complex(math.cos(t.delta[tid]), math.sin(t.delta[tid])) for tid, c, _ in run)
+    (first, c0, _), (last, c1, _) = run[0], run[-1]
+    body = t.body[first]
+    begin, end = t.ends[first][0 if c0 > 0 else 1], t.ends[last][1 if c1 > 0 else 0]
+    rank = [order.get((body, name), math.inf) for name in (begin, end)]
+    sign = -1.0 if rank[0] > rank[1] else 1.0
+    parts = tuple(sorted((tid, sign * c) for tid, c, _ in run))
+    if (body, parts) not in chords:
+        a, b = (end, begin) if sign < 0 else (begin, end)
+        zc = sign * z
+        tid = t.add(t.ang[first], -1, abs(zc), math.atan2(zc.imag, zc.real), f"{a}→{b} ({body})", body, (a, b))
+        t.parts[tid] = parts
+        chords[(body, parts)] = tid
+    return chords[(body, parts)], sign
+
+
+def loop_label(corners: list, mech: Mechanism, origin: str | None = None) -> str:
+    """Joint names at a loop's corners; the world origin takes the name of a ground joint placed there (``origin``,
     where known)."""
     origin = origin_name(mech) if origin is None else origin
     names: list[str] = []
-    for _, j in cyc:
+    for _, j in corners:
         n = origin if j == ORIGIN else j
         if not names or names[-1] != n:
             names.append(n)

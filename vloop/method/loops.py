@@ -79,6 +79,7 @@ class LoopSystem:
     assembly: dict = field(default_factory=dict)
     method: str = "auto"
     cache: dict = field(default_factory=dict, repr=False, compare=False)  # solver plans
+    chords: tuple = ()  # (term, ((part, coefficient), ...)): a body's vectors a loop crosses, summed (graph.crossings)
 
     @cached_property
     def graph(self) -> nx.Graph:
@@ -195,11 +196,11 @@ def loop_residual(sys: LoopSystem, q: np.ndarray, loops: list[int] | None = None
 
 
 def loop_polygon(sys: LoopSystem, q: np.ndarray, loop: Loop) -> list[complex]:
-    """The distinct joints along a loop at configuration ``q`` (the world origin where the loop uses it)."""
+    """The distinct joints at a loop's corners at configuration ``q`` (the world origin where the loop uses it)."""
     z = term_values(sys, q)
     tol = 1e-12 * sys.mechanism.scale
     pts: list[complex] = []
-    for _, joint in loop.nodes:
+    for _, joint in loop.corners:
         p = 0j if joint == ORIGIN else complex(z @ sys.path[:, sys.point_names.index(joint)])
         if not pts or abs(p - pts[-1]) > tol:
             pts.append(p)

@@ -61,13 +61,17 @@ def _safe(name: str) -> str:
 
 def _unit(res: Any, name: str) -> tuple[float, str]:
     """(factor, unit) to draw an output in: radians become degrees."""
-    from .studyfile import output_unit
+    from .studyfile import display_unit
 
     o = next(o for o in res.spec.outputs if name.startswith(o.name))
-    u = output_unit(res.spec.mechanism, o)
-    if u.startswith("rad"):
-        return 180.0 / math.pi, "deg" + u[3:]
-    return 1.0, u
+    return display_unit(res.spec.mechanism, o)
+
+
+def _axis(res: Any, name: str) -> str:
+    """A parameter's axis label: its name and unit (the file's; angles of a parameter stay in rad)."""
+    from ..core.variants import resolve
+
+    return f"{name} [{resolve(res.spec.mechanism, name, 'parameters').unit or '1'}]"
 
 
 def _save(fig: Any, path: Path) -> Path:
@@ -80,7 +84,19 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def _band(res: Any, o: Any, folder: Path) -> Path | None:
+    fig = band_figure(res, o)
+    return None if fig is None else _save(fig, folder / f"band_{_safe(o.name)}.png")
+
+
+def band_figure(res: Any, o: Any) -> Any:
+    """A series output's band picture (module docstring) as a pyplot figure; None without bands.
+
+    Curves that coincide (the base designs of a grid parameter the output does not depend on, the
+    Monte-Carlo percentiles of an output the tolerances do not move) are told apart by line style and
+    named in the legend (:mod:`vloop.views.curves`)."""
     import matplotlib.pyplot as plt
+
+    from ..views.curves import distinguish
 
     b = res.bands
     if not len(b):
@@ -98,29 +114,22 @@ def _band(res: Any, o: Any, folder: Path) -> Path | None:
             s = 1.96 * rows["linearized_sigma"].to_numpy() * k
             axes[1].fill_between(t, -s, s, color=f"C{i}", alpha=0.25, lw=0, label=f"linearized ±1.96σ{label}")
         if "mc_p2.5" in rows:
+            names = {
+                "mc_p2.5": "Monte-Carlo 2.5–97.5 %",
+                "mc_p97.5": "_Monte-Carlo 97.5 %",
+                "mc_p50": "Monte-Carlo median",
+            }
             for q, ls in (("mc_p2.5", "--"), ("mc_p97.5", "--"), ("mc_p50", ":")):
-                axes[1].plot(
-                    t,
-                    rows[q].to_numpy() * k - nom,
-                    ls,
-                    color=f"C{i}",
-                    lw=1.2,
-                    label=(
-                        f"Monte-Carlo 2.5–97.5 %{label}"
-                        if q == "mc_p2.5"
-                        else f"Monte-Carlo median{label}"
-                        if q == "mc_p50"
-                        else None
-                    ),
-                )
+                axes[1].plot(t, rows[q].to_numpy() * k - nom, ls, color=f"C{i}", lw=1.2, label=names[q] + label)
     axes[0].set_ylabel(f"{o.quantity} [{unit}]")
     axes[1].set_ylabel(f"deviation from nominal [{unit}]")
     axes[1].set_xlabel("t [s]")
     for ax in axes:
         ax.grid(True, alpha=0.3)
+        distinguish(ax)
         ax.legend(loc="best", fontsize=8)
     axes[0].set_title(f"{res.spec.mechanism.name}: {o.name} over the motion", fontsize=10)
-    return _save(fig, folder / f"band_{_safe(o.name)}.png")
+    return fig
 
 
 def _curves(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
@@ -139,7 +148,7 @@ def _curves(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
         c = cmap((row[first] - lo) / (hi - lo) if hi > lo else 0.5)
         ax.plot(res.t, np.asarray(row[o.name]) * k, color=c, lw=0.8)
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(lo, hi))
-    fig.colorbar(sm, ax=ax, label=first)
+    fig.colorbar(sm, ax=ax, label=_axis(res, first))
     ax.set_xlabel("t [s]")
     ax.set_ylabel(f"{o.quantity} [{unit}]")
     ax.grid(True, alpha=0.3)
@@ -193,7 +202,7 @@ def _line(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
     stopped = t[~t["completed"]]
     for x in stopped[p]:
         ax.axvline(x, color="0.8", lw=3, zorder=0)
-    ax.set_xlabel(p)
+    ax.set_xlabel(_axis(res, p))
     ax.set_ylabel(f"{o.name} [{unit}]")
     ax.grid(True, alpha=0.3)
     ax.set_title(f"{res.spec.mechanism.name}: {o.name} (grey: motion not completed)", fontsize=10)
@@ -233,8 +242,8 @@ def _map(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
     )
     m = ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_invalid(z), cmap="viridis", shading="flat")
     fig.colorbar(m, ax=ax, label=f"{o.name} [{unit}]")
-    ax.set_xlabel(grid_params[0].name)
-    ax.set_ylabel(grid_params[1].name)
+    ax.set_xlabel(_axis(res, grid_params[0].name))
+    ax.set_ylabel(_axis(res, grid_params[1].name))
     ax.set_title(f"{res.spec.mechanism.name}: {o.name} (grey: motion not completed)", fontsize=10)
     return _save(fig, folder / f"map_{_safe(o.name)}.png")
 
@@ -270,7 +279,7 @@ def _class_map(res: Any, o: Any, grid_params: list, folder: Path) -> Path:
             ax.clabel(cs, fmt="%.0f°", fontsize=8)
             handles.append(Patch(facecolor="none", edgecolor="k", label=f"{mu.name} [deg] (completed motions)"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    ax.set_xlabel(grid_params[0].name)
-    ax.set_ylabel(grid_params[1].name)
+    ax.set_xlabel(_axis(res, grid_params[0].name))
+    ax.set_ylabel(_axis(res, grid_params[1].name))
     ax.set_title(f"{res.spec.mechanism.name}: Grashof class", fontsize=10)
     return _save(fig, folder / f"map_{_safe(o.name)}.png")

@@ -41,7 +41,6 @@ the chunking — and the machine that runs a chunk — never changes a number.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -55,8 +54,9 @@ from ..core.batch import Outcomes
 from ..core.variants import ParamRef, VariantModel, resolve
 from ..errors import MechanismError, VloopError
 from ..files.schema import Problems
+from ..files.writers import finite_or_null
 from ..model import Mechanism
-from ..result import Result
+from ..result import Result, html_table
 from .studyfile import OutputSpec, StudySpec, from_dict, output_unit, quantity_kind
 
 TASKS_PER_WORKER = 4  # chunks per Dask worker thread when the chunk size is automatic
@@ -80,6 +80,7 @@ def study(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: bool | None = None,
+    memory_budget: Any = None,
 ) -> StudyResult:
     """Solve every variant of ``mechanism`` the parameters describe and report ``outputs`` per variant.
 
@@ -88,10 +89,11 @@ def study(
     table. ``outputs``: quantities with an optional stat, as strings (``"l4.theta.range"``) or tables.
     ``times`` [s] (default: the file's); ``samples`` Monte-Carlo draws from ``seed``; ``sensitivity``
     "nominal" | "each" | "none"; ``chunk`` variants per task; ``scheduler`` / ``workers`` run the chunks on
-    Dask. Lengths in the file's units, angles in rad. Raises MechanismError for a bad parameter or output.
+    Dask; ``memory_budget`` (bytes or "2G", as :func:`vloop.solve`) refuses a study that would not fit before it is
+    built. Lengths in the file's units, angles in rad. Raises MechanismError for a bad parameter or output.
     """
     if not isinstance(mechanism, Mechanism):
-        from ..files.fileformat import load
+        from .. import load  # (assembled at t = 0 if written from dimensions)
 
         mechanism = load(mechanism)
     data: dict[str, Any] = {"parameters": _param_tables(params), "outputs": _output_tables(outputs)}
@@ -102,7 +104,7 @@ def study(
     spec = from_dict(data, mechanism, source="vloop.study")
     if times is not None:
         spec = dataclasses.replace(spec, times=_check_times(times))
-    return run(spec, scheduler=scheduler, workers=workers, progress=progress)
+    return run(spec, scheduler=scheduler, workers=workers, progress=progress, memory_budget=memory_budget)
 
 
 def _param_tables(params: Any) -> list:
@@ -147,10 +149,31 @@ class _Plan:
     invalid: dict[int, str] = field(default_factory=dict)  # designs refused before solving
 
 
-def plan(spec: StudySpec) -> _Plan:
+def design_count(spec: StudySpec) -> tuple[int, int]:
+    """(variants, designs) of a study from its sizes alone — the rows :func:`plan` builds (variants, the bases of a
+    tolerance study, the nominal of a grid study's sensitivity, two neighbours per parameter and sensitivity point)."""
+    P = len(spec.parameters)
+    grid = math.prod(len(p.values) for p in spec.parameters if p.values is not None)
+    draws = spec.samples or 0
+    variants = grid * draws if draws else grid
+    bases = grid if draws else 0
+    if spec.sensitivity == "none" or not P:
+        points, nominal = 0, 0
+    elif spec.sensitivity == "each":
+        points, nominal = variants + bases, 0
+    else:
+        points, nominal = (grid, 0) if draws else (1, 1)
+    return variants, variants + bases + nominal + 2 * P * points
+
+
+def references(spec: StudySpec) -> tuple[ParamRef, ...]:
+    """The file's number each parameter names."""
+    return tuple(resolve(spec.mechanism, p.name, f"parameters[{i}]") for i, p in enumerate(spec.parameters))
+
+
+def plan(spec: StudySpec, refs: tuple[ParamRef, ...] | None = None) -> _Plan:
     """The designs of a study: variants (grid × draws), bases, and the central-difference neighbours."""
-    mech = spec.mechanism
-    refs = tuple(resolve(mech, p.name, f"parameters[{i}]") for i, p in enumerate(spec.parameters))
+    refs = references(spec) if refs is None else refs
     nominal = np.array([r.nominal for r in refs], float)
     bases = _bases(spec, nominal)
     draws = _draws(spec, refs)
@@ -192,13 +215,15 @@ def plan(spec: StudySpec) -> _Plan:
 
 def _bases(spec: StudySpec, nominal: np.ndarray) -> np.ndarray:
     """Every combination of the grid values (the first parameter slowest), the others at their nominal."""
-    grids = [(i, p.values) for i, p in enumerate(spec.parameters) if p.values is not None]
+    grids = [(i, np.asarray(p.values, float)) for i, p in enumerate(spec.parameters) if p.values is not None]
     if not grids:
         return nominal[None, :].copy()
-    combos = np.array(list(itertools.product(*[v for _, v in grids])), float).reshape(-1, len(grids))
-    out = np.tile(nominal, (len(combos), 1))
-    for k, (i, _) in enumerate(grids):
-        out[:, i] = combos[:, k]
+    total = math.prod(len(v) for _, v in grids)
+    out = np.tile(nominal, (total, 1))
+    inner = total
+    for i, v in grids:
+        inner //= len(v)  # each value repeats once per combination of the later parameters
+        out[:, i] = np.tile(np.repeat(v, inner), total // (len(v) * inner))
     return out
 
 
@@ -460,19 +485,26 @@ def grashof(model: VariantModel, d: Any, loop: tuple[int, list[int]]) -> tuple[n
 
 
 def run(
-    spec: StudySpec, *, scheduler: str | None = None, workers: int | None = None, progress: bool | None = None
+    spec: StudySpec,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool | None = None,
+    memory_budget: Any = None,
 ) -> StudyResult:
-    """Solve a study (in this process, or on Dask with ``scheduler`` / ``workers``) and gather its tables."""
+    """Solve a study (in this process, or on Dask with ``scheduler`` / ``workers``) and gather its tables. The
+    memory it needs is estimated from its sizes and checked against ``memory_budget`` before anything is built."""
     from ..compiler import compile_system
     from ..runner import run_tasks
 
     t0 = time.perf_counter()
-    p = plan(spec)
     mech = spec.mechanism
-    model = VariantModel.build(mech, compile_system(mech), p.refs)
+    refs = references(spec)
+    model = VariantModel.build(mech, compile_system(mech), refs)
     check_outputs(model, spec)
     times = spec.times if spec.times is not None else np.asarray(mech.times, float)
-    _check_memory(spec, p, model, len(times))
+    check_memory(spec, model, len(times), memory_budget)
+    p = plan(spec, refs)
     valid = np.array([i not in p.invalid for i in range(len(p.values))], bool)
     grid = (
         batch.make_grid(model, model.designs(p.values[valid]), times)
@@ -509,23 +541,28 @@ def _chunk_size(spec: StudySpec, n: int, scheduler: str | None, workers: int | N
     return LOCAL_CHUNK
 
 
-def _check_memory(spec: StudySpec, p: _Plan, model: VariantModel, n_times: int) -> None:
-    """Refuse a study whose tables would not fit the memory budget (vloop.files.budget), before solving it."""
+def check_memory(spec: StudySpec, model: VariantModel, n_times: int, explicit: Any = None) -> int:
+    """Refuse (MemoryBudgetError) a study whose designs and tables would not fit the memory budget
+    (vloop.files.budget: ``explicit``, VLOOP_MEMORY_BUDGET, the file's [solver] memory_budget, half the available
+    memory), estimated from its sizes before anything is built. Returns the estimate [bytes]."""
     from ..files.budget import MemoryBudgetError, budget, fmt_size
 
-    n = len(p.values)
+    _, n = design_count(spec)
     series = sum(
         2 if quantity_kind(model.mechanism, o.quantity) == "path" else (o.stat == "series") for o in spec.outputs
     )
-    need = n * (len(p.refs) + len(spec.outputs) + 16 + model.system.n_vars + 2 * len(model.system.point_names)) * 8
+    per_design = len(spec.parameters) + len(spec.outputs) + 16 + model.system.n_vars + 2 * len(model.system.point_names)
+    need = n * per_design * 8
     need = 3 * (need + n * series * n_times * 8) + batch.ROWS * 400
-    limit, source = budget()
+    limit, source = budget(explicit, spec.mechanism.options)
     if need > limit:
         raise MemoryBudgetError(
-            f"{spec.source}: the study's {n:,} variants need about {fmt_size(need)}, more than the memory budget of "
-            f"{fmt_size(limit)} ({source}): fewer samples or grid values, fewer series outputs, or a larger budget",
+            f"{spec.source}: the study's {n:,} designs to solve need about {fmt_size(need)}, more than the memory "
+            f"budget of {fmt_size(limit)} ({source}): fewer samples or grid values, fewer series outputs, or a larger "
+            "budget (--memory-budget, VLOOP_MEMORY_BUDGET)",
             entry="study",
         )
+    return need
 
 
 # ---------------------------------------------------------------- tables
@@ -566,7 +603,24 @@ class StudyResult:
         )
 
     def _repr_html_(self) -> str:
-        return f"<p>{self!r}</p>" + self.table._repr_html_()
+        """A notebook's summary: the counts, the parameters, the summary table and the first variants."""
+        import html
+
+        rows = []
+        for prm in self.spec.parameters:
+            ref = next((r for r in self._model.params if r.name == prm.name), None)
+            spread = f"{len(prm.values)} values" if prm.values else ""
+            if prm.tolerance is not None:
+                spread = "; ".join(x for x in (spread, _tolerance_text(prm.tolerance)) if x)
+            rows.append([prm.name, ref.unit if ref else "", ref.nominal if ref else "", spread])
+        parts = [
+            f"<p><b>{html.escape(repr(self))}</b> on {html.escape(self.spec.mechanism.name)}</p>",
+            html_table(rows, ["parameter", "unit", "nominal", "varied"], "parameters"),
+        ]
+        if len(self.summary):
+            parts.append("<p>summary</p>" + self.summary._repr_html_())
+        parts.append(f"<p>variants (the first {min(10, len(self.table))} of {len(self.table):,})</p>")
+        return "".join(parts) + self.table.head(10)._repr_html_()
 
     def variant_mechanism(self, row: int) -> Mechanism:
         """Variant ``row`` of the table as a Mechanism of its own (its coordinates the t = 0 assembly, so it loads
@@ -579,44 +633,73 @@ class StudyResult:
         pos = dict(zip(self._model.system.point_names, st.positions[row].tolist(), strict=True))
         return self._model.variant_mechanism(self._values[row], pos, st.q0[row])
 
-    def write(self, folder: str | Path, *, plot: bool = False) -> list[Path]:
-        """Write variants.parquet, summary.parquet, sensitivity.parquet, bands.parquet (those not empty) and
-        study.json into ``folder`` as one atomic set (vloop.files.output.OutputSet); with ``plot`` the pictures too."""
-        import json
-
+    def write(self, folder: str | Path, *, plot: bool = False, fmt: str = "parquet") -> list[Path]:
+        """Write the tables (variants, summary, sensitivity, bands: those not empty) as ``fmt`` ("parquet" or
+        "csv") and study.json into ``folder`` as one set (vloop.files.output.OutputSet, replacing a previous
+        study's files there); with ``plot`` the pictures too. Returns the paths written."""
         from ..files.output import OutputSet
 
-        with OutputSet(folder) as out:
-            for name, df in (
-                ("variants", self.table),
-                ("summary", self.summary),
-                ("sensitivity", self.sensitivity),
-                ("bands", self.bands),
-            ):
-                if len(df):
-                    _write_parquet(df, out.path(f"{name}.parquet"))
-            out.write_text("study.json", json.dumps(self.manifest(), indent=2) + "\n")
-            if plot:
-                from .plot import plot_study
-
-                plot_study(self, out.stage)
+        with OutputSet(folder, owns=OWNS) as out:
+            self.stage(out, plot=plot, fmt=fmt)
         return out.published
 
+    def stage(self, out: Any, *, plot: bool = False, fmt: str = "parquet") -> None:
+        """Write the study's files into an open OutputSet ``out`` (published when it closes)."""
+        import json
+
+        from ..files.writers import write_table
+
+        units = self.units()
+        for name, df in self.tables().items():
+            if len(df):
+                write_table(df, out.path(f"{name}.{fmt}"), fmt, units, {"study": self.spec.source})
+        out.write_text("study.json", json.dumps(self.manifest(), indent=2, allow_nan=False) + "\n")
+        if plot:
+            from .plot import plot_study
+
+            plot_study(self, out.stage)
+
+    def tables(self) -> dict[str, Any]:
+        """The study's tables by file name."""
+        return {"variants": self.table, "summary": self.summary, "sensitivity": self.sensitivity, "bands": self.bands}
+
+    def units(self) -> dict[str, str]:
+        """The unit of every column of the tables (a column without one — an index, a flag, text — has none).
+        ``[unit]``: the row's own unit, in its ``unit`` column (summary, sensitivity and bands hold several outputs;
+        ``[unit]·parameter``: times the unit of the row's parameter)."""
+        mech = self.spec.mechanism
+        out: dict[str, str] = {r.name: r.unit for r in self._model.params}
+        for o in self.spec.outputs:
+            u = output_unit(mech, o) if o.stat != "class" else ""
+            for col in (o.name, f"{o.name}.x", f"{o.name}.y"):
+                out[col] = u
+            for r in self._model.params:
+                out[f"d({o.name})/d({r.name})"] = f"{u}/{r.unit}"
+        out.update(stopped_at="s", t="s", max_cond="1", derivative="[unit]", sigma_contribution="[unit]·parameter")
+        for col in ("nominal", "linearized_sigma", "mc_mean", "mc_sigma", "mc_sigma_error"):
+            out[col] = "[unit]"
+        out.update({f"mc_p{q:g}": "[unit]" for q in PERCENTILES})
+        out.update({f"d/d({r.name})": f"[unit]/{r.unit}" for r in self._model.params})
+        return out
+
     def manifest(self) -> dict[str, Any]:
-        """What was run: the mechanism, parameters, outputs, counts, seed, seconds (study.json)."""
+        """What was run: the mechanism, parameters (with units and tolerances), outputs, counts, seed, seconds
+        (study.json)."""
         s = self.spec
+        units = {r.name: r.unit for r in self._model.params}
         return {
             "study": s.source,
             "mechanism": s.mechanism.name,
             "parameters": [
                 {
                     "name": p.name,
+                    "unit": units.get(p.name, ""),
                     "grid": len(p.values) if p.values else 0,
-                    "tolerance": dataclasses.asdict(p.tolerance) if p.tolerance else None,
+                    "tolerance": _tolerance_entry(p.tolerance),
                 }
                 for p in s.parameters
             ],
-            "outputs": [dataclasses.asdict(o) for o in s.outputs],
+            "outputs": [{**dataclasses.asdict(o), "unit": output_unit(s.mechanism, o)} for o in s.outputs],
             "samples": s.samples,
             "seed": s.seed,
             "sensitivity": s.sensitivity,
@@ -626,12 +709,22 @@ class StudyResult:
         }
 
 
-def _write_parquet(df: Any, path: Path) -> None:
-    """A DataFrame as Parquet (NaN as null: a missing value, never a non-finite number in the file)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+OWNS = (
+    *(f"{n}.{x}" for n in ("variants", "summary", "sensitivity", "bands") for x in ("csv", "parquet")),
+    *("study.json", "band_*.png", "hist_*.png", "grid_*.png", "map_*.png"),
+)  # a study's files: those of a previous study in the same folder are replaced as one set
 
-    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), path)
+
+def _tolerance_text(tol: Any) -> str:
+    """A parameter's tolerance in words: uniform within ± its half width, or normal with its σ."""
+    return f"uniform ± {tol.width:g}" if tol.dist == "uniform" else f"normal, σ = {tol.width:g}"
+
+
+def _tolerance_entry(tol: Any) -> dict[str, Any] | None:
+    """A tolerance as the study file writes it: ``half_width`` for a uniform one, ``sigma`` for a normal one."""
+    if tol is None:
+        return None
+    return {"dist": tol.dist, "half_width" if tol.dist == "uniform" else "sigma": tol.width}
 
 
 def _gather(
@@ -652,8 +745,7 @@ def _gather(
     summary = _summary(spec, p, values, sens, st)
     sensitivity = _sensitivity_table(spec, p, model, sens)
     bands = _bands(spec, p, values, sens, st, t)
-    for df in (table, summary, sensitivity, bands):
-        _null_non_finite(df)
+    table, summary, sensitivity, bands = map(finite_or_null, (table, summary, sensitivity, bands))
     stopped = int(np.sum(st.assembled[:n] & ~st.completed[:n]))
     counts = {
         "variants": n,
@@ -664,17 +756,6 @@ def _gather(
         "single_runs": sum(s == "single" for s in st.solver),
     }
     return StudyResult(table, summary, sensitivity, bands, t, spec, seconds, counts, model, st, p.values)
-
-
-def _null_non_finite(df: Any) -> None:
-    """A number too large for a float (an absurd design's output or its spread) is null, never inf, in the tables."""
-    for col in df.columns:
-        if df[col].dtype.kind == "f":
-            v = df[col].to_numpy()
-            if not np.all(np.isfinite(v) | np.isnan(v)):
-                df[col] = np.where(np.isinf(v), np.nan, v)
-        elif df[col].dtype == object and len(df) and isinstance(df[col].iloc[0], list):
-            df[col] = [None if r is None or not np.all(np.isfinite(r)) else r for r in df[col]]
 
 
 def _scalar_outputs(spec: StudySpec) -> list[OutputSpec]:
@@ -749,8 +830,9 @@ def _lin_sigma(p: _Plan, d: np.ndarray) -> np.ndarray:
     """√Σ (∂y/∂p·σ_p)² over the toleranced parameters; ``d`` (P,) or (P, N) gives a number or (N,)."""
     x = np.abs(d * p.sigma.reshape((-1,) + (1,) * (d.ndim - 1)))
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        big = np.max(x, axis=0)  # scaled so that the squares cannot overflow
-        return np.where(big > 0, big * np.sqrt(np.sum((x / np.where(big > 0, big, 1.0)) ** 2, axis=0)), 0.0)
+        big = np.max(x, axis=0)  # scaled so that the squares cannot overflow; NaN (a neighbour failed) stays NaN
+        sigma = np.where(big > 0, big * np.sqrt(np.sum((x / np.where(big > 0, big, 1.0)) ** 2, axis=0)), 0.0)
+        return np.where(np.isnan(big), np.nan, sigma)
 
 
 def _summary(
@@ -776,6 +858,7 @@ def _summary(
                     "grid": b,
                     **{r.name: p.values[row, i] for i, r in enumerate(p.refs)},
                     "output": o.name,
+                    "unit": output_unit(spec.mechanism, o),
                     "nominal": values[o.name][row] if st.completed[row] else np.nan,
                     "linearized_sigma": lin,
                     **_mc_stats(y),
@@ -850,6 +933,7 @@ def _bands(
         return pd.DataFrame()
     where = {int(r): k for k, r in enumerate(p.sens_at)}
     at = p.base_rows if p.draw_index is not None else p.sens_at
+    unit_of = {f"{o.name}{x}": output_unit(spec.mechanism, o) for o in spec.outputs for x in ("", ".x", ".y")}
     frames = []
     D = spec.samples or 0
     for b, row in enumerate(at):
@@ -858,6 +942,7 @@ def _bands(
             cols: dict[str, Any] = {
                 "base": b,
                 "output": name,
+                "unit": unit_of[name],
                 "sample": np.arange(len(t)),
                 "t": t,
                 "nominal": values[name][row] if st.completed[row] else np.full(len(t), np.nan),

@@ -204,8 +204,8 @@ class StudySpec:
 
 def load(path: str | Path) -> StudySpec:
     """Read and check a study file (and the mechanism it names). Raises MechanismError naming the entry."""
+    from .. import load as load_mechanism  # (assembled at t = 0 if written from dimensions)
     from ..files.fileformat import _read_text_file
-    from ..files.fileformat import load as load_mechanism
 
     path = Path(path)
     text = _read_text_file(path, MAX_STUDY_BYTES, what="study file", entry=str(path))
@@ -479,6 +479,15 @@ def output_unit(mech: Mechanism, o: OutputSpec) -> str:
     units.update({"ax": f"{u}/s²", "ay": f"{u}/s²", "s": u, "v": f"{u}/s", "a": f"{u}/s²", "speed": f"{u}/s"})
     units.update({"acceleration": f"{u}/s²", "path": u})
     return units.get(fld, "")
+
+
+def display_unit(mech: Mechanism, o: OutputSpec) -> tuple[float, str]:
+    """(factor, unit) an output is shown in — plots and the printed summary: radians become degrees (the tables
+    keep the output's own unit, :func:`output_unit`)."""
+    u = output_unit(mech, o)
+    if u.startswith("rad"):
+        return 180.0 / math.pi, "deg" + u[3:]
+    return 1.0, u or "1"
 
 
 def _quantity_help(mech: Mechanism) -> str:

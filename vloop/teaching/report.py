@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import VloopError
-from ..model import Mechanism
+from ..model import Mechanism, angle_text
 from ..result import Result
 from .centres import instant_centres, kennedy_centres
 from .ratios import default_outputs, mechanical_advantage, velocity_ratio
@@ -71,16 +71,16 @@ def _check_finite(mech: Mechanism, result: Result, cols: dict[str, np.ndarray]) 
 def write_extras(
     mech: Mechanism, result: Result, folder: str | Path, outputs: list[str] | None = None, system: Any = None
 ) -> Path:
-    """Write ``folder/extras.csv`` atomically (through vloop.files.output); every value must be finite."""
+    """Write ``folder/extras.csv`` atomically (through vloop.files.output; numbers as :func:`vloop.result.write_csv`
+    writes them); every value must be finite."""
     from ..files.output import atomic_write
+    from ..result import write_csv
 
     cols = extras(mech, result, outputs, system)
     _check_finite(mech, result, cols)
     path = Path(folder) / "extras.csv"
-    names = ["t", *cols]
-    data = np.column_stack([result.t, *cols.values()]) if len(result.t) else np.zeros((0, len(names)))
-    with atomic_write(path) as fh:
-        np.savetxt(fh, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    with atomic_write(path, "wb") as fh:
+        write_csv(fh, ["t", *cols], [result.t, *(np.asarray(c, float) for c in cols.values())])
     return path
 
 
@@ -118,19 +118,20 @@ def run_files(
     return files
 
 
-def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) -> Path | None:
-    """Figure of every dyad's folded transmission angle [deg] over time; None when there is no dyad."""
-    from ..files.output import atomic_write
+def transmission_figure(mech: Mechanism, result: Result) -> Any:
+    """Figure of every dyad's folded transmission angle [deg] over time; None when there is no dyad.
+
+    Dyads whose angles coincide (mirror images: the eight-bar's C and D) are told apart by line style
+    and named in the legend (``μ at D (= μ at C)``)."""
+    from matplotlib.figure import Figure
+
+    from ..views.curves import distinguish
 
     angles = transmission_angles(mech, result)
     if not angles or not len(result.t):
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig = Figure(figsize=(7.5, 4.5))
+    ax = fig.add_subplot()
     for ta in angles:
         ax.plot(result.t, np.degrees(ta.folded), lw=1.6, label=f"μ at {ta.dyad.label} ({ta.dyad.kind})")
     ax.axhline(40.0, color="0.4", ls="--", lw=1, label="40°: a common lower limit")
@@ -140,11 +141,21 @@ def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) 
     ax.set_ylabel("transmission angle μ [deg] (pressure angle = 90° − μ)")
     ax.set_title(f"{mech.title or mech.name}\ntransmission angle of each dyad (folded to 0–90°)", fontsize=10)
     ax.grid(True, alpha=0.3)
+    distinguish(ax)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
+    return fig
+
+
+def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) -> Path | None:
+    """Write :func:`transmission_figure` as a PNG at ``path``; None (nothing written) when there is no dyad."""
+    from ..files.output import atomic_write
+
+    fig = transmission_figure(mech, result)
+    if fig is None:
+        return None
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=110)
-    plt.close(fig)
     return Path(path)
 
 
@@ -152,22 +163,24 @@ def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) 
 
 
 def _input(mech: Mechanism, x: float) -> str:
-    d = mech.drivers[0]
-    if d.kind == "crank":
-        return f"{d.symbol} = {x:.10g} rad ({math.degrees(x):.4f}°)"
-    return f"{d.symbol} = {x:.10g} {mech.units}"
+    return mech.drivers[0].value_text(x, mech.units)
 
 
 def _value(mech: Mechanism, name: str, v: float) -> str:
-    return f"s = {v:.10g} {mech.units}" if name in mech.sliders else f"θ = {v:.10g} rad ({math.degrees(v):.4f}°)"
+    return f"s = {v:.10g} {mech.units}" if name in mech.sliders else f"θ = {angle_text(v)}"
 
 
 def _cycle_lines(mech: Mechanism) -> list[str]:
     from .input_cycle import TOL, cycle
 
     cyc = cycle(mech)
-    what = "one turn of the crank" if cyc.full_turn else f"the feasible range [{cyc.lower:.10g}, {cyc.upper:.10g}]"
-    lines = [f"  over {what} of {cyc.driver} (dead centres located to {TOL:g} of the range):"]
+    d = mech.drivers[0]
+    what = (
+        f"one turn of the crank {d.symbol}"
+        if cyc.full_turn
+        else f"the feasible range of {d.range_text(cyc.lower, cyc.upper, mech.units)}"
+    )
+    lines = [f"  over {what} (dead centres located to {TOL:g} of the range; angles in [0°, 360°)):"]
     for dc in cyc.dyads:
         lines.append(
             f"  transmission angle at {dc.dyad.label} ({dc.dyad.kind}: {dc.dyad.describe()}): "

@@ -175,6 +175,30 @@ def raw_angle(mech: Mechanism, result: Result, dyad: Dyad) -> np.ndarray:
     return _angle_between(normal, _motion.point(result, dyad.ends[1]) - at)
 
 
+def _turning(u: np.ndarray, du: np.ndarray) -> np.ndarray:
+    """The rate of turn of complex vectors u whose rate is du [rad/s]: Im(u̇/u)."""
+    return (du * np.conj(u)).imag / np.abs(u) ** 2
+
+
+def raw_rate(mech: Mechanism, result: Result, dyad: Dyad) -> np.ndarray:
+    """d(raw μ)/dt [rad/s] over the run, from the positions and velocities of the vectors that make μ (the
+    angle from u to v is arg(v/u), its rate Im(v̇/v) − Im(u̇/u); raw μ = |arg(v/u)| turns with its sign)."""
+    at, v_at = _motion.point(result, dyad.joint), _motion.point_velocity(result, dyad.joint)
+    if dyad.kind == "RRR":
+        a, b = dyad.ends
+        u, du = _motion.point(result, a) - at, _motion.point_velocity(result, a) - v_at
+        v, dv = _motion.point(result, b) - at, _motion.point_velocity(result, b) - v_at
+        turn = _turning(v, dv) - _turning(u, du)
+    else:
+        block = dyad.bodies[1] if dyad.kind == "RRP" else dyad.bodies[0]
+        normal, w = 1j * np.exp(1j * result[f"{block}.theta"]), result[f"{block}.omega"]
+        end = dyad.ends[0] if dyad.kind == "RRP" else dyad.ends[1]
+        r, dr = _motion.point(result, end) - at, _motion.point_velocity(result, end) - v_at
+        u, turn = (r, w - _turning(r, dr)) if dyad.kind == "RRP" else (normal, _turning(r, dr) - w)
+        v = normal if dyad.kind == "RRP" else r
+    return np.sign(np.angle(v * np.conj(u))) * turn
+
+
 @dataclass(frozen=True)
 class TransmissionAngle:
     """One dyad's transmission angle over a run [rad]: ``raw`` in [0, π], ``folded`` in [0, π/2],

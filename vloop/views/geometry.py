@@ -16,32 +16,17 @@ attributes only) and a :class:`~vloop.result.Result`, vectorized over samples:
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..method.equations import Vector, equation_text, legend_text, vector_loops
 from ..model import Mechanism
 from ..result import Result
 
-_EQUATION = re.compile(r"^loop (\d+) \((.*)\):  (.*) = 0$")
+BLOCK_SIZE = (0.08, 0.045)  # slider block length and height in drawings, fractions of the mechanism size
 
-
-@dataclass(frozen=True)
-class LoopVector:
-    """One vector of a loop, (r + s)·e^{j(θ_link + δ)}, the loop's sign folded into δ (−v = v·e^{jπ}).
-
-    ``link``: the link whose θ turns it (None: fixed to the ground). ``slider``: the slider whose
-    s adds to its magnitude (None: a rigid vector). ``r`` [length], ``delta`` [rad].
-    ``letter``: its symbol in the loop equation (``vloop loops``), e.g. ``"a"``.
-    """
-
-    letter: str
-    link: str | None
-    slider: str | None
-    r: float
-    delta: float
 
 
 @dataclass(frozen=True)
@@ -58,7 +43,7 @@ class LoopChain:
     index: int
     label: str
     equation: str
-    vectors: tuple[LoopVector, ...]
+    vectors: tuple[Vector, ...]
     start: str | None
     joints: tuple[tuple[int, str], ...]
     vertices: np.ndarray
@@ -89,13 +74,14 @@ def loop_chains(system: Any, result: Result) -> list[LoopChain]:
     (or at the world origin).
     """
     mech = system.mechanism
-    equations = loop_equations(system)
+    equations = {eq.number - 1: eq for eq in vector_loops(system)[0]}
     theta = {name: result[f"{name}.theta"] for name in system.angle_links}
     s = {name: result[f"{name}.s"] for name in system.slider_names}
     chains = []
     for lp in system.loops:
-        _, equation, letters = equations.get(lp.index + 1, (lp.index + 1, "", ()))
-        vectors = _vectors(system, lp, letters)
+        eq = equations[lp.index]
+        equation = f"{equation_text(eq)} = 0"
+        vectors = eq.vectors
         start = lp.nodes[0][1]
         start_name = start if start in mech.tracked_points else _origin_joint(system)
         z = np.zeros((len(result), len(vectors) + 1), complex)
@@ -110,28 +96,10 @@ def loop_chains(system: Any, result: Result) -> list[LoopChain]:
     return chains
 
 
-def _vectors(system: Any, lp: Any, letters: tuple[str, ...]) -> tuple[LoopVector, ...]:
-    """The loop's terms in traversal order, as LoopVectors (sign folded into the angle)."""
-    out = []
-    for k, (t, sign) in enumerate(zip(lp.terms, lp.signs, strict=True)):
-        a, sl = int(system.t_ang[t]), int(system.t_sl[t])
-        delta = float(system.t_delta[t]) + (math.pi if sign < 0 else 0.0)
-        out.append(
-            LoopVector(
-                letters[k] if k < len(letters) else "",
-                system.angle_links[a] if a >= 0 else None,
-                system.slider_names[sl] if sl >= 0 else None,
-                float(system.t_r[t]),
-                delta % (2 * math.pi),
-            )
-        )
-    return tuple(out)
-
-
-def _joints_on_chain(system: Any, lp: Any, vectors: tuple[LoopVector, ...]) -> tuple[tuple[int, str], ...]:
+def _joints_on_chain(system: Any, lp: Any, vectors: tuple[Vector, ...]) -> tuple[tuple[int, str], ...]:
     """Which chain vertex each joint of the loop is, found once on the t = 0 assembly ``system.q0``.
 
-    The loop's nodes are visited in order; each joint is the first vertex at or after the previous
+    The loop's corners are visited in order; each joint is the first vertex at or after the previous
     joint's that lies on it (a pin between two bodies adds no vector, so both nodes share a vertex).
     """
     mech = system.mechanism
@@ -151,7 +119,7 @@ def _joints_on_chain(system: Any, lp: Any, vectors: tuple[LoopVector, ...]) -> t
     origin = _origin_joint(system)
     out: list[tuple[int, str]] = []
     k = 0
-    for _, joint in lp.nodes:
+    for _, joint in lp.corners:
         hits = np.flatnonzero(np.abs(vert[k:] - at(joint)) <= tol)
         if not len(hits):
             raise AssertionError(f"loop {lp.index + 1} ({lp.label}): no vertex of its chain lies on {joint}")
@@ -171,51 +139,13 @@ def _origin_joint(system: Any) -> str | None:
     return None
 
 
-def _value(v: LoopVector, q: np.ndarray, system: Any) -> complex:
+def _value(v: Vector, q: np.ndarray, system: Any) -> complex:
     na = len(system.angle_links)
     th = q[system.angle_links.index(v.link)] if v.link is not None else 0.0
     s = q[na + system.slider_names.index(v.slider)] if v.slider is not None else 0.0
     return (v.r + s) * complex(math.cos(th + v.delta), math.sin(th + v.delta))
 
 
-def loop_equations(system: Any) -> dict[int, tuple[int, str, tuple[str, ...]]]:
-    """Per loop number: (number, the equation as ``vloop loops`` prints it, each vector's letter)."""
-    from ..method.equations import describe
-
-    out = {}
-    for line in describe(system).splitlines():
-        m = _EQUATION.match(line)
-        if m:
-            number, body = int(m.group(1)), m.group(3)
-            letters = tuple(term.split("·", 1)[0] for term in _split_terms(body))
-            out[number] = (number, f"{body} = 0", letters)
-    return out
-
-
 def equation_legend(system: Any) -> list[str]:
     """The lines after ``where`` in ``vloop loops``: what each letter stands for."""
-    from ..method.equations import describe
-
-    text = describe(system).splitlines()
-    if "where" not in text:
-        return []
-    return [line.strip() for line in text[text.index("where") + 1 :] if line.strip()]
-
-
-def _split_terms(body: str) -> list[str]:
-    """Split ``a·e^{jθ} + b·e^{j(θ + π)}`` at the top-level `` + `` signs only."""
-    terms, depth, cur = [], 0, []
-    i = 0
-    while i < len(body):
-        ch = body[i]
-        depth += ch in "({"
-        depth -= ch in ")}"
-        if depth == 0 and body.startswith(" + ", i):
-            terms.append("".join(cur))
-            cur = []
-            i += 3
-            continue
-        cur.append(ch)
-        i += 1
-    terms.append("".join(cur))
-    return terms
+    return [legend_text(item) for item in vector_loops(system)[1]]

@@ -8,6 +8,12 @@ its first joint and its θ), so the numbers panel shows every sample's exact val
 travel as little-endian float64, byte-shuffled, deflated and base64-encoded (the browser inflates
 them with its built-in ``DecompressionStream``): an eight-bar run of 5,000 samples is ~1.3 MB.
 
+A page is bounded by its bytes, not by a sample count: the sample data of a page is at most
+``MAX_PAGE_BYTES`` (each float64 counted at its deflated-and-base64 worst case, 8 × 4/3 bytes, so the bound
+holds whatever the numbers). A run with more samples than fit is solved at every requested sample (limits,
+stops and change points found at the file's resolution) but the page carries every k-th of them and the last
+— drawing is thinned, each number shown is a solved sample's exact value — and says so on the page.
+
 The page's script and style live in ``vloop/views/viewer/`` and are inlined at render time; a
 Content-Security-Policy (``default-src 'none'``, the script allowed by its hash) forbids any
 network request from the page.
@@ -35,14 +41,14 @@ import numpy as np
 from ..errors import MotionError, VloopError
 from ..model import Mechanism
 from ..result import Result
-from .geometry import equation_legend, loop_chains
+from .geometry import BLOCK_SIZE, equation_legend, loop_chains
 
 ASSETS = Path(__file__).resolve().parent / "viewer"
 _PLACEHOLDER = re.compile(r"__CSP__|__TITLE__|__HEADING__|__NAME__|/\*__CSS__\*/|__DATA__|/\*__JS__\*/")
 FORMAT = 1
-MAX_SAMPLES = 200_000  # ~100 MB of page for a small mechanism: beyond this a browser struggles
+MAX_PAGE_BYTES = 32 << 20  # the sample data of one page, at most: a browser opens it in a few seconds
+VALUE_BYTES = 8 * 4 / 3 * 1.001  # a float64 in the page, worst case: incompressible, deflate's 0.1 % framing, base64
 HEALTH = ("residual", "cond")
-BLOCK_SIZE = (0.08, 0.045)  # slider block length and height, fractions of the mechanism size
 
 
 class ViewError(VloopError):
@@ -55,21 +61,86 @@ class ViewError(VloopError):
 def solve_for_view(mech: Mechanism) -> tuple[Result, str | None]:
     """Solve the file's motion for a page: (Result, None), or (the samples before a stop, its message).
 
-    Where a motion stops before its first sample, the page shows the t = 0 assembly instead.
+    The page's size is checked before solving (:func:`page_every`): a run too long for one page is solved chunk
+    by chunk at every requested sample and only the samples the page carries are kept (``meta["page"]`` says
+    which). Where a motion stops before its first sample, the page shows the t = 0 assembly instead.
     """
     from ..compiler import compile_system
     from ..core.solver import solve
+    from ..files.budget import columns
 
-    _check_samples(mech.name, len(mech.times))  # before solving, not after
     system = compile_system(mech)
+    every = page_every(len(mech.times), columns(system) + len(HEALTH))
     try:
-        return solve(system), None
+        return (solve(system), None) if every == 1 else (_thinned_run(system, every), None)
     except MotionError as exc:
         partial = exc.partial
         if partial is None or not len(partial):
             partial = solve(system, times=np.zeros(1))
             return partial, f"{exc} (no requested sample could be solved: shown at the t = 0 assembly)"
         return partial, str(exc)
+
+
+def page_every(samples: int, n_columns: int) -> int:
+    """Carry every k-th sample (and the last) so that ``n_columns`` float64 columns fit in MAX_PAGE_BYTES; k ≥ 1."""
+    fit = max(int(MAX_PAGE_BYTES // (max(n_columns, 1) * VALUE_BYTES)), 2)
+    return 1 if samples <= fit else math.ceil((samples - 1) / (fit - 1))
+
+
+def page_rows(samples: int, every: int) -> np.ndarray:
+    """The samples a page carries: 0, k, 2k, … and the last."""
+    rows = np.arange(0, samples, every)
+    return rows if rows[-1] == samples - 1 else np.append(rows, samples - 1)
+
+
+def _thinned_run(system: Any, every: int) -> Result:
+    """Solve every sample in chunks, keeping the page's rows (every k-th, and the last solved); a stop raises
+    MotionError whose ``partial`` holds the kept rows up to the last solved sample."""
+    from ..core.solver import solve_iter
+
+    kept: list[Result] = []
+    done = 0
+    last: Result | None = None
+    try:
+        for part in solve_iter(system):
+            kept.append(_rows(part, done, every))
+            done, last = done + len(part), part
+    except MotionError as exc:
+        part = exc.partial
+        if part is not None and len(part):
+            kept.append(_rows(part, done, every))
+            done, last = done + len(part), part
+        exc.partial = _with_last(kept, last, done, every) if kept and last is not None else exc.partial
+        raise
+    return _with_last(kept, last, done, every)
+
+
+def _rows(part: Result, start: int, every: int) -> Result:
+    """The rows of a chunk (its first sample numbered ``start``) that fall on the page's grid."""
+    take = np.nonzero((start + np.arange(len(part))) % every == 0)[0]
+    return _take(part, take)
+
+
+def _take(res: Result, rows: np.ndarray) -> Result:
+    return Result(
+        res.mechanism,
+        res.engine,
+        res.t[rows],
+        {k: v[rows] for k, v in res.columns.items()},
+        {k: v[rows] for k, v in res.health.items()},
+        dict(res.meta),
+    )
+
+
+def _with_last(kept: list[Result], last: Result, done: int, every: int) -> Result:
+    """The kept rows joined, the last solved sample added if the grid missed it, and what was kept said in meta."""
+    from ..core.solver import join
+
+    if (done - 1) % every:
+        kept = [*kept, _take(last, np.array([len(last) - 1]))]
+    out = join([k for k in kept if len(k)])
+    out.meta = {**last.meta, "page": {"every": every, "of": done}}
+    return out
 
 
 # ------------------------------------------------------------------ page data
@@ -86,9 +157,9 @@ def build_payload(
 
     if not len(result):
         raise ViewError(f"{mech.name}: the result has no sample to show")
-    _check_samples(mech.name, len(result))
     system = system if system is not None else compile_system(mech)
     names, matrix = _columns(mech, result, forces)
+    matrix, thinned = _fit_page(matrix, result.meta.get("page"))
     chains = loop_chains(system, result)
     bodies = mech.bodies()
     slots = _slots(mech, result, bodies)
@@ -99,7 +170,8 @@ def build_payload(
         "units": mech.units,
         "scale": mech.scale,
         "error": error or None,
-        "samples": len(result),
+        "samples": matrix.shape[1],
+        "thinned": thinned,
         "data": {"columns": names, "encoding": "f64le-shuffle-deflate-base64", "data": _pack(matrix)},
         "bodies": [_body(mech, b, slots) for b in bodies.values()],
         "joints": _joints(mech),
@@ -117,12 +189,18 @@ def build_payload(
     }
 
 
-def _check_samples(name: str, n: int) -> None:
-    if n > MAX_SAMPLES:
-        raise ViewError(
-            f"{name}: {n} samples; the viewer takes at most {MAX_SAMPLES} "
-            "(use a coarser [time] step; vloop run writes every sample to results.csv)"
-        )
+def _fit_page(matrix: np.ndarray, page: dict | None) -> tuple[np.ndarray, dict | None]:
+    """The page's columns thinned to MAX_PAGE_BYTES (every k-th sample and the last), and what a note on the page
+    says: ``{"every": k, "shown": samples carried, "of": samples solved}`` (None: every sample is there)."""
+    n_cols, n = matrix.shape
+    every = page_every(n, n_cols)
+    if every > 1:
+        matrix = matrix[:, page_rows(n, every)]
+    before = page or {"every": 1, "of": n}
+    total = before["every"] * every
+    if total == 1:
+        return matrix, None
+    return matrix, {"every": total, "shown": matrix.shape[1], "of": before["of"]}
 
 
 def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], np.ndarray]:
@@ -376,6 +454,34 @@ def render(mech: Mechanism, result: Result, *, forces: Any = None, error: str | 
     }
     # one pass over the template: text put in is never searched again for placeholders
     return _PLACEHOLDER.sub(lambda m: values[m.group(0)], _asset("page.html"))
+
+
+class InlineView:
+    """A viewer page for a notebook's output cell: Jupyter shows ``_repr_html_``, an iframe that holds the page in
+    ``srcdoc`` and is sandboxed to scripts only (an opaque origin: no network, no access to the notebook)."""
+
+    def __init__(self, page: str, height: int = 720) -> None:
+        self.page = page
+        self.height = height
+
+    def _repr_html_(self) -> str:
+        return (
+            f'<iframe title="vloop viewer" sandbox="allow-scripts" style="width: 100%; height: {self.height}px; '
+            f'border: 0" srcdoc="{html.escape(self.page, quote=True)}"></iframe>'
+        )
+
+
+def inline(
+    mech: Mechanism, result: Result | None = None, *, forces: Any = None, error: str | None = None, height: int = 720
+) -> InlineView:
+    """The interactive viewer of a run, inline in a notebook (``vloop.views.view.inline(mech, res)`` as a cell's last
+    line). Without ``result`` the file's motion is solved (a stopped motion shows its last instant and message).
+    ``height`` [px] of the cell's frame, 200 to 4000."""
+    if isinstance(height, bool) or not isinstance(height, int) or not 200 <= height <= 4000:
+        raise ViewError(f"{mech.name}: height must be a whole number of pixels from 200 to 4000, got {height!r}")
+    if result is None:
+        result, error = solve_for_view(mech)
+    return InlineView(render(mech, result, forces=forces, error=error), height)
 
 
 def write_view(

@@ -46,6 +46,54 @@
     if (a >= 1e-3 && a < 1e7) return String(Number(x.toPrecision(9)));
     return x.toExponential(6);
   }
+  // A value read against its quantity's scale (the run's peak of that kind of quantity): SIG significant
+  // digits at the peak's decade, in fixed notation with the trailing zeros dropped; round-off below
+  // ZERO of the peak shows as 0; a value too small for the fixed digits but above round-off keeps two.
+  const SIG = 7, ZERO = 1e-12;
+  function fmtScaled(x, scale) {
+    const a = Math.abs(x);
+    if (!(scale > 0) || !(a > ZERO * scale)) return "0";
+    const top = Math.floor(Math.log10(scale));
+    if (top < -4 || top >= 9) {
+      const sig = Math.max(1, Math.min(SIG, SIG - (top - Math.floor(Math.log10(a)))));
+      return x.toExponential(sig - 1).replace(/\.?0+e/, "e");
+    }
+    const dec = Math.max(0, SIG - 1 - top);
+    let text = x.toFixed(dec);
+    if (dec > 0) text = text.replace(/\.?0+$/, "");
+    if (text === "0" || text === "-0") return x.toExponential(1).replace(/\.0e/, "e");
+    return text;
+  }
+  function scaledWidth(scale) {
+    // the longest text fmtScaled writes for this scale (characters): sign, digits, point, decimals or exponent
+    if (!(scale > 0)) return 1;
+    const top = Math.floor(Math.log10(scale));
+    if (top < -4 || top >= 9) return SIG + 7;
+    const dec = Math.max(0, SIG - 1 - top);
+    return Math.max(1 + Math.max(top + 1, 1) + (dec ? 1 + dec : 0), 8);
+  }
+  // the kind of quantity a column holds; every column of a kind shares one scale
+  function kindOf(col) {
+    if (col.startsWith("force:")) return D.forces.units[col.slice(6)] === "N·m" ? "moment" : "force";
+    if (col.startsWith("health.")) return col;
+    const q = col.slice(col.lastIndexOf(".") + 1);
+    return { x: "length", y: "length", s: "length", vx: "velocity", vy: "velocity", v: "velocity",
+      ax: "acceleration", ay: "acceleration", a: "acceleration" }[q] || q;
+  }
+  let SCALES = null;
+  function scaleOf(col) {
+    if (!SCALES) {
+      SCALES = {};
+      for (const c of D.data.columns) {
+        const k = kindOf(c), v = C[c];
+        let m = SCALES[k] || 0;
+        for (let i = 0; i < N; i++) { const a = Math.abs(v[i]); if (a > m) m = a; }
+        SCALES[k] = m;
+      }
+    }
+    return SCALES[kindOf(col)] || 0;
+  }
+  function fmtHealth(x) { return x === 0 ? "0" : Math.abs(x) >= 1e-3 && Math.abs(x) < 1e6 ? String(Number(x.toPrecision(3))) : x.toExponential(2); }
   function niceDown(x) {
     const m = Math.pow(10, Math.floor(Math.log10(x)));
     const f = x / m;
@@ -122,7 +170,8 @@
   }
 
   function buildScene() {
-    ["ground", "paths", "bodies", "blocks", "pins", "loops", "vel", "acc", "forces", "labels"].forEach(layer);
+    // paths over the links' plates (a coupler curve runs across a ternary link), under the pins
+    ["ground", "bodies", "blocks", "paths", "pins", "loops", "vel", "acc", "forces", "labels"].forEach(layer);
     buildGround();
     buildBodies();
     buildPins();
@@ -629,7 +678,7 @@
         const row = html("div", {}, this.tip);
         html("span", { class: "swl" }, row).style.borderColor = s.style.color;
         row.append(`${s.name}: `);
-        html("span", { class: "mono" }, row, `${fmt(s.values[i])} ${this.spec.unit}`);
+        html("span", { class: "mono" }, row, `${fmtScaled(s.values[i], s.scale)} ${this.spec.unit}`);
       }
       this.tip.hidden = false;
       const r = this.svg.getBoundingClientRect(), px = ev.clientX - r.left;
@@ -638,18 +687,51 @@
     }
   }
 
+  // Series of a group that coincide in every plot of it (within COINCIDE of the plot's range at every
+  // sample; the eight-bar's mirror sliders l6 and l8): index of a later series -> the earlier one it lies on.
+  const COINCIDE = 0.005;
+  function coincident(names, quantities) {
+    const col = (n, q) => C[n.column || `${n}.${q}`];
+    const out = {};
+    const ranges = quantities.map(([q]) => {
+      let lo = Infinity, hi = -Infinity;
+      for (const n of names) for (const v of col(n, q)) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
+      return hi - lo;
+    });
+    names.forEach((b, m) => {
+      for (let k = 0; k < m && !(m in out); k++) {
+        const same = quantities.every(([q], j) => {
+          const x = col(names[k], q), y = col(b, q), tol = COINCIDE * ranges[j];
+          for (let i = 0; i < N; i++) if (!(Math.abs(x[i] - y[i]) <= tol)) return false;
+          return true;
+        });
+        if (same) out[m] = k;
+      }
+    });
+    return out;
+  }
+
   function plotGroup(title, names, quantities) {
     if (!names.length) return;
     const host = html("div", { class: "plot-group", "data-group": title }, $("plots"));
     html("h2", {}, host, title);
     const group = { hidden: new Set(), plots: [] };
     const legend = html("div", { class: "plot-legend" }, host);
-    const series = (q) => names.map((n, k) => ({ name: n.label || n, values: C[n.column || `${n}.${q}`], style: seriesStyle(k), group }));
+    const on = coincident(names, quantities);
+    const label = (n) => n.label || n;
+    // a series lying on an earlier one is dashed over it, so both show
+    const style = (k) => (k in on ? { color: seriesStyle(k).color, dash: DASHES[1 + (Object.keys(on).indexOf(String(k)) % (DASHES.length - 1))] } : seriesStyle(k));
+    const series = (q) => names.map((n, k) => {
+      const col = n.column || `${n}.${q}`;
+      return { name: label(n), values: C[col], scale: scaleOf(col), style: style(k), group };
+    });
     names.forEach((n, k) => {
-      const name = n.label || n;
+      const name = label(n);
       const b = html("button", { type: "button", "aria-pressed": "true", "data-series-toggle": name }, legend);
-      html("span", { class: "swl" }, b).style.borderColor = seriesStyle(k).color;
-      b.append(name);
+      const sw = html("span", { class: "swl" }, b);
+      sw.style.borderColor = style(k).color;
+      if (k in on) { sw.style.borderTopStyle = "dashed"; b.dataset.coincides = label(names[on[k]]); }
+      b.append(k in on ? `${name} (= ${label(names[on[k]])})` : name);
       b.addEventListener("click", () => {
         const hide = !group.hidden.has(name);
         if (hide) group.hidden.add(name); else group.hidden.delete(name);
@@ -687,6 +769,7 @@
     });
     observer.observe($("plots"));
     observer.observe($("view-wrap"));
+    observer.observe(V.svg);
   }
 
   // ------------------------------------------------------------------ numbers panel
@@ -697,17 +780,23 @@
     const t = html("table", {}, wrap);
     html("caption", {}, t, caption);
     const tr = html("tr", {}, html("thead", {}, t));
-    head.forEach((h) => html("th", { scope: "col" }, tr, h));
+    const heads = head.map((h) => html("th", { scope: "col" }, tr, h));
     const body = html("tbody", {}, t);
+    const widths = [];
     for (const [name, cols, unit] of rows) {
       const r = html("tr", {}, body);
       html("th", { scope: "row" }, r, name);
-      for (const [col, f] of cols) {
+      cols.forEach(([col, f], k) => {
         const td = html("td", { class: "num", "data-col": col }, r);
-        cells.push({ td, values: C[col], f: f || ((x) => x) });
-      }
+        f = f || ((x) => x);
+        const health = col.startsWith("health."), scale = scaleOf(col) * Math.abs(f(1));
+        cells.push({ td, values: C[col], f, format: health ? fmtHealth : (x) => fmtScaled(x, scale) });
+        widths[k] = Math.max(widths[k] || 0, health ? 9 : scaledWidth(scale));
+      });
       if (unit !== undefined) html("td", {}, r, unit);
     }
+    // each column as wide as its longest value can be: the numbers never wrap, and do not jiggle in play
+    widths.forEach((w, k) => { if (heads[k + 1]) heads[k + 1].style.width = `${w + 1}ch`; });
   }
 
   function buildNumbers() {
@@ -727,10 +816,10 @@
   }
 
   function updateNumbers(i) {
-    $("numbers-time").textContent = `t = ${fmt(T[i])} s · sample ${i + 1} of ${N}`;
+    $("numbers-time").textContent = `t = ${fmt(T[i])} s · sample ${sampleNo(i)} of ${D.thinned ? D.thinned.of : N}`;
     for (const c of cells) {
       const v = c.values[i];
-      c.td.textContent = fmt(c.f(v));
+      c.td.textContent = c.format(c.f(v));
       c.td.dataset.value = String(c.f(v)); // full precision (shortest round trip)
     }
   }
@@ -871,6 +960,12 @@
 
   // ------------------------------------------------------------------ start
 
+  // the run's own sample number (1-based) of page sample i (a thinned page carries every k-th and the last)
+  function sampleNo(i) {
+    if (!D.thinned) return i + 1;
+    return i === N - 1 ? D.thinned.of : i * D.thinned.every + 1;
+  }
+
   async function main() {
     if (typeof DecompressionStream === "undefined") throw new Error("this browser has no DecompressionStream: use a current Firefox, Chrome, Edge or Safari");
     C = await decode(D.data);
@@ -887,7 +982,12 @@
     if (D.error) {
       const box = $("error");
       box.hidden = false;
-      box.textContent = `The motion stopped: ${D.error}\nThe drawing shows the last assembled instant, t = ${fmt(T[N - 1])} s (sample ${N}).`;
+      box.textContent = `The motion stopped: ${D.error}\nThe drawing shows the last assembled instant, t = ${fmt(T[N - 1])} s (sample ${sampleNo(N - 1)}).`;
+    }
+    if (D.thinned) {
+      const note = $("note");
+      note.hidden = false;
+      note.textContent = `This page carries ${D.thinned.shown.toLocaleString()} of the run's ${D.thinned.of.toLocaleString()} samples (one in every ${D.thinned.every}, and the last), to keep the page small; each value shown is that sample's exact value. vloop run writes every sample.`;
     }
     S.i = start;
     fit();

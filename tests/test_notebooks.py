@@ -1,0 +1,168 @@
+"""Notebooks: the two example notebooks in docs/ run, and every result type shows itself in a notebook.
+
+* docs/lecture_fourbar.ipynb and docs/design_study.ipynb are stored without outputs and executed here with
+  nbclient (a real kernel); each asserts its own numbers against formulas written out in its cells (Norton's
+  closed form, the velocity loop, the instant centre as a line intersection, the transmission angle by the law
+  of cosines, the power balance, the crank-rocker's extreme transmission angles, Monte-Carlo against the
+  linearized σ), so a notebook that runs is a notebook whose numbers were checked.
+* ``_repr_html_`` of Mechanism, Result, ForceResult and StudyResult: an HTML table whose numbers are the data's
+  (ranges against numpy's min and max, Gruebler's M of the paper's eight-bar), every name escaped.
+* ``Result.to_pandas()``: the columns and their units (angles rad, lengths the file's).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import vloop
+
+from .conftest import MECHANISMS, ROOT
+
+NOTEBOOKS = sorted((ROOT / "docs").glob("*.ipynb"))
+
+
+def test_there_are_two_notebooks_stored_without_outputs() -> None:
+    assert {p.name for p in NOTEBOOKS} == {"lecture_fourbar.ipynb", "design_study.ipynb"}
+    for path in NOTEBOOKS:
+        nb = json.loads(path.read_text(encoding="utf-8"))
+        for cell in nb["cells"]:
+            if cell["cell_type"] == "code":
+                assert cell["outputs"] == [] and cell["execution_count"] is None, path.name
+            assert "execution" not in cell.get("metadata", {}), path.name
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_the_notebook_runs_and_checks_its_numbers(path: Path) -> None:
+    nbformat = pytest.importorskip("nbformat", reason="pip install -e '.[notebooks]'")
+    nbclient = pytest.importorskip("nbclient", reason="pip install -e '.[notebooks]'")
+    pytest.importorskip("ipykernel", reason="pip install -e '.[notebooks]'")
+    nb = nbformat.read(path, as_version=4)
+    start = time.perf_counter()
+    client = nbclient.NotebookClient(
+        nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": path.parent}}
+    )
+    client.execute()  # raises CellExecutionError, naming the cell, where one fails (its asserts included)
+    seconds = time.perf_counter() - start
+    text = "".join(o.get("text", "") for c in nb.cells for o in c.get("outputs", []) if o["output_type"] == "stream")
+    html = "".join(
+        o.get("data", {}).get("text/html", "") for c in nb.cells for o in c.get("outputs", []) if "data" in o
+    )
+    if path.stem == "lecture_fourbar":
+        assert "by hand: θ3 = 20.2979°, θ4 = 57.3249°" in text and "power balance" in text
+        assert 'sandbox="allow-scripts"' in html and "<b>Result</b>" in html and "<b>ForceResult</b>" in html
+    else:
+        assert "rocker swing: nominal" in text and "StudyResult(" in html
+    print(f"{path.name}: {seconds:.1f} s")  # with the kernel's start; a few seconds each
+
+
+# ---------------------------------------------------------------- rich display
+
+
+class _Tags(HTMLParser):
+    """Checks tags are balanced and collects the text of every cell."""
+
+    VOID = frozenset({"br", "hr", "img", "meta", "input", "link"})
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stack: list[str] = []
+        self.cells: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list) -> None:
+        if tag not in self.VOID:
+            self.stack.append(tag)
+        if tag in ("td", "th"):
+            self.cells.append("")
+
+    def handle_endtag(self, tag: str) -> None:
+        assert self.stack and self.stack.pop() == tag, (tag, self.stack)
+
+    def handle_data(self, data: str) -> None:
+        if self.stack and self.stack[-1] in ("td", "th"):
+            self.cells[-1] += data
+
+
+def _parse(html: str) -> list[str]:
+    tags = _Tags()
+    tags.feed(html)
+    tags.close()
+    assert tags.stack == []
+    return tags.cells
+
+
+def test_a_mechanism_shows_its_bodies_and_mobility() -> None:
+    mech = vloop.load(MECHANISMS / "eightbar.toml")
+    html = mech._repr_html_()
+    cells = _parse(html)
+    assert "L = 8 bodies, J = 10 joints, Gruebler M = 1" in html  # the paper: L = 8, J = 10, M = 1
+    assert {"l2", "l3", "l5", "l7", "l4", "l6", "l8"} <= set(cells) and "length 6.15" in cells
+    watt = vloop.load(MECHANISMS / "sixbar_watt2_dimensions.toml")._repr_html_()
+    assert "written from dimensions" in watt and "sides 4, 3, angle -2.26893 rad" in _parse(watt)
+
+
+def test_a_result_shows_each_quantity_s_range() -> None:
+    mech = vloop.load(MECHANISMS / "whitworth_quick_return.toml")
+    res = vloop.solve(mech)
+    cells = _parse(res._repr_html_())
+    i = next(i for i in range(len(cells) - 1) if cells[i : i + 2] == ["l6", "slider"])  # (l6 is also a block's θ)
+    s = res["l6.s"]
+    assert cells[i + 2] == f"s {s.min():.4g} … {s.max():.4g} mm"
+    w = res["l4.omega"]
+    assert f"omega {w.min():.4g} … {w.max():.4g} rad/s" in cells
+    speed = np.hypot(res["C.vx"], res["C.vy"]).max()
+    assert f"|v| ≤ {speed:.4g} mm/s" in cells
+
+
+def test_forces_and_study_results_show_their_tables() -> None:
+    mech = vloop.load(MECHANISMS / "fourbar_textbook_dynamics.toml")
+    forces = vloop.solve_forces(mech, vloop.solve(mech))
+    cells = _parse(forces._repr_html_())
+    i = cells.index("l2.torque")
+    assert cells[i + 1] == "N·m" and float(cells[i + 2]) == pytest.approx(forces["l2.torque"].min(), rel=1e-5)
+    assert "O2:ground>l2.fx" in cells and cells[cells.index("O2:ground>l2.fx") + 1] == "N"
+    study = vloop.study(
+        mech,
+        [{"name": "links.l3.length", "tolerance": {"dist": "uniform", "half_width": 0.5}}],
+        ["l4.theta.range"],
+        samples=8,
+        seed=1,
+        times=mech.times[:30],
+    )
+    cells = _parse(study._repr_html_())
+    assert cells[cells.index("links.l3.length") + 1 : cells.index("links.l3.length") + 4] == [
+        "mm",
+        "120",
+        "uniform ± 0.5",
+    ]
+
+
+def test_hostile_names_and_titles_stay_text() -> None:
+    text = (MECHANISMS / "fourbar_textbook_example.toml").read_text(encoding="utf-8")
+    text = re.sub(r'^title = ".*"$', 'title = "<script>alert(1)</script> & <b>"', text, flags=re.M)
+    mech = vloop.loads(text, source="<x>")
+    res = vloop.solve(mech, times=mech.times[:5])
+    assert "&lt;script&gt;alert(1)&lt;/script&gt; &amp; &lt;b&gt;" in mech._repr_html_()
+    for html in (mech._repr_html_(), res._repr_html_()):
+        assert "<script>" not in html
+        _parse(html)
+
+
+def test_to_pandas_has_every_column_and_its_unit() -> None:
+    mech = vloop.load(MECHANISMS / "whitworth_quick_return.toml")  # millimetres
+    res = vloop.solve(mech, times=mech.times[:20])
+    df = res.to_pandas()
+    assert list(df.columns) == ["t", *res.columns] and np.array_equal(df["l6.v"].to_numpy(), res["l6.v"])
+    units = df.attrs["units"]
+    assert units["t"] == "s" and units["l4.theta"] == "rad" and units["l4.omega"] == "rad/s"
+    assert units["l4.alpha"] == "rad/s^2" and units["C.x"] == "mm" and units["C.vy"] == "mm/s"
+    assert units["C.ax"] == "mm/s^2" and units["l6.s"] == "mm" and units["l6.a"] == "mm/s^2"
+    assert vloop.Result.to_dataframe is vloop.Result.to_pandas
+    bare = vloop.Result("m", "csv", res.t, dict(res.columns))  # a Result that does not know its units
+    assert bare.to_pandas().attrs["units"]["C.x"] == "L" and bare.to_pandas(length="in").attrs["units"]["C.x"] == "in"

@@ -1,0 +1,203 @@
+"""Files written from dimensions: which files they are, and where their joints sit until vloop assembles them.
+
+A file is *written from dimensions* when nothing in it depends on where its coordinates draw a moving body:
+every moving link has its ``length`` (binary) or ``sides`` (ternary), every slider its ``offset`` (and its
+``angle`` in the guide's frame when the guide moves), every point on a moving body its ``local`` coordinates and
+every centre of mass its ``com_local`` (or the default). Its coordinates, other than the ground's, are then
+hints: they may be rough or missing, and :mod:`vloop.authoring` assembles t = 0 from the dimensions on the
+branch nearest them. Here, before any solving, the reader
+
+* decides whether a file is written from dimensions (:func:`dimension_mode`), refusing the keys that only such a
+  file may use (a slider's ``offset`` or ``angle``, a missing coordinate) in any other;
+* places joints without coordinates provisionally, link by link from the placed ones (:func:`place_joints`;
+  the assembly replaces them, only the ground's coordinates are kept);
+* turns slider angles into t = 0 axes and points' ``local`` into t = 0 positions (:func:`axes_from_angles`,
+  :func:`points_from_local`), through the body frames the coordinates give.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from ..model import Link, Mechanism, Point, Slider, third_corner, to_world
+from .schema import Problems, show
+
+HANDEDNESS_TOL = 1e-9  # |J0J1 × J0J2| below this fraction of |J0J1|·|J0J2|: the drawn triangle shows no side
+
+
+def missing_dimensions(
+    links: dict[str, Link], sliders: dict[str, Slider], points: dict[str, Point], data: dict
+) -> list[str]:
+    """What keeps a file from being written from dimensions (empty: it is), one phrase each."""
+    why: list[str] = []
+    ground = next((n for n, lk in links.items() if lk.ground), None)
+    one_joint = {n for n, lk in links.items() if len(lk.joints) == 1}
+    for n, lk in links.items():
+        if lk.ground or len(lk.joints) == 1 or lk.dimensioned:
+            continue
+        need = {2: "length", 3: "sides"}.get(len(lk.joints))
+        why.append(f"links.{n} has no {need}" if need else f"links.{n} has {len(lk.joints)} joints (at most 3)")
+    for n, sl in sliders.items():
+        if sl.offset is None:
+            why.append(f"sliders.{n} has no offset")
+        if sl.angle is None and sl.guide != ground and sl.guide not in one_joint:
+            why.append(f"sliders.{n} on the moving guide {sl.guide} has no angle")
+    why += [f"points.{n} has no local" for n, p in points.items() if p.local is None and p.link != ground]
+    for section in ("links", "sliders"):
+        for n, table in (data.get(section) or {}).items():
+            if isinstance(table, dict) and "com" in table:
+                why.append(f"{section}.{n} gives com (use com_local)")
+    return why
+
+
+def dimension_mode(
+    links: dict[str, Link], sliders: dict[str, Slider], points: dict[str, Point], data: dict, probs: Problems
+) -> tuple[bool, str]:
+    """Whether the file is written from dimensions, and if not, what it lacks (a phrase for messages). A slider's
+    ``offset`` or ``angle`` (which only such a file may state) in any other file is refused, naming what lacks."""
+    why = missing_dimensions(links, sliders, points, data)
+    if not why:
+        return True, ""
+    lacks = f"{'; '.join(why[:3])}{' ...' if len(why) > 3 else ''}"
+    uses = [(n, k) for n, s in sliders.items() for k in ("offset", "angle") if getattr(s, k) is not None]
+    for n, key in uses[:4]:
+        probs.add(
+            f"sliders.{n}",
+            f"'{key}' needs a file written from dimensions (every moving link its length or sides, every slider its "
+            f"offset and, on a moving guide, its angle; points local, centres of mass com_local); here {lacks}",
+        )
+    return False, lacks
+
+
+def check_lengths(m: Mechanism, tol: float, probs: Problems) -> None:
+    """In a file written from dimensions, a link's joints are as far apart as its dimensions say: none may be
+    shorter than ``tol`` of the mechanism's size (coordinates and dimensions), which makes two joints one."""
+    size = max(m.scale, m.largest_dimension)
+    for n, lk in m.links.items():
+        if lk.ground or not lk.dimensioned:
+            continue
+        corners = list(_local(lk, m.joints).values())
+        pairs = [(i, k) for i in range(len(corners)) for k in range(i + 1, len(corners))]
+        for i, k in pairs:
+            if math.dist(corners[i], corners[k]) <= tol * size:
+                what = f"its dimensions put joints {lk.joints[i]} and {lk.joints[k]} together (zero-length link)"
+                probs.add(f"links.{n}", what)
+
+
+def check_ternaries(links: dict[str, Link], joints: dict[str, tuple[float, float]], probs: Problems) -> None:
+    """Three sides give a triangle up to its mirror image: the coordinates of its three joints must show which."""
+    for n, lk in links.items():
+        if lk.sides is None or len(lk.sides) != 3:
+            continue
+        j0, j1, j2 = lk.joints
+        fix = f"give rough coordinates of {j0}, {j1}, {j2}, or sides = [|{j0}{j1}|, |{j0}{j2}|] with the angle at {j0}"
+        if any(j not in joints for j in lk.joints):
+            probs.add(f"links.{n}", f"three sides give the triangle up to its mirror image: {fix}")
+            continue
+        p0, p1, p2 = (joints[j] for j in lk.joints)
+        u, v = (p1[0] - p0[0], p1[1] - p0[1]), (p2[0] - p0[0], p2[1] - p0[1])
+        if abs(u[0] * v[1] - u[1] * v[0]) <= HANDEDNESS_TOL * math.hypot(*u) * math.hypot(*v):
+            why = "its coordinates are in a line, so they do not show which mirror image the three sides mean"
+            probs.add(f"links.{n}", f"{why}: {fix}")
+
+
+def place_joints(
+    joints: dict[str, tuple[float, float]],
+    links: dict[str, Link],
+    sliders: dict[str, Slider],
+    missing: dict[str, str],
+    probs: Problems,
+) -> dict[str, tuple[float, float]]:
+    """Every joint with a position: the given ones, and the missing ones placed provisionally from the dimensions
+    (a link with a placed joint is laid down through it, turned as its placed joints show or along +x)."""
+    placed = dict(joints)
+    todo = [j for j in missing if j not in placed]
+    while todo:
+        before = len(todo)
+        for lk in links.values():
+            if not lk.ground:
+                _lay_link(lk, placed)
+        for sl in sliders.values():
+            if sl.joint not in placed and _frame_known(links, placed, sl.guide):
+                placed[sl.joint] = _on_line(sl, links, placed)
+        todo = [j for j in todo if j not in placed]
+        if len(todo) == before:
+            for j in todo:
+                probs.add(missing[j], f"joint {show(j)} cannot be placed from the dimensions: give rough coordinates")
+            break
+    return {j: placed[j] for j in [*joints, *(j for j in missing if j in placed and j not in joints)]}
+
+
+def _local(lk: Link, placed: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+    """A dimensioned link's joints in its frame."""
+    out = {lk.joints[0]: (0.0, 0.0)}
+    if len(lk.joints) >= 2:
+        out[lk.joints[1]] = (lk.length if lk.length is not None else lk.sides[0], 0.0)  # type: ignore[index]
+    if lk.sides is not None:
+        out[lk.joints[2]] = third_corner(lk, [placed.get(j, (0.0, 0.0)) for j in lk.joints])
+    return out
+
+
+def _lay_link(lk: Link, placed: dict[str, tuple[float, float]]) -> None:
+    """Place a link's missing joints through its placed ones (turned as two placed joints show, else along +x)."""
+    have = [j for j in lk.joints if j in placed]
+    if not have or len(have) == len(lk.joints) or not lk.dimensioned:
+        return
+    loc = _local(lk, placed)
+    turn = 0.0
+    if len(have) >= 2:
+        (a, b), (la, lb) = (placed[have[0]], placed[have[1]]), (loc[have[0]], loc[have[1]])
+        turn = math.atan2(b[1] - a[1], b[0] - a[0]) - math.atan2(lb[1] - la[1], lb[0] - la[0])
+    c, s = math.cos(turn), math.sin(turn)
+    p, lp = placed[have[0]], loc[have[0]]
+    for j in lk.joints:
+        if j not in placed:
+            dx, dy = loc[j][0] - lp[0], loc[j][1] - lp[1]
+            placed[j] = (p[0] + c * dx - s * dy, p[1] + s * dx + c * dy)
+
+
+def _frame_known(links: dict[str, Link], placed: dict[str, tuple[float, float]], guide: str) -> bool:
+    """Whether a guide's frame is known from placed joints (the ground's always)."""
+    lk = links[guide]
+    return lk.ground or (len(lk.joints) >= 2 and all(j in placed for j in lk.joints[:2]))
+
+
+def _frame(links: dict[str, Link], placed: dict[str, tuple[float, float]], guide: str) -> tuple[float, float, float]:
+    """(x, y, θ) of a guide's frame from placed joints (the ground's is the world's)."""
+    lk = links[guide]
+    if lk.ground:
+        return 0.0, 0.0, 0.0
+    (x0, y0), (x1, y1) = placed[lk.joints[0]], placed[lk.joints[1]]
+    return x0, y0, math.atan2(y1 - y0, x1 - x0)
+
+
+def _on_line(sl: Slider, links: dict[str, Link], placed: dict[str, tuple[float, float]]) -> tuple[float, float]:
+    """A slider's joint at s = 0 on its sliding line (provisional)."""
+    x, y, th = _frame(links, placed, sl.guide)
+    alpha = th + (sl.angle if sl.angle is not None else math.atan2(sl.axis[1], sl.axis[0]) - th)
+    e = sl.offset or 0.0
+    return x - e * math.sin(alpha), y + e * math.cos(alpha)
+
+
+def axes_from_angles(
+    sliders: dict[str, Slider], links: dict[str, Link], joints: dict[str, tuple[float, float]]
+) -> dict[str, Slider]:
+    """Sliders given by ``angle`` with their t = 0 ``axis``: the angle turned by the guide's frame as the
+    coordinates draw it (the assembly turns it with the guide)."""
+    out = {}
+    for n, sl in sliders.items():
+        if sl.angle is not None:
+            th = _frame(links, joints, sl.guide)[2] + sl.angle
+            sl = dataclasses.replace(sl, axis=(math.cos(th), math.sin(th)))
+        out[n] = sl
+    return out
+
+
+def points_from_local(proto: Mechanism, points: dict[str, Point]) -> dict[str, Point]:
+    """Points given by ``local`` with their t = 0 position ``at`` through their body's frame."""
+    bodies = proto.bodies()
+    return {
+        n: dataclasses.replace(p, at=to_world(bodies[p.link], p.local)) if p.local is not None else p
+        for n, p in points.items()
+    }
