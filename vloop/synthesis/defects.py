@@ -4,13 +4,15 @@ The classic failures of synthesis (Erdman & Sandor; Norton, ch. 5), as vloop see
 candidate's own file from its first precision position with the input moving one way:
 
 * **branch defect** — the motion stops at a limit (a toggle of the input) before the last precision position:
-  the positions are not all reachable without reversing the input through a dead point;
+  the positions are not all reachable without reversing the input through a dead point; or a non-Grashof
+  linkage reaches some position's input angle on the other branch of its one circuit;
 * **circuit defect** — an exact method's linkage passes through every position on paper, but the motion from
-  the first position reaches some position's input angle on the other assembly circuit (the error there is
-  not round-off: more than CIRCUIT_TOL of the size);
+  the first position reaches some position's input angle on the other assembly circuit of a Grashof linkage
+  (the error there is not round-off: more than CIRCUIT_TOL of the size);
 * **order defect** — the positions are reached in another order than asked as the input moves one way;
 * **no full rotation** — a full-turning input was required and the input cannot turn through 360°;
-* **transmission angle** — the smallest transmission angle over the working motion is below the limit asked.
+* **transmission angle** — the smallest transmission angle over the working motion is below the limit asked;
+* **error** — an optimization's candidate misses a precision position by more than the tolerance asked.
 
 A candidate with any of these is reported with its defects named, never ranked as a solution.
 """
@@ -22,7 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import compile, solve
 from ..errors import MotionError
+from ..loops import LoopSystem
 from ..model import Mechanism
 from ..result import Result
 from .candidates import Candidate, Task
@@ -37,10 +41,12 @@ TWO_PI = 2.0 * math.pi
 @dataclass(frozen=True)
 class Requirements:
     """What a solution must also do: turn its input fully; keep the transmission angle at or above
-    ``min_transmission`` [rad] over its working motion."""
+    ``min_transmission`` [rad] over its working motion; (an optimization's candidate) pass every precision
+    position within ``tolerance`` of the task's size."""
 
     full_rotation: bool = False
     min_transmission: float = 0.0
+    tolerance: float | None = None
 
 
 @dataclass
@@ -66,45 +72,54 @@ def assess(draft: Draft, task: Task, req: Requirements) -> Candidate:
     times = np.asarray(draft.times, float)
     work = np.union1d(np.linspace(0.0, draft.span, WORK_SAMPLES), times[np.isfinite(times) & (times >= 0)])
     mech = reanchored(draft.mechanism, top, 0.0, work)
-    res, stop = _solve(mech, work)
+    system = compile(mech)
+    res, stop = _solve(system, work)
     errors, angle_errors = _errors(res, times, task, top)
     defects, notes = [], list(draft.notes)
     if stop is not None:
         missed = [k + 1 for k in range(len(times)) if not np.isfinite(errors[k])]
         defects.append("branch")
         notes.append(f"branch defect: {stop} (precision position{'s' if len(missed) > 1 else ''} {missed} not reached)")
+    grashof = grashof_class(system)
     if task.exact and np.any(np.nan_to_num(np.abs(errors), nan=0.0) > CIRCUIT_TOL * task.size):
         bad = [k + 1 for k in range(len(errors)) if abs(errors[k]) > CIRCUIT_TOL * task.size]
-        defects.append("circuit")
-        notes.append(f"circuit defect: position{'s' if len(bad) > 1 else ''} {bad} lie on another assembly circuit")
+        # a Grashof four-bar's two assemblies are two circuits; a non-Grashof one's are two branches of one
+        # circuit, joined at the toggles
+        kind = "branch" if grashof.startswith(("non-Grashof", "special")) else "circuit"
+        if kind not in defects:
+            defects.append(kind)
+        where = "across a toggle, on the other branch" if kind == "branch" else "on another assembly circuit"
+        notes.append(f"{kind} defect: position{'s' if len(bad) > 1 else ''} {bad} lie {where}")
     if len(times) > 1 and not np.all(np.diff(times) > 0):
         defects.append("order")
         notes.append("order defect: the positions are not reached in the order asked as the input moves one way")
-    full = _turns_fully(mech, res, draft.span, stop)
+    full = _turns_fully(system, draft.span, stop)
     if req.full_rotation and not full:
         defects.append("no full rotation")
         notes.append(f"the input {top.input} cannot turn through a full revolution")
-    mu = min_transmission(mech, res)
+    mu = min_transmission(mech, res, system)
     if req.min_transmission > 0 and not mu >= req.min_transmission:
         defects.append("transmission angle")
         notes.append(
             f"minimum transmission angle {math.degrees(mu):.1f}° < {math.degrees(req.min_transmission):.1f}° asked"
         )
+    worst = np.nanmax(np.abs(errors)) / task.size if np.any(np.isfinite(errors)) else math.nan
+    if req.tolerance is not None and not task.exact and worst > req.tolerance:
+        defects.append("error")
+        notes.append(f"misses a precision position by {worst:.3g} of the size (tolerance {req.tolerance:g})")
     return Candidate(
         draft.name, draft.method, top.name, mech, top.input, top.guided, top.tracer, times,
         _inputs(res, times, top), errors, task.size, tuple(defects), tuple(notes), angle_errors,
-        grashof_class(mech), full, mu, None, draft.search_error, lengths(mech), dict(draft.extra),
+        grashof, full, mu, None, draft.search_error, lengths(mech), dict(draft.extra),
     )  # fmt: skip
 
 
-def _solve(mech: Mechanism, times: np.ndarray) -> tuple[Result, str | None]:
+def _solve(system: LoopSystem, times: np.ndarray) -> tuple[Result, str | None]:
     """The run over ``times``, or the samples before it stopped and why."""
-    from .. import solve
-
     try:
-        return solve(mech, times), None
+        return solve(system, times), None
     except MotionError as exc:
-        part = exc.partial if exc.partial is not None else Result(mech.name, "vloop", np.zeros(0), {})
+        part = exc.partial if exc.partial is not None else Result(system.mechanism.name, "vloop", np.zeros(0), {})
         return part, str(exc)
 
 
@@ -148,38 +163,35 @@ def _inputs(res: Result, times: np.ndarray, top: Topology) -> np.ndarray:
     return np.where(k >= 0, th, np.nan)
 
 
-def _turns_fully(mech: Mechanism, res: Result, span: float, stop: str | None) -> bool:
+def _turns_fully(system: LoopSystem, span: float, stop: str | None) -> bool:
     """Whether the input turns through a full revolution from t = 0 (solved over one turn unless the working
     motion already covers one)."""
-    from .. import solve
-
-    omega = abs(mech.drivers[0].v0)
+    omega = abs(system.mechanism.drivers[0].v0)
     turn = TWO_PI / omega
     if stop is None and span >= turn * (1 - 1e-12):
         return True
     try:
-        solve(mech, np.linspace(0.0, turn, TURN_SAMPLES))
+        solve(system, np.linspace(0.0, turn, TURN_SAMPLES))
     except MotionError:
         return False
     return True
 
 
-def min_transmission(mech: Mechanism, res: Result) -> float:
+def min_transmission(mech: Mechanism, res: Result, system: LoopSystem | None = None) -> float:
     """The smallest folded transmission angle [rad] of any dyad over the run (NaN without dyads or samples)."""
     from .. import transmission_angles
 
     if not len(res.t):
         return math.nan
-    angles = transmission_angles(mech, res)
+    angles = transmission_angles(mech, res, system)
     return float(min((np.min(a.folded) for a in angles), default=math.nan))
 
 
-def grashof_class(mech: Mechanism) -> str:
+def grashof_class(system: LoopSystem) -> str:
     """The Grashof class of the linkage's first four-bar loop ("" when it has none), as vloop names it."""
-    from .. import compile
     from ..equations import grashof
 
-    found = grashof(compile(mech))
+    found = grashof(system)
     return found[0][1] if found else ""
 
 
@@ -190,7 +202,6 @@ def population_transmission(topology: Topology, points: dict[str, np.ndarray], t
     """The smallest folded transmission angle [rad] over the samples of each row of a population (rows, samples)
     arrays of joint positions (complex); NaN where a row has no motion. The dyads are the topology's (one
     structure for every member), the angle as :mod:`vloop.teaching.transmission` measures it."""
-    from .. import compile
     from ..teaching.transmission import dyads, raw_angle
 
     if topology.name not in _DYADS:

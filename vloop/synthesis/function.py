@@ -127,6 +127,8 @@ def function(
     cand = assess(draft, task, requirements or Requirements())
     if defects:
         cand.defects = (*cand.defects, "branch")
+    cand.guided = "rocker" if top.name == "fourbar" else "slider"
+    cand.notes = (*cand.notes, *_flipped(coords, th[0], out[0], top))
     if setup["f"] is not None:
         _structural(cand, setup, samples, direction)
     return Candidates(task, [cand], time.perf_counter() - started)
@@ -160,7 +162,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
         if y_range is not None
         else (float(fn(np.array([x0]))[0]), float(fn(np.array([xf]))[0]))
     )
-    if not (math.isfinite(y0) and math.isfinite(yf)) or y0 == yf:
+    if not (math.isfinite(y0) and math.isfinite(yf)) or abs(yf - y0) <= 1e-12 * max(1.0, float(np.max(np.abs(yd)))):
         raise SynthesisError(
             f"[function] f takes the same value at both ends of the range: give y_range (got {y0:g}, {yf:g})"
         )
@@ -219,6 +221,20 @@ def _physical(out: np.ndarray, coords: dict[str, complex], top: Topology) -> np.
         return out
     c_positive = abs(np.exp(1j * out[0]) - (coords["B"] - coords["O4"]) / abs(coords["B"] - coords["O4"])) < 1
     return out if c_positive else out + math.pi
+
+
+def _flipped(coords: dict[str, complex], th1: float, out1: float, top: Topology) -> tuple[str, ...]:
+    """Notes for a crank (rocker) whose length came out negative: it points the other way, its angle is the
+    input (output) angle asked + π; the increments, and so the function generated, are the same."""
+    notes = []
+    if abs(np.exp(1j * th1) - coords["A"] / abs(coords["A"])) > 1:
+        notes.append("the crank points opposite to the input angles asked (a < 0): its angle is the input + π")
+    if (
+        top.name == "fourbar"
+        and abs(np.exp(1j * out1) - (coords["B"] - coords["O4"]) / abs(coords["B"] - coords["O4"])) > 1
+    ):
+        notes.append("the rocker points opposite to the output angles asked (c < 0): its angle is the output + π")
+    return tuple(notes)
 
 
 def _dims(top: Topology, coords: dict[str, complex]) -> dict[str, float]:

@@ -183,19 +183,38 @@ def centre_curve(ps: Poses, rays: int = RAYS, reach: float = 20.0) -> tuple[np.n
     rs = np.array([-1.0, 0.0, 1.0, 2.0])
     dets = np.stack([np.linalg.det(_consistency(ps, r * u)) for r in rs], 1)  # (rays, 4)
     coef = np.linalg.solve(np.vander(rs, 4), dets.T).T  # cubic coefficients, highest first
-    M, ray = [], []
-    for i in range(rays):
-        c = coef[i]
-        big = np.max(np.abs(c))
-        if not big > 0:
-            continue
-        roots = np.roots(np.where(np.abs(c) > 1e-14 * big, c, 0.0)) if c[0] != 0 or c[1] != 0 else np.roots(c[2:])
-        for r in roots:
-            if abs(r.imag) <= 1e-9 * max(1.0, abs(r)) and abs(r.real) <= reach:
-                M.append(r.real * u[i])
-                ray.append(i)
-    M = np.array(M, complex)
-    return M, circle_points(ps, M), np.array(ray, int)
+    r, i = _real_roots(coef)
+    keep = np.abs(r) <= reach
+    M = r[keep] * u[i[keep]]
+    return M, circle_points(ps, M), i[keep]
+
+
+def _real_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The real roots of cubics (rows of ``coef``, highest power first) and the row of each: the eigenvalues of
+    the companion matrices, all rows at once (a row whose leading coefficient vanishes is solved alone)."""
+    big = np.max(np.abs(coef), axis=1)
+    cubic = np.abs(coef[:, 0]) > 1e-12 * big
+    roots, rows = [], []
+    if cubic.any():
+        c = coef[cubic] / coef[cubic, :1]
+        comp = np.zeros((len(c), 3, 3))
+        comp[:, 0, :] = -c[:, 1:]
+        comp[:, 1, 0] = comp[:, 2, 1] = 1.0
+        ev = np.linalg.eigvals(comp)
+        real = np.abs(ev.imag) <= 1e-9 * np.maximum(1.0, np.abs(ev))
+        k, j = np.nonzero(real)
+        roots.append(ev[k, j].real)
+        rows.append(np.nonzero(cubic)[0][k])
+    for i in np.nonzero(~cubic & (big > 0))[0]:
+        ev = np.roots(np.trim_zeros(np.where(np.abs(coef[i]) > 1e-12 * big[i], coef[i], 0.0), "f"))
+        ev = ev[np.abs(ev.imag) <= 1e-9 * np.maximum(1.0, np.abs(ev))].real
+        roots.append(ev)
+        rows.append(np.full(len(ev), i))
+    if not roots:
+        return np.zeros(0), np.zeros(0, int)
+    r, i = np.concatenate(roots), np.concatenate(rows).astype(int)
+    order = np.lexsort((r, i))
+    return r[order], i[order]
 
 
 def _consistency(ps: Poses, M: np.ndarray) -> np.ndarray:
@@ -205,13 +224,18 @@ def _consistency(ps: Poses, M: np.ndarray) -> np.ndarray:
 
 
 def circle_points(ps: Poses, M: np.ndarray) -> np.ndarray:
-    """The circle point (pose 1) of each centre point, least squares over the equations g_k."""
+    """The circle point (pose 1) of each centre point, least squares over the equations g_k (the normal
+    equations of every point at once; exact where the equations are consistent)."""
+    if not len(M):
+        return np.zeros(0, complex)
     c, p = _g_parts(ps, M)
-    a = np.array([np.linalg.lstsq(p[i], -c[i], rcond=None)[0] for i in range(len(M))]).reshape(-1, 2)
+    pt = np.swapaxes(p, 1, 2)
+    with np.errstate(all="ignore"):
+        a = np.linalg.solve(pt @ p + 1e-300 * np.eye(2), (pt @ -c[:, :, None]))[:, :, 0]
     return ps.p[0] + a[:, 0] + 1j * a[:, 1]
 
 
-def burmester_points(ps: Poses, rays: int = 4 * RAYS) -> list[tuple[complex, complex]]:
+def burmester_points(ps: Poses, rays: int = 2 * RAYS) -> list[tuple[complex, complex]]:
     """Five poses: every real Burmester pair (centre point M, circle point A at pose 1)."""
     first4 = Poses(ps.p[:4], ps.theta[:4], ps.centre, ps.size)
     found: list[tuple[complex, complex]] = []

@@ -18,6 +18,7 @@ six-bar where no four-bar reaches every target within ``tolerance``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -39,6 +40,7 @@ INFEASIBLE = 10.0  # the score of a member that cannot turn fully (the targets' 
 ORDER_PENALTY = 1.0
 FD_STEP = 1e-7  # forward-difference step of the polish's Jacobian (the targets' size is 1)
 COINCIDENT = 1e-9
+MAX_NFEV = 150  # least-squares evaluations of one polish (each a batched solve of the member and its neighbours)
 POLISH_AT = 0.1  # a member whose sampled score is within this (of the size) is worth polishing
 
 
@@ -107,6 +109,7 @@ class _Problem:
     at: np.ndarray | None  # with timing: the sample of each target
     req: Requirements
     box: float
+    seeds: list = dataclasses.field(default_factory=list)  # (coordinates, ω, instants) to polish and breed from
 
     @property
     def n_coords(self) -> int:
@@ -163,11 +166,13 @@ def path(
     started = time.perf_counter()
     tg = targets_of(points, timing)
     _check_options(linkage, tolerance, count, population, generations, samples, restarts, region)
-    req = requirements or Requirements(full_rotation=True)
+    req = dataclasses.replace(requirements or Requirements(full_rotation=True), tolerance=tolerance)
     task = Task("path", tg.size, False, points=tg.centre + tg.size * tg.z, units=units, timing=tg.timing)
-    cands, log = [], []
+    cands, log, drafts = [], [], []
     for top in LINKAGES[linkage]:
         problem = _problem(top, tg, samples, req, region)
+        if top is STEPHENSON3 and drafts:  # the four-bars found, each as a six-bar tracing its coupler point
+            problem.seeds = _embedded(problem, drafts)
         drafts = _search(problem, tolerance, count, seed, population, generations, restarts, name, units, log)
         found = [assess(d, task, req) for d in drafts]
         cands += found
@@ -214,27 +219,34 @@ def _problem(top: Topology, tg: Targets, samples: int, req: Requirements, region
 
 
 def _search(p: _Problem, tolerance, count, seed, population, generations, restarts, name, units, log) -> list[Draft]:
-    """Differential evolution (``restarts`` times; each stops once a polished member is within the tolerance),
-    then the polish of the best distinct members of the last populations."""
+    """Differential evolutions, each stopping once a polished member is within the tolerance, one after another
+    (new seeds) until ``count`` distinct candidates are found — at least ``restarts`` of them, and no more once
+    one finds nothing; then, if still short, the polish of the best members of the last populations."""
     bounds = [(-p.box, p.box)] * p.n_coords + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
     members, energies, polished = [], [], []
-    for r in range(restarts):
+    for start in p.seeds:
+        out = _polish(p, *start)
+        if out is not None and out[3] <= tolerance and _acceptable(p, out[0], out[1]):
+            polished += [] if any(_same(out[0], q[0]) for q in polished) else [out]
+    for r in range(max(restarts, count) if len(polished) < count else 0):
         t0 = time.perf_counter()
         early = _Early(p, tolerance)
+        rng = np.random.default_rng(seed + r)
         res = differential_evolution(
             p.score, bounds, popsize=population, maxiter=generations, tol=0.0, mutation=(0.5, 1.0),
-            recombination=0.9, rng=np.random.default_rng(seed + r), vectorized=True, updating="deferred",
-            polish=False, init="latinhypercube", callback=early,
+            recombination=0.9, rng=rng, vectorized=True, updating="deferred", polish=False,
+            init=_initial(p, bounds, population, rng), callback=early,
         )  # fmt: skip
         members.append(res.population)
         energies.append(res.population_energies)
-        polished += early.found
+        polished += [f for f in early.found if not any(_same(f[0], q[0]) for q in polished)]
         log.append(f"{p.top.name} search {r + 1}: {res.nit} generations of {len(res.population)} in "
                    f"{time.perf_counter() - t0:.2f} s, best sampled {res.fun:.3g} of the size")  # fmt: skip
-        if len(polished) >= count:
+        if len(polished) >= count or (r + 1 >= restarts and not early.found):
             break
-    X, E = np.concatenate(members), np.concatenate(energies)
-    best = [k for k in np.argsort(E) if E[k] < INFEASIBLE][: 4 * count] if len(polished) < count else []
+    X = np.concatenate(members) if members else np.zeros((0, len(bounds)))
+    E = np.concatenate(energies) if energies else np.zeros(0)
+    best = [k for k in np.argsort(E) if E[k] < INFEASIBLE][: 2 * count] if len(polished) < count else []
     drafts: list[Draft] = []
     for out in polished + [_polish(p, *s) for s in (_anchored(p, X[best]) if best else [])]:
         if out is None or any(_same(out[0], d.extra["coords"]) for d in drafts):
@@ -249,6 +261,49 @@ def _search(p: _Problem, tolerance, count, seed, population, generations, restar
         if len(drafts) == 2 * count:
             break
     return drafts
+
+
+def _initial(p: _Problem, bounds: list, population: int, rng: np.random.Generator) -> np.ndarray | str:
+    """DE's first population: Latin hypercube over the bounds, with the seeds (clipped to the bounds) first."""
+    if not p.seeds:
+        return "latinhypercube"
+    n, S = len(bounds), population * len(bounds)
+    lo, hi = np.array(bounds).T
+    cut = (np.arange(S)[:, None] + rng.uniform(size=(S, n))) / S
+    X = lo + (hi - lo) * np.take_along_axis(cut, np.argsort(rng.uniform(size=(S, n)), axis=0), axis=0)
+    for i, (coords, omega, _) in enumerate(p.seeds[: S // 2]):
+        gene = coords if p.tg.timing is not None else np.append(coords, 0.5 * omega)
+        X[i] = np.clip(gene, lo, hi)
+    return X
+
+
+def _embedded(p: _Problem, drafts: list[Draft]) -> list[tuple[np.ndarray, float, np.ndarray]]:
+    """Each four-bar draft as a Stephenson III tracing the same path: its coupler point becomes the coupler's
+    pin C, a dyad C–D–O6 is hung there (O6 at the centre of C's path, both links √2/2 of C's mean distance from
+    it, so the dyad closes over the turn where it can) and the tracer sits on link CD a thousandth of the size
+    from C — the same path to that much, and room for the polish to move off it."""
+    out = []
+    for d in drafts:
+        c4, omega, t = d.extra["coords"], float(d.mechanism.drivers[0].v0), np.asarray(d.times, float)
+        ev = evaluate(FOURBAR, c4[None, :], np.array([omega]), p.times, points=("P",))
+        if not ev.completed[0]:
+            continue
+        path = ev.points["P"][0]
+        O6 = complex(np.mean(path))
+        dist = np.abs(path - O6)
+        L = max(np.mean(dist) / math.sqrt(2.0), 0.51 * np.max(dist))
+        z = dict(zip(FOURBAR.coordinates, c4[0::2] + 1j * c4[1::2], strict=True))
+        C = z["P"]
+        f = abs(O6 - C)
+        if not (0 < f < 2 * L):
+            continue
+        u = (O6 - C) / f
+        D = C + u * complex(f / 2, math.sqrt(max(L * L - f * f / 4, 0.0)))
+        z6 = {"O2": z["O2"], "A": z["A"], "B": z["B"], "O4": z["O4"], "C": C, "D": D, "O6": O6}
+        z6["P"] = C + 1e-3 * (D - C) / abs(D - C)
+        coords = np.array([[z6[k].real, z6[k].imag] for k in STEPHENSON3.coordinates]).ravel()
+        out.append((coords, omega, t))
+    return out
 
 
 class _Early:
@@ -269,10 +324,21 @@ class _Early:
         k = int(np.argmin(intermediate_result.population_energies))
         starts = _anchored(self.p, intermediate_result.population[k : k + 1])
         out = _polish(self.p, *starts[0]) if starts else None
-        if out is not None and out[3] <= self.tolerance:
+        if out is not None and out[3] <= self.tolerance and _acceptable(self.p, out[0], out[1]):
             self.found.append(out)
             return True
         return False
+
+
+def _acceptable(p: _Problem, coords: np.ndarray, omega: float) -> bool:
+    """Whether a polished member still turns fully (the batch takes its whole turn) with its transmission angle
+    at or above the limit asked (the polish minds only the distances)."""
+    ev = evaluate(p.top, coords[None, :], np.array([omega]), p.times, points=p.top.coordinates)
+    if not ev.completed[0]:
+        return False
+    if p.req.min_transmission <= 0:
+        return True
+    return bool(population_transmission(p.top, ev.points, p.times)[0] >= p.req.min_transmission)
 
 
 def _anchored(p: _Problem, X: np.ndarray) -> list[tuple[np.ndarray, float, np.ndarray]]:
@@ -341,7 +407,7 @@ def _polish(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray):
     if not np.all(np.isfinite(residual(x0))) or residual(x0)[0] == INFEASIBLE:
         return None
     sol = least_squares(
-        residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=60
+        residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=MAX_NFEV
     )
     c, tt = unpack(sol.x)
     P, _, ok = _positions(p, c[None, :], omega, tt)
@@ -356,6 +422,4 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 def _renamed(mech, name: str):
-    import dataclasses
-
     return dataclasses.replace(mech, name=name)
