@@ -99,7 +99,7 @@ def main() -> None:
     if args.child:
         child(Path(args.child[0]), int(args.child[1]), Path(args.child[2]))
         return
-    from vloop import corpus
+    from validators import corpus
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "corpus"

@@ -5,7 +5,7 @@
 
 For each mechanism, rounds in which ``solve(system)`` (auto) and ``solve(system, method="newton")`` take
 turns (bench_speed.rounds_of_each: each called once untimed first). Inside the Newton run two stages are timed
-by wrapping the functions of ``vloop.newton`` that do them:
+by wrapping the functions of ``vloop.core.newton`` that do them:
 
 * the coarse continuation (``_coarse_pass``): rows ~15° of input travel apart solved one window after the
   other from Taylor predictors, each checked for the branch (this is what keeps the path on its assembly
@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 from bench_speed import rounds_of_each, worst_relative  # noqa: E402  (this script's folder is on sys.path)
 
 import vloop  # noqa: E402
-from vloop import newton as _newton  # noqa: E402
+from vloop.core import newton as _newton  # noqa: E402
 
 STAGES = {"coarse": "_coarse_pass", "exact_cond": "_condition_near"}
 

@@ -19,7 +19,7 @@ pair. Each is solved over its file's time span with ``steps`` samples:
 Times are the best of ``--repeat`` rounds in which every contender runs once in turn (a burst of load on a
 shared machine then falls on all of them alike). BLAS and numba run one thread (threadpoolctl,
 NUMBA_NUM_THREADS=1): the products are small, and a second thread only competes for the other core with
-whatever runs next. vloop asks glibc to keep freed heap for reuse (vloop.budget.keep_heap, at its first
+whatever runs next. vloop asks glibc to keep freed heap for reuse (vloop.files.budget.keep_heap, at its first
 solve; the whole process, so every contender here runs with it); ``VLOOP_KEEP_HEAP=0 python
 benchmarks/bench_speed.py`` measures without it. Every run is checked: auto against the
 closed form (1e-9 of peak) and newton against auto.
@@ -49,7 +49,7 @@ sys.path.insert(0, str(ROOT))
 
 import vloop  # noqa: E402
 from validators import analytic  # noqa: E402
-from vloop.budget import keep_heap  # noqa: E402
+from vloop.files.budget import keep_heap  # noqa: E402
 
 MECHANISMS = (
     "eightbar",

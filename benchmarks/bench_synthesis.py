@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 import vloop  # noqa: E402
 import vloop.synthesis as syn  # noqa: E402
-from vloop import batch  # noqa: E402
+from vloop.core import batch  # noqa: E402
 from vloop.synthesis._evaluate import _model, evaluate  # noqa: E402
 from vloop.synthesis.linkages import FOURBAR  # noqa: E402
 

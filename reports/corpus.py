@@ -182,7 +182,7 @@ def render_corpus(summary: dict[str, Any]) -> str:
 
 
 def write_corpus_page(summary: dict[str, Any], out_dir: str | Path) -> Path:
-    """Write ``out_dir/corpus.html`` through vloop.output and return its path."""
-    from vloop.output import write_text
+    """Write ``out_dir/corpus.html`` through vloop.files.output and return its path."""
+    from vloop.files.output import write_text
 
     return write_text(Path(out_dir) / "corpus.html", render_corpus(summary))

@@ -142,7 +142,7 @@ def _geometry(mech: Mechanism, system: Any) -> _Geometry:
     if system is None:
         return _Geometry(pos, theta, {}, note="loops not available: the mechanism did not compile")
     import vloop
-    from vloop.geometry import loop_chains
+    from vloop.views.geometry import loop_chains
 
     try:
         at0 = vloop.solve(system, times=np.zeros(1))  # the t = 0 assembly, through the public API
@@ -777,7 +777,7 @@ def _mechanism_section(
     ref = next((r.result for r in runs if r.result is not None and len(r.result)), None)
     equations, equations_error = "", compile_error
     if system is not None:
-        from vloop.equations import describe
+        from vloop.method.equations import describe
 
         try:
             equations = describe(system)
@@ -823,7 +823,7 @@ def _viewer_source(item: MechanismValidation) -> tuple[Result, str | None] | Non
 
 def write_viewer_pages(validation: Validation, out_dir: Path) -> list[Path]:
     """One interactive viewer page per mechanism vloop solved, ``out_dir/viewer/<anchor>.html``."""
-    from vloop.view import write_view
+    from vloop.views.view import write_view
 
     pages = []
     for index, item in enumerate(validation.items):

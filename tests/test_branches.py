@@ -10,7 +10,7 @@ import pytest
 import vloop
 from tests.conftest import MECHANISMS
 from vloop.compare import assert_histories_close
-from vloop.loops import branch_name
+from vloop.method.loops import branch_name
 
 
 def with_solver(path, table: str) -> vloop.Mechanism:

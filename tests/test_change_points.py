@@ -247,8 +247,7 @@ def test_corpus_change_points_found_by_the_nightly(index, why):
     """Seed 2026 of the generated corpus (vloop corpus): both once missed a change point and jumped
     branches silently; the velocity-continuous closed form (validators/analytic_changepoint.py) is the
     reference, and Pinocchio (which passes a change point on its predicted path) agrees too."""
-    from validators import analytic, pinocchio
-    from vloop import corpus
+    from validators import analytic, corpus, pinocchio
 
     mech = corpus.draw_item(2026, index).item.mechanism
     res = vloop.solve(mech)

@@ -17,10 +17,12 @@ import pytest
 import vloop
 from tests.conftest import ROOT, mechanism_files
 from tests.test_bad_input import FOURBAR
-from vloop import assembly, corpus, graph, kernels, structure
+from validators import corpus
+from vloop.core import kernels
 from vloop.drivers import evaluate_all
 from vloop.errors import MechanismError
-from vloop.loops import LoopGroup, TermIndex, loop_jacobian, loop_residual, term_values
+from vloop.method import assembly, graph, structure
+from vloop.method.loops import LoopGroup, TermIndex, loop_jacobian, loop_residual, term_values
 
 N_GENERATED = 120
 

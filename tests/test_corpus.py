@@ -1,4 +1,4 @@
-"""The generated corpus (vloop.corpus): deterministic, valid files of known structure, checked against closed forms.
+"""The generated corpus (validators.corpus): deterministic, valid files of known structure, checked against closed forms.
 
 * Generation is a pure function of (seed, index); every file loads, has safe names and a sidecar.
 * Every family is drawn, and the four-bars cover every Grashof class and the change points (classified
@@ -22,8 +22,7 @@ import pytest
 
 import vloop
 from tests.conftest import mechanism_files
-from validators import analytic, analytic_chain, analytic_changepoint, analytic_fourbar, harness
-from vloop import corpus
+from validators import analytic, analytic_chain, analytic_changepoint, analytic_fourbar, corpus, harness
 from vloop.cli import main
 from vloop.compare import assert_histories_close
 

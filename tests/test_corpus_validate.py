@@ -20,8 +20,7 @@ import numpy as np
 import pytest
 
 import vloop
-from validators import harness, shrink
-from vloop import corpus
+from validators import corpus, harness, shrink
 from vloop.cli import main
 
 SCHEMA = json.loads((Path(harness.__file__).parent / "summary.schema.json").read_text())

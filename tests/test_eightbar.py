@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import vloop
-from vloop.equations import describe
-from vloop.loops import loop_jacobian
+from vloop.method.equations import describe
+from vloop.method.loops import loop_jacobian
 
 
 @pytest.fixture(scope="module")

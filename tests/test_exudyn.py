@@ -296,13 +296,13 @@ def _exudyn(key: str, mode: str) -> tuple[Result, MotionError | None]:
 
 
 def _vloop_available() -> bool:
-    return importlib.util.find_spec("vloop.solver") is not None
+    return importlib.util.find_spec("vloop.core.solver") is not None
 
 
 @functools.cache
 def _vloop(key: str) -> tuple[Result, MotionError | None]:
     if not _vloop_available():
-        pytest.skip("vloop.solver is not written yet: vloop.solve is unavailable")
+        pytest.skip("vloop.core.solver is not written yet: vloop.solve is unavailable")
     try:
         return vloop.solve(_mech(key)), None
     except MotionError as exc:

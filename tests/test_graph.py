@@ -8,7 +8,7 @@ import pytest
 
 import vloop
 from tests.conftest import MECHANISMS
-from vloop import graph
+from vloop.method import graph
 
 
 def edges(cycle: list) -> frozenset:

@@ -313,7 +313,7 @@ def test_a_chain_of_200_dyads_compiles_and_solves():
 
 
 def test_published_files_follow_the_umask(tmp_path):
-    from vloop.output import write_text
+    from vloop.files.output import write_text
 
     old = os.umask(0o022)
     try:

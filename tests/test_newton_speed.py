@@ -12,8 +12,8 @@ import vloop
 from tests.conftest import MECHANISMS
 from tests.test_change_points import parallelogram
 from validators import analytic
-from vloop import kernels, newton
 from vloop.compare import assert_histories_close
+from vloop.core import kernels, newton
 
 RNG = np.random.default_rng(15)
 EPS = np.finfo(float).eps

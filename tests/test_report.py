@@ -27,7 +27,7 @@ from PIL import Image
 import vloop
 from reports.html import write_report
 from validators import harness
-from vloop.equations import describe
+from vloop.method.equations import describe
 
 from .conftest import MECHANISMS
 

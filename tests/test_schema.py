@@ -1,4 +1,4 @@
-"""One schema: the README's key tables are generated from vloop/schema.py, every documented key is
+"""One schema: the README's key tables are generated from vloop/files/schema.py, every documented key is
 accepted by the readers, and a key the schema does not name is refused, in every section."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 import vloop
-from vloop import schema
-from vloop.fileformat import to_dict
+from vloop.files import schema
+from vloop.files.fileformat import to_dict
 
 README = Path(__file__).parents[1] / "README.md"
 BASE = {
@@ -45,7 +45,7 @@ def test_readme_tables_are_the_schema():
     text = README.read_text(encoding="utf-8")
     block = re.search(r"<!-- schema:begin -->\n(.*?)<!-- schema:end -->", text, re.S)
     assert block is not None, "README lost its generated key tables"
-    assert block.group(1) == schema.markdown(), "README's key tables differ from vloop/schema.py: regenerate them"
+    assert block.group(1) == schema.markdown(), "README's key tables differ from vloop/files/schema.py: regenerate them"
 
 
 def _where(section: str) -> tuple[dict, list]:

@@ -22,11 +22,11 @@ from tests.conftest import MECHANISMS, mechanism_files
 from tests.test_bad_input import ISOSCELES
 from tests.test_change_points import parallelogram
 from validators import analytic, analytic_fourbar
-from vloop import kernels, solver
-from vloop.budget import MemoryBudgetError, parse_size
 from vloop.cli import main
 from vloop.compare import assert_histories_close
-from vloop.loops import LoopSystem, loop_jacobian
+from vloop.core import kernels, solver
+from vloop.files.budget import MemoryBudgetError, parse_size
+from vloop.method.loops import LoopSystem, loop_jacobian
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -22,8 +22,8 @@ import pandas as pd
 import pytest
 
 import vloop
-from vloop import studyfile
 from vloop.errors import MechanismError, MotionError
+from vloop.studies import studyfile
 
 ROOT = Path(__file__).resolve().parents[1]
 TEXTBOOK = ROOT / "mechanisms" / "fourbar_textbook_example.toml"
@@ -270,7 +270,7 @@ def test_variants_that_cannot_assemble_or_stop_are_reported_and_the_others_go_on
 )
 def test_newton_and_slider_variants_equal_their_own_files(file, params):
     mech = vloop.load(ROOT / "mechanisms" / file)
-    from vloop.variants import resolve
+    from vloop.core.variants import resolve
 
     tol = []
     for name in params:
@@ -316,7 +316,7 @@ def test_catalog_variants_equal_their_own_files(path, method):
     solved by vloop.solve, on the closed-form path and (three files) the Newton path."""
     import dataclasses
 
-    from vloop.variants import resolve
+    from vloop.core.variants import resolve
 
     mech = vloop.load(path)
     if method == "newton":
@@ -431,7 +431,7 @@ def test_readme_table_is_the_study_schema():
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     block = re.search(r"<!-- study-schema:begin -->\n(.*?)<!-- study-schema:end -->", text, re.S)
     assert block is not None, "README lost its generated study-file tables"
-    assert block.group(1) == studyfile.markdown(), "README's study tables differ from vloop/studyfile.py: regenerate"
+    assert block.group(1) == studyfile.markdown(), "README's study tables differ from vloop/studies/studyfile.py: regenerate"
 
 
 HOSTILE = [0, -0.0, 1e308, 5e-324, float("nan"), float("inf"), 10**400, "1.0", [[1.0]], True]
@@ -487,7 +487,7 @@ def _never_valid(where: str, v) -> bool:
 def test_hostile_values_are_refused_with_one_line_naming_the_entry(textbook, where, build, value):
     """A value a field can never take is refused in one line naming the entry; a value it can take (a huge or
     tiny length, a wide tolerance) runs, and every number the study reports is finite or null."""
-    from vloop.studies import run
+    from vloop.studies.study import run
 
     try:
         spec = _study(textbook, **build(value))
@@ -548,7 +548,7 @@ def test_hostile_values_are_refused_with_one_line_naming_the_entry(textbook, whe
     ],
 )
 def test_bad_study_entries_say_what_and_where(textbook, data, words):
-    from vloop.studies import run
+    from vloop.studies.study import run
 
     with pytest.raises(MechanismError) as exc:
         run(_study(textbook, **data))
@@ -572,6 +572,6 @@ def test_bad_study_file_exits_2_with_one_line(tmp_path):
 
 def test_study_is_in_the_public_api(textbook):
     assert vloop.study is vloop.study  # lazy attribute
-    from vloop.studies import study
+    from vloop.studies.study import study
 
     assert vloop.study is study

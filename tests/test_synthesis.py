@@ -587,7 +587,7 @@ def test_batch_reports_doubtful_variants_as_failures():
     """batch.solve(doubtful="fail"): a variant the batch is not sure of is reported as not completed (reason
     DOUBTFUL, columns NaN) instead of solved one by one; every other variant's numbers are the same bits as
     with the default (the single-run fallback)."""
-    from vloop import batch
+    from vloop.core import batch
     from vloop.synthesis._evaluate import _model
 
     coords, omega = _random_population(150, 5)
@@ -622,7 +622,7 @@ def test_viewer_page_draws_the_targets(written):
     got = np.array([[t["x"], t["y"], t["angle"]] for t in data["targets"]])
     assert np.max(np.abs(got - np.array(MOTION_POSES))) <= 1e-15
     with pytest.raises(vloop.VloopError, match="target 1"):
-        from vloop.view import build_payload
+        from vloop.views.view import build_payload
 
         mech = vloop.load(folder / "guide_1.toml")
         build_payload(mech, vloop.solve(mech), targets=[(float("nan"), 0.0)])

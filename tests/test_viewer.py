@@ -28,9 +28,9 @@ import pytest
 
 import vloop
 from vloop.cli import main
-from vloop.equations import describe
-from vloop.geometry import body_poses, loop_chains
-from vloop.view import ViewError, build_payload, render, solve_for_view, unpack, write_view
+from vloop.method.equations import describe
+from vloop.views.geometry import body_poses, loop_chains
+from vloop.views.view import ViewError, build_payload, render, solve_for_view, unpack, write_view
 
 from .conftest import MECHANISMS, mechanism_files
 
@@ -282,7 +282,7 @@ def test_view_command_opens_the_browser_only_when_asked(tmp_path: Path, monkeypa
 
 
 def test_too_many_samples_refused_before_solving(tmp_path: Path, capsys) -> None:
-    from vloop.view import MAX_SAMPLES
+    from vloop.views.view import MAX_SAMPLES
 
     text = EIGHTBAR.read_text(encoding="utf-8").replace("step = 0.05", f"step = {2.35 / (MAX_SAMPLES + 5)!r}")
     big = tmp_path / "big.toml"

@@ -110,7 +110,7 @@ class MechanismValidation:
     runs: dict[str, EngineRun] = field(default_factory=dict)
     checks: list[CheckedComparison] = field(default_factory=list)
     error: str = ""  # the file itself is bad
-    corpus: dict[str, Any] | None = None  # the generated file's sidecar (vloop.corpus): family, seed, expectations
+    corpus: dict[str, Any] | None = None  # the generated file's sidecar (validators.corpus): family, seed, expectations
     expectation: dict[str, Any] | None = None  # what the sidecar expected of every engine, and what happened
 
     @property
@@ -298,7 +298,7 @@ def engine_task(task: tuple[str, Mechanism]) -> EngineRun:
 
 def load_items(paths: Iterable[str | Path]) -> list[MechanismValidation]:
     """Load every file (a bad one becomes an item with its error) and its corpus sidecar, if any."""
-    from vloop.corpus import read_sidecar
+    from validators.corpus import read_sidecar
 
     items = []
     for p in paths:
@@ -562,10 +562,10 @@ def comparison_table(summary: dict[str, Any]) -> Any:
 
 
 def write_parquet(summary: dict[str, Any], path: str | Path) -> Path:
-    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``) through vloop.output."""
+    """Write the comparison table as Parquet (pyarrow; ``pip install 'vloop[parquet]'``) through vloop.files.output."""
     import io
 
-    from vloop.output import write_bytes
+    from vloop.files.output import write_bytes
 
     try:
         import pyarrow  # noqa: F401

@@ -175,8 +175,8 @@ def minimize_failures(
     ``items`` are the harness's MechanismValidation objects. A failure that needs Exudyn's dynamic mode
     to show is not minimized (too slow to repeat); at most ``max_items`` failures are shrunk.
     """
-    from vloop.corpus import Spec
-    from vloop.output import write_text
+    from validators.corpus import Spec
+    from vloop.files.output import write_text
 
     from . import shrink
 

@@ -1,6 +1,6 @@
 """Shrink a failing generated mechanism to a simpler file that still fails, as hypothesis shrinks.
 
-A generated mechanism is a pure function of its Spec (:func:`vloop.corpus.build`): a flat dict of
+A generated mechanism is a pure function of its Spec (:func:`validators.corpus.build`): a flat dict of
 numbers (lengths, pivot positions, axis angles, ω, α, sample counts). Shrinking edits those numbers
 toward simpler ones and keeps an edit when the rebuilt file *still fails the same way* (the same
 engine-vs-reference comparison, engine error or expectation fails), the way hypothesis shrinks the
@@ -13,7 +13,7 @@ choices behind a failing example:
 Passes repeat until a whole pass changes nothing or the budget is spent (``max_tries`` rebuilt files
 that were validated, ``seconds`` of wall time). Structural choices (family, variant, branch signs,
 which link a dyad hangs on) are never changed, and a rebuild that does not satisfy its variant
-(:class:`vloop.corpus.Infeasible`) is skipped without counting as a try. "Simpler" is measured by
+(:class:`validators.corpus.Infeasible`) is skipped without counting as a try. "Simpler" is measured by
 :func:`complexity`: significant digits over all numbers, then samples.
 """
 
@@ -25,7 +25,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from typing import Any
 
-from vloop import corpus
+from validators import corpus
 
 from . import harness
 

@@ -59,7 +59,7 @@ def __getattr__(name: str) -> Any:
     if name == "study":  # design studies, imported on first use (by name: modules that import the package
         import importlib  # for vloop.solve must not look as if they depended on the studies built on them)
 
-        return importlib.import_module(".studies", __name__).study
+        return importlib.import_module(".studies.study", __name__).study
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")
 
 
@@ -79,11 +79,11 @@ def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options
     ``mechanism`` may be a Mechanism (compiled on the first solve, then kept with it) or a LoopSystem.
     Options: ``method="auto"|"newton"`` (a LoopSystem compiled otherwise keeps its variant), ``tol``,
     ``max_iter``, ``rtol``, ``memory_budget`` (bytes or "2G": a run whose results would not fit is refused,
-    see vloop.budget). Raises MotionError (with ``.partial``) if the motion cannot be completed.
+    see vloop.files.budget). Raises MotionError (with ``.partial``) if the motion cannot be completed.
     """
     from .compiler import compile_system
-    from .loops import LoopSystem
-    from .solver import solve as solve_system
+    from .core.solver import solve as solve_system
+    from .method.loops import LoopSystem
 
     method = options.pop("method", None)
     unknown = set(options) - {"tol", "max_iter", "rtol", "memory_budget"}

@@ -32,14 +32,14 @@ def _fail(msg: str) -> int:
 
 def _load(args: argparse.Namespace) -> Any:
     """The mechanism file named on the command line (profiles outside its folder only if allowed)."""
-    from .fileformat import load
+    from .files.fileformat import load
 
     return load(args.file, allow_external_profiles=getattr(args, "allow_external_profiles", False))
 
 
 def _out_folder(args: argparse.Namespace, mech: Any) -> Path:
     """--out, else out/<safe name> (a name can never lead outside out/)."""
-    from .output import default_folder
+    from .files.output import default_folder
 
     return Path(args.out) if args.out else default_folder(mech.name)
 
@@ -76,13 +76,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_streamed(args: argparse.Namespace, mech: Any, system: Any, out: Path, outputs: Any) -> tuple:
-    """Stream the run's chunks into results.FMT / health.FMT (vloop.writers) inside one OutputSet, then the
+    """Stream the run's chunks into results.FMT / health.FMT (vloop.files.writers) inside one OutputSet, then the
     extras from the whole run when asked. Returns (summary, published files, the MotionError that stopped it)."""
-    from . import budget, writers
+    from .core.solver import CHUNK_ROWS, join, solve_iter
+    from .files import budget, writers
+    from .files.output import OutputSet
+    from .files.progress import Progress
     from .forces import has_forces
-    from .output import OutputSet
-    from .progress import Progress
-    from .solver import CHUNK_ROWS, join, solve_iter
 
     keep = bool(args.plot or args.html or args.extras or outputs is not None or has_forces(mech))
     n = len(mech.times)
@@ -136,7 +136,7 @@ def _rocking(mech: Any) -> Any:
 def _write_extras(stage: Path, args: argparse.Namespace, mech: Any, result: Result, outputs: Any, error: Any) -> None:
     """The files of one run besides results and health, into the staging folder (published together)."""
     if args.plot and len(result):
-        from .plots import plot_result
+        from .views.plots import plot_result
 
         plot_result(mech, result, stage)
     if len(result):
@@ -159,7 +159,7 @@ def _forces(mech: Any, result: Result, stage: Path, plot: bool) -> Any:
         return None
     forces.to_csv(stage / "forces.csv")
     if plot:
-        from .forces_plot import plot_forces
+        from .views.forces_plot import plot_forces
 
         plot_forces(mech, forces, stage)
     if forces.message:
@@ -212,8 +212,8 @@ def _teaching_files(args: argparse.Namespace, mech, result, out: Path, outputs: 
 
 def _view_page(mech: Any, result: Any, folder: Path, error: str | None = None, forces: Any = None) -> Path:
     """The viewer page of a run, ``folder/<safe name>.html`` (``vloop view``, ``vloop run --html``)."""
-    from .output import safe_folder_name
-    from .view import write_view
+    from .files.output import safe_folder_name
+    from .views.view import write_view
 
     return write_view(mech, result, folder / f"{safe_folder_name(mech.name)}.html", error=error, forces=forces)
 
@@ -223,8 +223,8 @@ def _view_page(mech: Any, result: Any, folder: Path, error: str | None = None, f
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Solve the file's motion and write one offline HTML page that animates it (exit 2 if it stopped)."""
-    from .output import OutputSet
-    from .view import solve_for_view
+    from .files.output import OutputSet
+    from .views.view import solve_for_view
 
     mech = _load(args)
     result, error = solve_for_view(mech)
@@ -253,7 +253,7 @@ def _solve_forces(mech: Any, result: Result) -> Any:
 def cmd_loops(args: argparse.Namespace) -> int:
     """Print the loop equations as the paper writes them (or LaTeX)."""
     from .compiler import compile_system
-    from .equations import describe
+    from .method.equations import describe
 
     print(describe(compile_system(_load(args)), latex=args.latex))
     return 0
@@ -308,8 +308,8 @@ def _info_parts(mech: Any) -> list[str]:
 
 
 def _info_mobility(system: Any) -> list[str]:
-    from .assembly import redundancy_text
-    from .loops import loop_jacobian
+    from .method.assembly import redundancy_text
+    from .method.loops import loop_jacobian
 
     mech = system.mechanism
     L, J, M = mech.gruebler()
@@ -327,8 +327,8 @@ def _info_mobility(system: Any) -> list[str]:
 
 
 def _info_loops(system: Any) -> list[str]:
-    from .equations import grashof
-    from .loops import branch_name
+    from .method.equations import grashof
+    from .method.loops import branch_name
 
     mech = system.mechanism
     L, J, _ = mech.gruebler()
@@ -349,7 +349,7 @@ def _info_loops(system: Any) -> list[str]:
 
 def _info_motion(system: Any) -> list[str]:
     """The time grid; change points and kept ill-conditioned samples (they show only along the motion)."""
-    from .solver import solve
+    from .core.solver import solve
 
     mech = system.mechanism
     n = len(mech.times)
@@ -384,7 +384,7 @@ def _validate_files(args: argparse.Namespace) -> list[Path]:
 
 def _corpus_options(args: argparse.Namespace) -> str:
     """The generator options that differ from the defaults (a reproduce command must repeat them)."""
-    from .corpus import FAMILIES
+    from validators.corpus import FAMILIES
 
     opts = ""
     if args.families and [f.strip() for f in args.families.split(",")] != list(FAMILIES):
@@ -395,8 +395,8 @@ def _corpus_options(args: argparse.Namespace) -> str:
 
 
 def _families(args: argparse.Namespace) -> list[str] | None:
-    """--families: family or family/variant names (checked by vloop.corpus)."""
-    from .corpus import _catalogue
+    """--families: family or family/variant names (checked by validators.corpus)."""
+    from validators.corpus import _catalogue
 
     if args.families is None:
         return None
@@ -421,8 +421,9 @@ def _check_corpus_args(args: argparse.Namespace, n: int) -> None:
 
 def cmd_corpus(args: argparse.Namespace) -> int:
     """vloop corpus --n N --seed S --out DIR: generate N mechanism files (and sidecars) of known structure."""
-    from . import corpus
-    from .output import default_folder
+    from validators import corpus
+
+    from .files.output import default_folder
 
     _check_corpus_args(args, args.n)
     seed = args.seed if args.seed is not None else 0
@@ -446,7 +447,7 @@ def _generate_for_validate(args: argparse.Namespace, out: Path) -> tuple[list[Pa
     """--corpus N: a fresh corpus inside the output folder; its seed (drawn if not given) goes to the summary."""
     import secrets
 
-    from . import corpus
+    from validators import corpus
 
     _check_corpus_args(args, args.corpus)
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
@@ -473,7 +474,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
     from validators import harness, nightly
 
-    from .output import ensure_folder, write_text
+    from .files.output import ensure_folder, write_text
 
     engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
     unknown = [e for e in engines if e not in harness.ENGINES]
@@ -632,9 +633,9 @@ def _table(summary: dict) -> str:
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Run a design study file: every variant solved (in this process, or on Dask), tables to Parquet in --out."""
-    from .output import default_folder
-    from .studies import run
-    from .studyfile import load
+    from .files.output import default_folder
+    from .studies.study import run
+    from .studies.studyfile import load
 
     spec = load(args.file)
     out = Path(args.out) if args.out else default_folder(Path(args.file).stem)
@@ -681,7 +682,7 @@ def _study_lines(res: Any) -> list[str]:
 def cmd_synth(args: argparse.Namespace) -> int:
     """Synthesize what a synthesis file asks; write the ranked candidates, the best solutions' mechanism files
     and (with --plot, --html) their pictures and viewer pages into --out."""
-    from .output import default_folder
+    from .files.output import default_folder
     from .synthesis import load, run, write
 
     spec = load(args.file)
@@ -874,11 +875,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except MemoryError:
-        from .budget import out_of_memory
+        from .files.budget import out_of_memory
 
         return _fail(out_of_memory())
     except OSError as exc:  # an output or input the operating system refused, outside vloop's own checks
-        from .output import describe_os_error
+        from .files.output import describe_os_error
 
         where = exc.filename if exc.filename is not None else "a file"
         return _fail(f"{where}: {describe_os_error(exc)}")

@@ -2,8 +2,8 @@
 
     graph → loops → unknowns → assembly at t = 0 → block structure → branches asked for in the file
 
-Each step is a function of its own module (:mod:`vloop.graph`, :mod:`vloop.assembly`,
-:mod:`vloop.structure`); this module only strings them together. The last step re-assembles
+Each step is a function of its own module (:mod:`vloop.method.graph`, :mod:`vloop.method.assembly`,
+:mod:`vloop.method.structure`); this module only strings them together. The last step re-assembles
 t = 0 with the solver's closed forms when the file asks for another assembly branch.
 """
 
@@ -13,13 +13,13 @@ import dataclasses
 
 import numpy as np
 
-from .assembly import assemble, moved
+from .core.solver import assemble_blocks
 from .errors import MechanismError
-from .graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
-from .loops import Block, LoopSystem, branch_name
+from .method.assembly import assemble, moved
+from .method.graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
+from .method.loops import Block, LoopSystem, branch_name
+from .method.structure import analyse, block_structure
 from .model import Body, Mechanism
-from .solver import assemble_blocks
-from .structure import analyse, block_structure
 
 
 def compile_system(mech: Mechanism, method: str | None = None) -> LoopSystem:

@@ -501,7 +501,7 @@ class ForceResult:
 
     def to_csv(self, path: str | Path) -> Path:
         """Write ``t`` and every column (``%.17g``) atomically; only finite numbers (else ForceError)."""
-        from .output import atomic_write
+        from .files.output import atomic_write
 
         self.check_finite()
         names = ["t", *self.columns]

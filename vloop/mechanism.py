@@ -1,5 +1,5 @@
 """The mechanism description, as one import: the data (:mod:`vloop.model`) and its file format
-(:mod:`vloop.fileformat`, with the schema in :mod:`vloop.schema`).
+(:mod:`vloop.files.fileformat`, with the schema in :mod:`vloop.files.schema`).
 
 Conventions (README "The mechanism file"): lengths in the file's units, angles in radians, CCW
 positive from +x; joint coordinates describe t = 0; a link's θ runs from its first to its second
@@ -8,7 +8,7 @@ joint; a slider's s is measured along its axis from its guide's origin.
 
 from __future__ import annotations
 
-from .fileformat import (
+from .files.fileformat import (
     BRANCH_CHOICES,
     CHANGE_POINT_CHOICES,
     COINCIDENT_TOL,

@@ -1,4 +1,4 @@
-"""What a mechanism is: plain, immutable data (read from a file by :mod:`vloop.fileformat`).
+"""What a mechanism is: plain, immutable data (read from a file by :mod:`vloop.files.fileformat`).
 
 Conventions (see README "Mechanism file"):
 

@@ -16,10 +16,10 @@ import math
 import numpy as np
 
 from .compiler import compile_system
+from .core.solver import solve
 from .errors import MechanismError, MotionError
 from .model import Driver, Mechanism, Profile
 from .result import Result
-from .solver import solve
 
 SEARCH_STEPS = 720  # samples per turn (crank) or per 2 mechanism sizes (slider) while looking for limits
 

@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import batch
+from ..core import batch
 from ..compiler import compile_system
-from ..variants import VariantModel, resolve
+from ..core.variants import VariantModel, resolve
 from .linkages import Topology, reflect, side
 
 _MODELS: dict[tuple[str, tuple[float, ...]], VariantModel] = {}

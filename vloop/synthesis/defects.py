@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import compile, solve
 from ..errors import MotionError
-from ..loops import LoopSystem
+from ..method.loops import LoopSystem
 from ..model import Mechanism
 from ..result import Result
 from .candidates import Candidate, Task
@@ -189,7 +189,7 @@ def min_transmission(mech: Mechanism, res: Result, system: LoopSystem | None = N
 
 def grashof_class(system: LoopSystem) -> str:
     """The Grashof class of the linkage's first four-bar loop ("" when it has none), as vloop names it."""
-    from ..equations import grashof
+    from ..method.equations import grashof
 
     found = grashof(system)
     return found[0][1] if found else ""

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..fileformat import from_dict, to_dict
+from ..files.fileformat import from_dict, to_dict
 from ..model import Mechanism
 
 

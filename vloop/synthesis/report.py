@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ..fileformat import dumps
-from ..output import OutputSet
+from ..files.fileformat import dumps
+from ..files.output import OutputSet
 from .candidates import Candidate, Candidates
 
 
@@ -78,7 +78,7 @@ def _page(result: Candidates, c: Candidate, path: Path) -> None:
     """The viewer page of a written candidate with its targets: points, poses (with their angle), or a
     function generator's output pin at each precision instant."""
     from .. import solve
-    from ..view import write_view
+    from ..views.view import write_view
 
     res = solve(c.mechanism)
     task = result.task

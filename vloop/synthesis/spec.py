@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import MechanismError, SynthesisError
-from ..schema import Key, Problems, Section, name_problem, real, show
-from ..schema import markdown as schema_markdown
+from ..files.schema import Key, Problems, Section, name_problem, real, show
+from ..files.schema import markdown as schema_markdown
 from .defects import Requirements
 
 MAX_SPEC_BYTES = 4 * 2**20
@@ -194,7 +194,7 @@ class SynthSpec:
 
 def load(path: str | Path) -> SynthSpec:
     """Read and check a synthesis file. Raises a VloopError naming the file and the entry."""
-    from ..fileformat import _read_text_file
+    from ..files.fileformat import _read_text_file
 
     path = Path(path)
     text = _read_text_file(path, MAX_SPEC_BYTES, what="synthesis file", entry=str(path))

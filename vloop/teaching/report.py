@@ -71,8 +71,8 @@ def _check_finite(mech: Mechanism, result: Result, cols: dict[str, np.ndarray]) 
 def write_extras(
     mech: Mechanism, result: Result, folder: str | Path, outputs: list[str] | None = None, system: Any = None
 ) -> Path:
-    """Write ``folder/extras.csv`` atomically (through vloop.output); every value must be finite."""
-    from ..output import atomic_write
+    """Write ``folder/extras.csv`` atomically (through vloop.files.output); every value must be finite."""
+    from ..files.output import atomic_write
 
     cols = extras(mech, result, outputs, system)
     _check_finite(mech, result, cols)
@@ -120,7 +120,7 @@ def run_files(
 
 def plot_transmission_angles(mech: Mechanism, result: Result, path: str | Path) -> Path | None:
     """Figure of every dyad's folded transmission angle [deg] over time; None when there is no dyad."""
-    from ..output import atomic_write
+    from ..files.output import atomic_write
 
     angles = transmission_angles(mech, result)
     if not angles or not len(result.t):

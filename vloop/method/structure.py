@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import MechanismError
+from ..errors import MechanismError
 from .loops import Block, LoopSystem, term_values
 
 

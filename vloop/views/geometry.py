@@ -1,6 +1,6 @@
 """Drawing geometry from a solved run: body poses and the vector loops head to tail.
 
-Everything here is a pure function of a compiled :class:`~vloop.loops.LoopSystem` (its public
+Everything here is a pure function of a compiled :class:`~vloop.method.loops.LoopSystem` (its public
 attributes only) and a :class:`~vloop.result.Result`, vectorized over samples:
 
 * :func:`body_poses` — the pose (x, y, θ) of every body's frame per sample, the frame of
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .model import Mechanism
-from .result import Result
+from ..model import Mechanism
+from ..result import Result
 
 _EQUATION = re.compile(r"^loop (\d+) \((.*)\):  (.*) = 0$")
 
@@ -180,7 +180,7 @@ def _value(v: LoopVector, q: np.ndarray, system: Any) -> complex:
 
 def loop_equations(system: Any) -> dict[int, tuple[int, str, tuple[str, ...]]]:
     """Per loop number: (number, the equation as ``vloop loops`` prints it, each vector's letter)."""
-    from .equations import describe
+    from ..method.equations import describe
 
     out = {}
     for line in describe(system).splitlines():
@@ -194,7 +194,7 @@ def loop_equations(system: Any) -> dict[int, tuple[int, str, tuple[str, ...]]]:
 
 def equation_legend(system: Any) -> list[str]:
     """The lines after ``where`` in ``vloop loops``: what each letter stands for."""
-    from .equations import describe
+    from ..method.equations import describe
 
     text = describe(system).splitlines()
     if "where" not in text:

@@ -1,14 +1,14 @@
 """Many variants of one mechanism solved together: a leading batch axis over variants.
 
 Every variant shares the nominal LoopSystem's structure; its own numbers are per-variant term constants
-(r, e^{jδ}), driver numbers and frame offsets (:class:`vloop.variants.Designs`). The state holds arrays of
+(r, e^{jδ}), driver numbers and frame offsets (:class:`vloop.core.variants.Designs`). The state holds arrays of
 shape (variants, internal samples, columns) — the single-run solver's state with a leading axis — and every
 operation is elementwise over variants (no BLAS product mixes rows, so a variant's numbers do not depend on
 which other variants it is solved with: chunking never changes a number).
 
 Blocks are solved in the structure's order, over every sample at once:
 
-* **closed-form dyads** (RRR, RRP, RPR, PP) exactly as :mod:`vloop.solver` writes them, elementwise, on
+* **closed-form dyads** (RRR, RRP, RPR, PP) exactly as :mod:`vloop.core.solver` writes them, elementwise, on
   the nominal branch σ;
 * **Newton blocks** by continuation along the samples, batched over variants: Taylor predictor from the
   sample before, Newton–Raphson with the analytic Jacobian (``numpy.linalg.solve`` on stacks of small
@@ -21,7 +21,7 @@ discriminant that the single run's first zoom pass would not dismiss (a possible
 between samples), a sample whose velocity error bound cond²·ε exceeds a tenth of rtol (the single run
 refuses at rtol), a branch sign change, a Newton step that does not converge, close, or stay near its
 prediction, inputs too large to resolve or moving too far per sample, a non-finite number — is solved
-again on its own by the single-run solver (:func:`vloop.solver.solve` on the variant's LoopSystem: same
+again on its own by the single-run solver (:func:`vloop.core.solver.solve` on the variant's LoopSystem: same
 structure, its own constants), which locates limits, passes change points and says why a motion stops,
 exactly as ``vloop.solve`` of that variant's file would (or, with ``solve(..., doubtful="fail")``, reported as
 not completed without that second solve). A variant that does not assemble at t = 0 on the nominal branch is
@@ -37,20 +37,11 @@ from typing import Self
 
 import numpy as np
 
+from ..drivers import evaluate
+from ..errors import MotionError, VloopError
+from ..method.loops import Block, LoopSystem
 from .changepoints import CHANGE_GAP, DIP, ETA_INPUT, ZOOM_POINTS
-from .drivers import evaluate
-from .errors import MotionError, VloopError
-from .kernels import (
-    DEFAULT_RTOL,
-    EPS,
-    block_terms,
-    cross,
-    det_sign,
-    newton_rows,
-    pinv_rows,
-    solve_rows,
-)
-from .loops import Block, LoopSystem
+from .kernels import DEFAULT_RTOL, EPS, block_terms, cross, det_sign, newton_rows, pinv_rows, solve_rows
 from .solver import DEFAULT_MAX_ITER, DEFAULT_TOL, MAX_INPUT_STEP
 from .variants import Designs, VariantModel
 
@@ -404,7 +395,7 @@ def _dyad_health(c1: np.ndarray, c2: np.ndarray, angle: tuple[bool, bool], scale
 def _dips(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(variant, row c) of every dip of the sampled discriminants: a local minimum below DIP of its larger
     neighbour (bracket c − 1 .. c + 1), or still falling at the end (bracket c = n − 2 .. n − 1): where the
-    single run zooms in for a change point or a limit between samples (vloop.changepoints._candidate_minima)."""
+    single run zooms in for a change point or a limit between samples (vloop.core.changepoints._candidate_minima)."""
     n = h.shape[1]
     if n < 2:
         return np.zeros(0, int), np.zeros(0, int)
@@ -535,7 +526,7 @@ class _Newton:
         return out[0], out[1]
 
     def cond(self, J: np.ndarray, rtol: float) -> np.ndarray:
-        """Condition number of the scaled Jacobians (2-norm where it matters, as vloop.newton)."""
+        """Condition number of the scaled Jacobians (2-norm where it matters, as vloop.core.newton)."""
         Js = J * self.colscale
         ok = np.all(np.isfinite(Js), axis=(1, 2))
         cond = np.full(len(J), np.inf)

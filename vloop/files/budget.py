@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import VloopError
+from ..errors import VloopError
 
 ENV = "VLOOP_MEMORY_BUDGET"
 DEFAULT_FRACTION = 0.5  # of the memory available to the process

@@ -10,11 +10,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .model import Mechanism
-from .output import atomic_write
+from ..files.output import atomic_write
+from ..model import Mechanism
 
 if TYPE_CHECKING:  # the plot reads a ForceResult; vloop.forces imports this module lazily
-    from .forces import ForceResult
+    from ..forces import ForceResult
 
 TOP_PINS = 6  # reaction magnitudes drawn (the largest)
 

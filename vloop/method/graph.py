@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .model import Body, Mechanism
+from ..model import Body, Mechanism
 
 if TYPE_CHECKING:
     import networkx as nx

@@ -28,8 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from . import budget, newton
-from .assembly import redundancy_text
+from ..errors import MechanismError, MotionError
+from ..files import budget
+from ..method.assembly import redundancy_text
+from ..method.loops import LoopSystem
+from ..result import Result
+from . import newton
 from .changepoints import (
     STENCIL_INPUT,
     _eta,
@@ -39,7 +43,6 @@ from .changepoints import (
     _rates_across,
     find_singular_points,
 )
-from .errors import MechanismError, MotionError
 from .kernels import (
     DEFAULT_RTOL,
     ILL_FRACTION,
@@ -66,8 +69,6 @@ from .kernels import (
     _velocity_bound,
     row_max,
 )
-from .loops import LoopSystem
-from .result import Result
 
 DEFAULT_TOL = 1e-12  # Newton stops when the step is below tol·(1 + |x|)
 
@@ -295,7 +296,7 @@ def solve(
     ``tol``: Newton step tolerance (relative); ``max_iter``; ``rtol``: accuracy asked of every output
     (samples whose velocities' error bound cond²·ε exceeds it are refused). The file's [solver] values win for tol
     and max_iter; an ``rtol`` given here wins over the file's. ``memory_budget`` (bytes or "2G"; see
-    vloop.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
+    vloop.files.budget): a run whose results would not fit is refused before it starts (MemoryBudgetError).
     """
     run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
     chunk = _in_memory_chunk(len(times))

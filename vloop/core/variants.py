@@ -4,7 +4,7 @@ A design study varies numbers of a mechanism file, never its topology, so every 
 nominal LoopSystem's structure (graph, loops, blocks, unknowns). What varies, per variant, is:
 
 * the vector terms' constants r and δ (from joint and point coordinates, stated lengths of binary
-  links, slider axes and the offsets of their sliding lines), exactly as :mod:`vloop.graph` derives
+  links, slider axes and the offsets of their sliding lines), exactly as :mod:`vloop.method.graph` derives
   them from a file, but vectorized over variants;
 * the drivers' numbers x0, v0, a0 (theta0/omega/alpha of a crank, s0/v/a of an actuator);
 * the frame offsets of slider blocks (their θ output) and the starting guess of the t = 0 assembly.
@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import MechanismError
-from .loops import LoopSystem
-from .model import Driver, Link, Mechanism, Point, Slider
+from ..errors import MechanismError
+from ..method.loops import LoopSystem
+from ..model import Driver, Link, Mechanism, Point, Slider
 
 TWO_PI = 2.0 * math.pi
 FD_STEP = 6e-6  # central-difference step, relative to a parameter's typical size (≈ ε^(1/3))
@@ -163,7 +163,7 @@ def _check_field(name: str, section: str, fld: str, entry: str) -> None:
 
 
 def _show(value: object) -> str:
-    from .schema import show
+    from ..files.schema import show
 
     return show(value, 40)
 
@@ -293,7 +293,7 @@ class VariantModel:
         scale = self.mechanism.scale
         dz = np.abs(d.r[0] * d.cd[0] - sys.t_r * np.exp(1j * sys.t_delta))
         if np.any(dz > 1e-9 * scale) or np.any(np.abs(d.x0[0] - [x.x0 for x in self.mechanism.drivers]) > 1e-12):
-            raise RuntimeError("vloop.variants does not reproduce the compiled vector terms (graph changed?)")
+            raise RuntimeError("vloop.core.variants does not reproduce the compiled vector terms (graph changed?)")
 
     def variant_mechanism(
         self, values: np.ndarray, positions: dict[str, complex] | None = None, q0: np.ndarray | None = None
@@ -353,7 +353,7 @@ class VariantModel:
 
 class _Geometry:
     """Body frames and local coordinates of every variant (the vectorized :func:`vloop.model._bodies` and
-    :func:`vloop.graph.build_graph` terms)."""
+    :func:`vloop.method.graph.build_graph` terms)."""
 
     def __init__(self, model: VariantModel, values: np.ndarray) -> None:
         self.model = model
@@ -478,7 +478,7 @@ def _term_roles(mech: Mechanism, sys: LoopSystem) -> list[tuple]:
     for t, extra in sys.cache.get("study_offset_terms", {}).items():
         roles[t] = ("offset", extra)
     if any(r is None for r in roles):
-        raise RuntimeError("vloop.variants cannot tell what every vector term is (graph changed?)")
+        raise RuntimeError("vloop.core.variants cannot tell what every vector term is (graph changed?)")
     return roles  # type: ignore[return-value]
 
 
@@ -499,7 +499,7 @@ def _with_zero_terms(sys: LoopSystem) -> LoopSystem:
     if not restored.any():
         return sys
     if np.any((C != sys.C) & ~restored):
-        raise RuntimeError("vloop.variants cannot rebuild the loop coefficients (graph changed?)")
+        raise RuntimeError("vloop.core.variants cannot rebuild the loop coefficients (graph changed?)")
     return dataclasses.replace(sys, C=np.where(restored, C, sys.C), cache={})
 
 

@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from .errors import VloopError
+from ..errors import VloopError
 
 DEFAULT_ROOT = Path("out")
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")

@@ -1,6 +1,6 @@
 """The mechanism file's schema, in one place: every section, key, type, default and unit.
 
-The readers (:mod:`vloop.fileformat`) accept exactly these keys, and the README's file-format
+The readers (:mod:`vloop.files.fileformat`) accept exactly these keys, and the README's file-format
 table is generated from them (:func:`markdown`; a test keeps the two equal), so the
 documentation cannot drift from what is accepted. The value checks every reader shares live
 here too: finite numbers (10**400, nan, inf, strings and booleans refused), coordinate pairs,
@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import MechanismError
+from ..errors import MechanismError
 
 NAME_MAX = 64
 _NAME = re.compile(r"[^\W_][\w-]*|_[\w-]*")  # letters, digits, '_' and '-' (Unicode letters and digits too)

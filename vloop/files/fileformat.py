@@ -1,6 +1,6 @@
 """Reading and writing mechanism files: TOML → Mechanism (one small reader per section) and back.
 
-The keys each reader accepts come from :mod:`vloop.schema`. Every problem is a
+The keys each reader accepts come from :mod:`vloop.files.schema`. Every problem is a
 :class:`~vloop.errors.MechanismError` naming the file, the entry and what is wrong, never a
 traceback: non-finite or huge numbers, deep nesting, unsafe names, files that are not regular
 files, profiles outside the mechanism's folder (unless allowed), oversized inputs.
@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import MechanismError
-from .model import (
+from ..errors import MechanismError
+from ..model import (
     LENGTH_UNITS,
     Driver,
     Link,
@@ -35,7 +35,7 @@ from .model import (
 from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
 
 MAX_SAMPLES = 10**12  # a ceiling for absurd counts; the limit that applies is the memory budget (_time_limit)
-TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.budget)
+TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.files.budget)
 
 
 def _time_limit(n: float) -> str | None:
@@ -641,7 +641,7 @@ def read_solver(raw: Any, probs: Problems) -> dict[str, Any]:
             if not 0 < v < 1:
                 probs.add("solver", f"{k} must be between 0 and 1 (a fraction), got {v:g}")
             out[k] = v
-    if "memory_budget" in raw:  # bytes or a size such as "2G" (vloop.budget)
+    if "memory_budget" in raw:  # bytes or a size such as "2G" (vloop.files.budget)
         from .budget import parse_size
 
         try:

@@ -1,8 +1,8 @@
 """The solver's building blocks: state arrays over the sample grid and the numerics of one block.
 
-Shared by :mod:`vloop.solver` (the run: blocks in order, limits, late starts, chunks, the Result),
-:mod:`vloop.newton` (Newton blocks vectorized over samples) and :mod:`vloop.changepoints` (where two
-assembly branches meet). See :mod:`vloop.solver` for the state's layout and the formulas.
+Shared by :mod:`vloop.core.solver` (the run: blocks in order, limits, late starts, chunks, the Result),
+:mod:`vloop.core.newton` (Newton blocks vectorized over samples) and :mod:`vloop.core.changepoints` (where two
+assembly branches meet). See :mod:`vloop.core.solver` for the state's layout and the formulas.
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from .drivers import evaluate_all
-from .loops import Block, LoopSystem
-from .model import Mechanism
+from ..drivers import evaluate_all
+from ..method.loops import Block, LoopSystem
+from ..model import Mechanism
 
 EPS = float(np.finfo(float).eps)
 
@@ -830,8 +830,8 @@ class _Run:
     tail: bool = True  # the rows end the run (not a chunk followed by another)
     t_start: float = 0.0  # the run's first requested time
     memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
-    sink: Any = None  # solve()'s whole-run output columns, filled chunk by chunk (vloop.solver._Sink)
-    blocks: Callable[..., Any] | None = None  # the solver's block runner, for probes (set by vloop.solver)
+    sink: Any = None  # solve()'s whole-run output columns, filled chunk by chunk (vloop.core.solver._Sink)
+    blocks: Callable[..., Any] | None = None  # the solver's block runner, for probes (set by vloop.core.solver)
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""

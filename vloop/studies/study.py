@@ -10,10 +10,10 @@
     res.sensitivity            # d(output)/d(parameter) at the nominal design(s), central differences
     res.bands                  # series outputs over the motion: nominal, linearized σ, Monte-Carlo percentiles
 
-**Variants.** A parameter is a number of the mechanism file (:mod:`vloop.variants`): grid values (the
+**Variants.** A parameter is a number of the mechanism file (:mod:`vloop.core.variants`): grid values (the
 study takes every combination, the first parameter slowest) and/or a tolerance (``samples`` Monte-Carlo
 draws, uniform in ±half_width or normal with σ, drawn up front from ``seed``; every grid point gets the
-same draws). All variants share the nominal structure and are solved together (:mod:`vloop.batch`); a
+same draws). All variants share the nominal structure and are solved together (:mod:`vloop.core.batch`); a
 variant that does not assemble at t = 0 on the nominal branch, or whose motion stops, is reported in its
 row (``assembled``, ``completed``, ``stopped_at`` [s], ``stopped_sample``, ``reason``) with null outputs,
 and the others go on.
@@ -50,14 +50,14 @@ from typing import Any
 
 import numpy as np
 
-from . import batch
-from .batch import Outcomes
-from .errors import MechanismError, VloopError
-from .model import Mechanism
-from .result import Result
-from .schema import Problems
+from ..core import batch
+from ..core.batch import Outcomes
+from ..core.variants import ParamRef, VariantModel, resolve
+from ..errors import MechanismError, VloopError
+from ..files.schema import Problems
+from ..model import Mechanism
+from ..result import Result
 from .studyfile import OutputSpec, StudySpec, from_dict, output_unit, quantity_kind
-from .variants import ParamRef, VariantModel, resolve
 
 TASKS_PER_WORKER = 4  # chunks per Dask worker thread when the chunk size is automatic
 LOCAL_CHUNK = 2048  # variants per task in this process (progress granularity; never changes a number)
@@ -91,7 +91,7 @@ def study(
     Dask. Lengths in the file's units, angles in rad. Raises MechanismError for a bad parameter or output.
     """
     if not isinstance(mechanism, Mechanism):
-        from .fileformat import load
+        from ..files.fileformat import load
 
         mechanism = load(mechanism)
     data: dict[str, Any] = {"parameters": _param_tables(params), "outputs": _output_tables(outputs)}
@@ -317,7 +317,7 @@ def needed_columns(model: VariantModel, outputs: tuple[OutputSpec, ...]) -> list
 
 def _dyads(model: VariantModel, quantity: str) -> list:
     """The dyads a transmission-angle quantity covers (all, or the one at the joint it names)."""
-    from .teaching.transmission import dyads
+    from ..teaching.transmission import dyads
 
     found, _ = dyads(model.system)
     if quantity != "transmission_angle":
@@ -331,7 +331,7 @@ def check_outputs(model: VariantModel, spec: StudySpec) -> None:
     for i, o in enumerate(spec.outputs):
         kind = quantity_kind(model.mechanism, o.quantity)
         if kind == "transmission" and not _dyads(model, o.quantity):
-            from .teaching.transmission import dyads
+            from ..teaching.transmission import dyads
 
             labels = ", ".join(d.label for d in dyads(model.system)[0]) or "none: its blocks are solved by Newton"
             raise MechanismError(
@@ -370,7 +370,7 @@ def _history(model: VariantModel, o: OutputSpec, cols: dict[str, np.ndarray], t:
         p, f = o.quantity.rsplit(".", 1)
         a, b = (f"{p}.vx", f"{p}.vy") if f == "speed" else (f"{p}.ax", f"{p}.ay")
         return np.hypot(cols[a], cols[b])
-    from .teaching.transmission import raw_angle
+    from ..teaching.transmission import raw_angle
 
     view = Result("", "study", t, cols)
     folded = [
@@ -435,7 +435,7 @@ def _fourbar_loop(model: VariantModel, quantity: str) -> tuple[int, list[int]] |
 
 
 def grashof(model: VariantModel, d: Any, loop: tuple[int, list[int]]) -> tuple[np.ndarray, np.ndarray]:
-    """Grashof class and s + l ≤ p + q of a four-bar loop for every design (as vloop.equations.grashof names it)."""
+    """Grashof class and s + l ≤ p + q of a four-bar loop for every design (as vloop.method.equations.grashof does)."""
     sys = model.system
     li, owners = loop
     coef = sys.C[li]
@@ -463,8 +463,8 @@ def run(
     spec: StudySpec, *, scheduler: str | None = None, workers: int | None = None, progress: bool | None = None
 ) -> StudyResult:
     """Solve a study (in this process, or on Dask with ``scheduler`` / ``workers``) and gather its tables."""
-    from .compiler import compile_system
-    from .runner import run_tasks
+    from ..compiler import compile_system
+    from ..runner import run_tasks
 
     t0 = time.perf_counter()
     p = plan(spec)
@@ -510,8 +510,8 @@ def _chunk_size(spec: StudySpec, n: int, scheduler: str | None, workers: int | N
 
 
 def _check_memory(spec: StudySpec, p: _Plan, model: VariantModel, n_times: int) -> None:
-    """Refuse a study whose tables would not fit the memory budget (vloop.budget), before solving it."""
-    from .budget import MemoryBudgetError, budget, fmt_size
+    """Refuse a study whose tables would not fit the memory budget (vloop.files.budget), before solving it."""
+    from ..files.budget import MemoryBudgetError, budget, fmt_size
 
     n = len(p.values)
     series = sum(
@@ -581,10 +581,10 @@ class StudyResult:
 
     def write(self, folder: str | Path, *, plot: bool = False) -> list[Path]:
         """Write variants.parquet, summary.parquet, sensitivity.parquet, bands.parquet (those not empty) and
-        study.json into ``folder`` as one atomic set (vloop.output.OutputSet); with ``plot`` the pictures too."""
+        study.json into ``folder`` as one atomic set (vloop.files.output.OutputSet); with ``plot`` the pictures too."""
         import json
 
-        from .output import OutputSet
+        from ..files.output import OutputSet
 
         with OutputSet(folder) as out:
             for name, df in (
@@ -597,7 +597,7 @@ class StudyResult:
                     _write_parquet(df, out.path(f"{name}.parquet"))
             out.write_text("study.json", json.dumps(self.manifest(), indent=2) + "\n")
             if plot:
-                from .study_plot import plot_study
+                from .plot import plot_study
 
                 plot_study(self, out.stage)
         return out.published

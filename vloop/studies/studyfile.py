@@ -27,10 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import MechanismError
-from .model import Mechanism
-from .schema import Key, Problems, Section, real, show
-from .schema import markdown as schema_markdown
+from ..errors import MechanismError
+from ..files.schema import Key, Problems, Section, real, show
+from ..files.schema import markdown as schema_markdown
+from ..model import Mechanism
 
 MAX_VALUES = 1_000_000  # grid values of one parameter
 MAX_SAMPLES = 10_000_000  # Monte-Carlo draws
@@ -204,8 +204,8 @@ class StudySpec:
 
 def load(path: str | Path) -> StudySpec:
     """Read and check a study file (and the mechanism it names). Raises MechanismError naming the entry."""
-    from .fileformat import _read_text_file
-    from .fileformat import load as load_mechanism
+    from ..files.fileformat import _read_text_file
+    from ..files.fileformat import load as load_mechanism
 
     path = Path(path)
     text = _read_text_file(path, MAX_STUDY_BYTES, what="study file", entry=str(path))
@@ -242,7 +242,7 @@ def from_dict(data: Any, mech: Mechanism, *, source: str = "<study>", probs: Pro
     outputs = read_outputs(data.get("outputs"), mech, probs)
     times = None
     if "time" in data:
-        from .fileformat import read_time
+        from ..files.fileformat import read_time
 
         times = read_time(data["time"], list(mech.drivers), probs)
     probs.raise_if_any()
@@ -284,7 +284,7 @@ def check(spec: StudySpec) -> None:
 
 def read_parameters(raw: Any, mech: Mechanism, probs: Problems) -> tuple[ParameterSpec, ...]:
     """[[parameters]]: each a name with values, start/stop/num, a tolerance, or a grid and a tolerance."""
-    from .variants import resolve
+    from ..core.variants import resolve
 
     if not isinstance(raw, list) or not raw:
         probs.add(
@@ -409,7 +409,7 @@ def read_outputs(raw: Any, mech: Mechanism, probs: Problems) -> tuple[OutputSpec
 
 
 def output_spec(d: dict, mech: Mechanism, entry: str, probs: Problems) -> OutputSpec | None:
-    """One output's quantity and stat checked against the mechanism (see :mod:`vloop.studies` for the meaning)."""
+    """One output's quantity and stat checked against the mechanism (see :mod:`vloop.studies.study` for the meaning)."""
     q = d.get("quantity")
     if not isinstance(q, str) or not q:
         probs.add(entry, f"'quantity' must be a string such as l4.theta or transmission_angle, got {show(q)}")

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .errors import MechanismError
+from ..errors import MechanismError
 from .kernels import (
     EPS,
     _change_point_choices,

@@ -8,7 +8,7 @@ its first joint and its θ), so the numbers panel shows every sample's exact val
 travel as little-endian float64, byte-shuffled, deflated and base64-encoded (the browser inflates
 them with its built-in ``DecompressionStream``): an eight-bar run of 5,000 samples is ~1.3 MB.
 
-The page's script and style live in ``vloop/viewer/`` and are inlined at render time; a
+The page's script and style live in ``vloop/views/viewer/`` and are inlined at render time; a
 Content-Security-Policy (``default-src 'none'``, the script allowed by its hash) forbids any
 network request from the page.
 
@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import MotionError, VloopError
+from ..errors import MotionError, VloopError
+from ..model import Mechanism
+from ..result import Result
 from .geometry import equation_legend, loop_chains
-from .model import Mechanism
-from .result import Result
 
 ASSETS = Path(__file__).resolve().parent / "viewer"
 _PLACEHOLDER = re.compile(r"__CSP__|__TITLE__|__HEADING__|__NAME__|/\*__CSS__\*/|__DATA__|/\*__JS__\*/")
@@ -57,8 +57,8 @@ def solve_for_view(mech: Mechanism) -> tuple[Result, str | None]:
 
     Where a motion stops before its first sample, the page shows the t = 0 assembly instead.
     """
-    from .compiler import compile_system
-    from .solver import solve
+    from ..compiler import compile_system
+    from ..core.solver import solve
 
     _check_samples(mech.name, len(mech.times))  # before solving, not after
     system = compile_system(mech)
@@ -89,7 +89,7 @@ def build_payload(
     Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m. ``targets``: a
     synthesis's precision positions, drawn as numbered crosses: ``(x, y)`` points or ``(x, y, angle)`` poses.
     """
-    from .compiler import compile_system
+    from ..compiler import compile_system
 
     if not len(result):
         raise ViewError(f"{mech.name}: the result has no sample to show")
@@ -415,7 +415,7 @@ def write_view(
     system: Any = None,
     targets: Any = None,
 ) -> Path:
-    """Write the viewer page to ``path`` atomically (through :mod:`vloop.output`) and return the path."""
-    from .output import write_text
+    """Write the viewer page to ``path`` atomically (through :mod:`vloop.files.output`) and return the path."""
+    from ..files.output import write_text
 
     return write_text(path, render(mech, result, forces=forces, error=error, system=system, targets=targets))

@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 
-from .drivers import evaluate
-from .errors import MechanismError
+from ..drivers import evaluate
+from ..errors import MechanismError
+from ..model import Mechanism, mobility_message
 from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
-from .model import Mechanism, mobility_message
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size

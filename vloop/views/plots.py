@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .model import Mechanism
-from .result import Result
+from ..model import Mechanism
+from ..result import Result
 
 
 def _figure(

@@ -1,6 +1,6 @@
 """A run's results streamed to disk chunk by chunk: ``results.{csv,parquet,npz}`` and ``health.{...}``.
 
-Every file is staged by an :class:`vloop.output.OutputSet` and published with the others when the
+Every file is staged by an :class:`vloop.files.output.OutputSet` and published with the others when the
 run ends (complete, or stopped by a limit position with its rows so far): nothing half-written ever
 appears, and Ctrl-C leaves the previous complete set (or nothing).
 
@@ -29,8 +29,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from ..result import Result
 from .output import OutputError, OutputSet
-from .result import Result
 
 FORMATS = ("csv", "parquet", "npz")
 HEALTH = (("residual", np.float32), ("cond", np.float32), ("branch", np.int64))

@@ -33,7 +33,7 @@ How a file is made (none of it calls vloop's loop equations or solver):
    comments and in the sidecar JSON (``expect.stop_sample``).
 4. **Check and write**: the TOML text is read back by :func:`vloop.loads` and compiled by
    :func:`vloop.compile` (a file vloop refuses is not written: it is drawn again, and counted
-   in ``corpus.json`` as ``refused``); files are written through :mod:`vloop.output`.
+   in ``corpus.json`` as ``refused``); files are written through :mod:`vloop.files.output`.
 
 Lengths are in the file's units (scale drawn from 0.03 to 30), angles in radians, CCW positive.
 """
@@ -1396,7 +1396,7 @@ def write(
     items: Sequence[Item], out: str | Path, *, seed: int, refused: Sequence[dict[str, Any]] = (), **settings: Any
 ) -> list[Path]:
     """NAME.toml and NAME.json for every item and a corpus.json manifest, atomically, inside ``out``."""
-    from .output import ensure_folder, write_text
+    from vloop.files.output import ensure_folder, write_text
 
     out = ensure_folder(out)
     written = []
@@ -1431,7 +1431,7 @@ def read_sidecar(path: str | Path) -> dict[str, Any] | None:
     A JSON file that is not a corpus sidecar (no ``generator`` key of ours) is ignored; one that claims to
     be but has a missing or malformed field raises MechanismError naming the file and the field.
     """
-    from .errors import MechanismError
+    from vloop.errors import MechanismError
 
     side = Path(path).with_suffix(".json")
     if not side.is_file():

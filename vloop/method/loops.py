@@ -1,9 +1,9 @@
 """The compiled mechanism: LoopSystem (immutable) and the numerics every algorithm shares.
 
 A LoopSystem holds the vector terms z = (r + s_i)·e^{j(φ_a + δ)} of the paper's graph (see
-:mod:`vloop.graph`), the loop equations Σ_k C[l, k]·z_k = 0, the unknowns (rotating links' angles
+:mod:`vloop.method.graph`), the loop equations Σ_k C[l, k]·z_k = 0, the unknowns (rotating links' angles
 and slider displacements less the driven ones), the block-triangular structure of the equations
-(:mod:`vloop.structure`) and the assembled configuration at t = 0 (:mod:`vloop.assembly`).
+(:mod:`vloop.method.structure`) and the assembled configuration at t = 0 (:mod:`vloop.method.assembly`).
 It is built by :func:`vloop.compiler.compile_system`.
 """
 
@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..model import Mechanism
 from .graph import ORIGIN, Loop, networkx_graph
-from .model import Mechanism
 
 if TYPE_CHECKING:
     import networkx as nx
@@ -82,7 +82,7 @@ class LoopSystem:
 
     @cached_property
     def graph(self) -> nx.Graph:
-        """The paper's graph (:mod:`vloop.graph`) as a networkx graph, built on first use."""
+        """The paper's graph (:mod:`vloop.method.graph`) as a networkx graph, built on first use."""
         return networkx_graph(*self.graph_parts)
 
     @property
