@@ -296,8 +296,8 @@ PATH_SPEC = f"""
 name = "loop"
 method = "path"
 seed = 2
-candidates = 2
-files = 2
+candidates = 1
+files = 1
 [path]
 points = {PATH_POINTS}
 linkage = "fourbar"

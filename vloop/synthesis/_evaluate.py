@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import batch
 from ..compiler import compile_system
+from ..core import batch
 from ..core.variants import VariantModel, resolve
 from .linkages import Topology, reflect, side
 

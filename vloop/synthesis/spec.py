@@ -16,13 +16,12 @@ arrays refused), counts are bounded integers, point lists have the right shape.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ..errors import MechanismError, SynthesisError
-from ..files.schema import Key, Problems, Section, name_problem, real, show
+from ..files.schema import Key, Problems, Section, check_keys, integer, name_problem, real, show
 from ..files.schema import markdown as schema_markdown
 from .defects import Requirements
 
@@ -194,16 +193,10 @@ class SynthSpec:
 
 def load(path: str | Path) -> SynthSpec:
     """Read and check a synthesis file. Raises a VloopError naming the file and the entry."""
-    from ..files.fileformat import _read_text_file
+    from ..files.fileformat import _read_text_file, parse_toml
 
     path = Path(path)
-    text = _read_text_file(path, MAX_SPEC_BYTES, what="synthesis file", entry=str(path))
-    try:
-        data = tomllib.loads(text.removeprefix("\ufeff"))
-    except tomllib.TOMLDecodeError as exc:
-        raise MechanismError(f"{path}: TOML syntax error: {exc}", entry="toml") from None
-    except RecursionError:
-        raise MechanismError(f"{path}: TOML nested too deeply", entry="toml") from None
+    data = parse_toml(_read_text_file(path, MAX_SPEC_BYTES, what="synthesis file", entry=str(path)), str(path))
     return from_dict(data, source=str(path), default_name=path.stem)
 
 
@@ -228,9 +221,9 @@ def from_dict(data: Any, *, source: str = "<synthesis>", default_name: str = "sy
     if others:
         probs.add("synthesis", f"method is {method!r}, but the file has a [{others[0]}] section")
     common = {
-        "seed": _integer(data, "seed", "synthesis", 0, 2**63 - 1, probs, 0),
-        "candidates": _integer(data, "candidates", "synthesis", 1, 100, probs, 5),
-        "files": _integer(data, "files", "synthesis", 0, 100, probs, 3),
+        "seed": integer(data, "seed", "synthesis", 0, 2**63 - 1, probs, 0),
+        "candidates": integer(data, "candidates", "synthesis", 1, 100, probs, 5),
+        "files": integer(data, "files", "synthesis", 0, 100, probs, 3),
     }
     req = _requirements(data, method, probs)
     section = data.get(method)
@@ -281,7 +274,7 @@ def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
             probs.add(e, f"the expression needs {', '.join(missing)}")
     for key, lo, hi in (("points", 3, 1000), ("samples", 2, 100_000)):
         if key in d:
-            opts[key] = _integer(d, key, e, lo, hi, probs, None)
+            opts[key] = integer(d, key, e, lo, hi, probs, None)
     for key, choices in (("spacing", ("chebyshev", "even")), ("linkage", ("fourbar", "slider-crank"))):
         if key in d:
             opts[key] = _choice(d[key], key, choices, e, probs)
@@ -302,7 +295,7 @@ def _read_motion(d: dict, probs: Problems) -> dict[str, Any]:
     if "region" in d:
         opts["region"] = _numbers(d["region"], "region", e, probs, n=4)
     if "grid" in d:
-        opts["grid"] = _integer(d, "grid", e, 2, 40, probs, None)
+        opts["grid"] = integer(d, "grid", e, 2, 40, probs, None)
     if "dyads" in d:
         raw = d["dyads"]
         if not isinstance(raw, list) or len(raw) != 2:
@@ -344,7 +337,7 @@ def _read_path(d: dict, probs: Problems) -> dict[str, Any]:
         ("restarts", 1, 100),
     ):
         if key in d:
-            opts[key] = _integer(d, key, e, lo, hi, probs, None)
+            opts[key] = integer(d, key, e, lo, hi, probs, None)
     for key, lo, hi in (("tolerance", 0.0, 1.0), ("region", 0.1, 100.0)):
         if key in d:
             v = real(d[key], key, e, probs)
@@ -361,20 +354,7 @@ _READERS = {"function": _read_function, "motion": _read_motion, "path": _read_pa
 
 
 def _check_keys(table: dict, section: str, entry: str, probs: Problems, extra: set[str] | None = None) -> None:
-    allowed = SECTION[section].allowed | (extra or set())
-    for k in table:
-        if k not in allowed:
-            probs.add(entry, f"unknown key {show(k)} (allowed: {', '.join(sorted(allowed))})")
-
-
-def _integer(table: dict, key: str, entry: str, lo: int, hi: int, probs: Problems, default: Any) -> Any:
-    if key not in table:
-        return default
-    v = table[key]
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        probs.add(entry, f"'{key}' must be an integer from {lo:,} to {hi:,}, got {show(v)}")
-        return default
-    return v
+    check_keys(table, SECTION[section], entry, probs, extra)
 
 
 def _choice(v: Any, key: str, choices: tuple[str, ...], entry: str, probs: Problems) -> Any:
