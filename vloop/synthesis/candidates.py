@@ -113,6 +113,17 @@ class Candidates:
     def __getitem__(self, i: int) -> Candidate:
         return self.items[i]
 
+    def keep(self, name: str, count: int | None = None) -> Candidates:
+        """Keep the ``count`` first-ranked candidates (all by default), named NAME_1, NAME_2, … in rank order
+        (their mechanisms too); returns self."""
+        import dataclasses
+
+        self.items = self.items[: max(count, 1)] if count is not None else self.items
+        for k, c in enumerate(self.items):
+            c.name = f"{name}_{k + 1}"
+            c.mechanism = dataclasses.replace(c.mechanism, name=c.name)
+        return self
+
     @property
     def solutions(self) -> list[Candidate]:
         return [c for c in self.items if c.solution]

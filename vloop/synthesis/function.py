@@ -131,7 +131,7 @@ def function(
     cand.notes = (*cand.notes, *_flipped(coords, th[0], out[0], top))
     if setup["f"] is not None:
         _structural(cand, setup, samples, direction)
-    return Candidates(task, [cand], time.perf_counter() - started)
+    return Candidates(task, [cand], time.perf_counter() - started).keep(name)
 
 
 def _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage) -> dict:

@@ -343,11 +343,7 @@ def motion(
     if not drafts:
         raise SynthesisError("[motion] no four-bar: every pair of dyads found is degenerate")
     cands = [assess(d, task, req) for d in drafts]
-    out = Candidates(task, cands)
-    out.items = out.items[: max(count, 1)] if not dyads and len(ps.p) < 5 else out.items
-    for k, c in enumerate(out.items):
-        c.name = f"{name}_{k + 1}"
-        c.mechanism = _renamed(c.mechanism, c.name)
+    out = Candidates(task, cands).keep(name, count if not dyads and len(ps.p) < 5 else None)
     out.seconds = time.perf_counter() - started
     return out
 
@@ -416,12 +412,6 @@ def _timing(ps: Poses, M: complex, A: complex) -> tuple[float, np.ndarray]:
     t = np.mod(beta, TWO_PI)
     t[0] = 0.0
     return 1.0, t
-
-
-def _renamed(mech, name: str):
-    import dataclasses
-
-    return dataclasses.replace(mech, name=name)
 
 
 # ---------------------------------------------------------------- the search

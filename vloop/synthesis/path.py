@@ -180,11 +180,7 @@ def path(
             break
         if progress is not None and top is not LINKAGES[linkage][-1]:
             progress(f"no {top.name} within {tolerance:g} of the size: trying a {LINKAGES[linkage][-1].name}")
-    out = Candidates(task, cands, log=log)
-    out.items = out.items[: max(count, 1)]
-    for k, c in enumerate(out.items):
-        c.name = f"{name}_{k + 1}"
-        c.mechanism = _renamed(c.mechanism, c.name)
+    out = Candidates(task, cands, log=log).keep(name, count)
     out.seconds = time.perf_counter() - started
     return out
 
@@ -419,7 +415,3 @@ def _polish(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray):
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
     """Two polished members are one linkage when every coordinate agrees to a thousandth of the size."""
     return bool(np.max(np.abs(a - b)) < 1e-3)
-
-
-def _renamed(mech, name: str):
-    return dataclasses.replace(mech, name=name)
