@@ -652,3 +652,39 @@ def test_sixbar_where_no_fourbar_reaches(tmp_path):
         res = engine.solve(best.mechanism, np.asarray(best.times))
         err = np.abs(res["P.x"] + 1j * res["P.y"] - z)
         assert np.max(err) <= best.error * size + 1e-9 * size, engine.__name__
+
+
+HOSTILE = [0, -0.0, 1e308, 5e-324, float("nan"), float("inf"), 10**400, "a string", [[1.0]]]
+
+
+def _quick(section: str) -> dict:
+    """A base file of the section's method that runs in a moment (a tiny search for path generation)."""
+    data = _base(section)
+    if data["method"] == "path":
+        data["path"].update(generations=2, population=5, samples=16, linkage="fourbar")
+        data["candidates"] = 1
+    return data
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("section,key", [(s.name, k.name) for s in synth_spec.SECTIONS for k in s.keys])
+def test_every_key_refuses_or_survives_hostile_values(tmp_path, capfd, section, key):
+    """0, −0, 1e308, 5e-324, nan, inf, 10**400, a string, a nested array in every key: either one line and
+    exit 2, or a run whose files hold only finite numbers (never a traceback)."""
+    import tomli_w
+
+    for k, value in enumerate(HOSTILE):
+        data = _quick(section)
+        table = _table(data, section)
+        table[key] = value
+        f = tmp_path / f"s{k}.toml"
+        f.write_text(tomli_w.dumps(data), encoding="utf-8")
+        rc = main(["synth", str(f), "--out", str(tmp_path / f"out{k}")])
+        err = capfd.readouterr().err
+        assert rc in (0, 2), (key, value, err)
+        assert "Traceback" not in err
+        if rc == 2:
+            assert err.strip().count("\n") == 0 and err.startswith("vloop: error:"), (key, value, err)
+        else:
+            text = (tmp_path / f"out{k}" / "candidates.csv").read_text(encoding="utf-8").lower()
+            assert "nan" not in text.replace("name", "") and "inf" not in text, (key, value)

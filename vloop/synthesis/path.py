@@ -397,8 +397,10 @@ def _polish(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray):
         return np.nan_to_num(np.concatenate([J.real, J.imag], 0))
 
     x0 = np.concatenate([coords, t[1:]]) if free_t else coords.copy()
-    lo = np.concatenate([np.full(nc, -np.inf), np.zeros(len(t) - 1)]) if free_t else np.full(nc, -np.inf)
-    hi = np.concatenate([np.full(nc, np.inf), np.full(len(t) - 1, TWO_PI)]) if free_t else np.full(nc, np.inf)
+    # joints stay within the search region (or as far out as the member's own, re-anchored, already are)
+    reach = np.maximum(p.box, 1.05 * np.abs(coords))
+    lo = np.concatenate([-reach, np.zeros(len(t) - 1)]) if free_t else -reach
+    hi = np.concatenate([reach, np.full(len(t) - 1, TWO_PI)]) if free_t else reach
     x0 = np.clip(x0, lo, hi)
     if not np.all(np.isfinite(residual(x0))) or residual(x0)[0] == INFEASIBLE:
         return None
