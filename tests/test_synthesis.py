@@ -11,6 +11,7 @@ held to the error they report plus 1e-9 of the size.
 
 from __future__ import annotations
 
+import importlib
 import math
 import re
 from pathlib import Path
@@ -688,3 +689,89 @@ def test_every_key_refuses_or_survives_hostile_values(tmp_path, capfd, section, 
         else:
             text = (tmp_path / f"out{k}" / "candidates.csv").read_text(encoding="utf-8").lower()
             assert "nan" not in text.replace("name", "") and "inf" not in text, (key, value)
+
+
+# ---------------------------------------------------------------- more methods: slider-crank, least squares, four poses, timing
+
+
+@FEW
+@given(st.floats(0.2, 0.5), st.floats(1.2, 2.0), st.floats(-0.3, 0.3), st.floats(-math.pi, math.pi), st.data())
+def test_slider_crank_function_round_trip(a, b, e, th0, data):
+    """An offset slider-crank (crank a, rod b, offset e; the test's own B at t = 0) and its own crank angles and
+    slider positions at three instants (closed form, validators/analytic_slider_crank.py) → the slider-crank
+    function generator → a, b, e to 1e-9 of b; it meets each pair to 1e-9."""
+    from validators import analytic_slider_crank
+    from vloop.synthesis.linkages import SLIDER_CRANK
+
+    A = a * np.exp(1j * th0)
+    B = complex(A.real + math.sqrt(b * b - (e - A.imag) ** 2), e)
+    mech = SLIDER_CRANK.mechanism({"O2": 0j, "A": A, "B": B}, name="sc", omega=1.0, times=np.array([0.0]))
+    res = analytic_slider_crank.solve(mech, _instants(data.draw, 3))
+    out = syn.function(pairs=list(zip(res["crank.theta"], res["slider.s"], strict=True)), linkage="slider-crank")
+    c = out[0]
+    assert abs(c.dims["crank"] - a) <= TOL * b and abs(c.dims["rod"] - b) <= TOL * b
+    assert abs(c.mechanism.joints["B"][1] - e) <= TOL * b
+    assert c.solution and np.max(c.errors) <= TOL * b
+
+
+def test_function_by_least_squares_recovers_an_exact_generator():
+    """Five pairs of the same four-bar (a = 0.3, b = 1, c = 0.8 along a ground d = 1; the test's own B): the
+    over-determined Freudenstein system is consistent, and least squares gives the four-bar back to 1e-9."""
+    A = 0.3 * np.exp(1j * math.pi / 3)
+    coords = {"O2": 0j, "A": A, "B": circle_meet(A, 1.0, 1 + 0j, 0.8, 1), "O4": 1 + 0j, "P": A}
+    res = closed_form(coords, np.array([0.0, 0.5, 1.0, 1.5, 2.0]))
+    out = syn.function(pairs=list(zip(res["crank.theta"], res["rocker.theta"], strict=True)), ground=1.0)
+    c = out[0]
+    assert [c.dims["crank"], c.dims["coupler"], c.dims["rocker"]] == pytest.approx([0.3, 1.0, 0.8], abs=TOL)
+    assert np.max(c.errors) <= TOL
+
+
+FOUR_POSES_OF = {"O2": 0j, "A": 0.3 + 0.4j, "B": 1.2 + 1.1j, "O4": 1.3 + 0j, "P": 0.5 + 1.0j}
+
+
+def test_four_poses_own_pivots_on_the_burmester_curves():
+    """Four poses of a crank-rocker: its own ground pivots lie on the centre-point curve (the consistency
+    determinant vanishes there, to round-off) with its own moving pivots as their circle points; and the
+    curve found along the rays passes within 1e-9 of them."""
+    motion_module = importlib.import_module("vloop.synthesis.motion")  # the package exports the function
+
+    ps = motion_module.poses_of(poses(FOUR_POSES_OF, np.array([0.0, 0.8, 1.7, 2.6])))
+    norm = {k: (v - ps.centre) / ps.size for k, v in FOUR_POSES_OF.items()}
+    M, A, _ = motion_module.centre_curve(ps, rays=720, reach=50.0)
+    for pivot, moving in (("O2", "A"), ("O4", "B")):
+        det = np.linalg.det(motion_module._consistency(ps, np.array([norm[pivot]])))[0]
+        assert abs(det) <= 1e-12
+        assert abs(motion_module.circle_points(ps, np.array([norm[pivot]]))[0] - norm[moving]) <= TOL
+        near = np.argmin(np.abs(M - norm[pivot]))
+        assert abs(M[near] - norm[pivot]) <= 0.05  # a ray every 0.25°: the nearest sample of the curve
+        assert abs(A[near] - norm[moving]) <= 0.5
+
+
+@pytest.mark.slow
+def test_four_poses_search_along_the_curves():
+    """Four poses: the candidates searched along the centre-point curve are exact (every pose met to 1e-9 of
+    the size when re-solved)."""
+    pz = poses(FOUR_POSES_OF, np.array([0.0, 0.8, 1.7, 2.6]))
+    size = syn.motion.__globals__["poses_of"](pz).size
+    out = syn.motion(pz, grid=5, count=2)
+    assert len(out.solutions) >= 1
+    for c in out.solutions:
+        assert np.max(c.errors) <= TOL * size and np.max(c.angle_errors) <= TOL
+
+
+@pytest.mark.slow
+def test_path_with_prescribed_timing():
+    """Five points of a crank-rocker's coupler path at crank angles 0, 1, 2.2, 3.1, 4.5 rad from the first:
+    the synthesized linkage passes each point at that input angle from the first (the closed form re-solves it
+    at the stated instants: within its reported error + 1e-9 of the size, the error within 1 %)."""
+    coords = {"O2": 0j, "A": 0.3 + 0.4j, "B": 1.2 + 1.1j, "O4": 1.3 + 0j, "P": 0.5 + 1.0j}
+    timing = np.array([0.0, 1.0, 2.2, 3.1, 4.5])
+    pts = [p[:2] for p in poses(coords, timing)]
+    out = syn.path(pts, timing=timing.tolist(), count=1, seed=0, linkage="fourbar")
+    c = out.best
+    assert c is not None and c.error <= 0.01
+    assert np.allclose(c.times, timing, atol=1e-12)
+    res = analytic_fourbar.solve(c.mechanism, c.times)
+    z = np.array([complex(*p) for p in pts])
+    assert np.max(np.abs(res["P.x"] + 1j * res["P.y"] - z)) <= c.error * out.task.size + TOL * out.task.size
+    assert np.allclose(np.diff(res["crank.theta"]), np.diff(timing) * c.mechanism.drivers[0].v0, atol=1e-12)
