@@ -100,6 +100,7 @@ class Candidates:
     items: list[Candidate]
     seconds: float = 0.0
     log: list[str] = field(default_factory=list)
+    curves: dict[str, np.ndarray] = field(default_factory=dict)  # Burmester's centre- and circle-point curves
 
     def __post_init__(self) -> None:
         self.items = rank(self.items)

@@ -344,6 +344,10 @@ def motion(
         raise SynthesisError("[motion] no four-bar: every pair of dyads found is degenerate")
     cands = [assess(d, task, req) for d in drafts]
     out = Candidates(task, cands).keep(name, count if not dyads and len(ps.p) < 5 else None)
+    if len(ps.p) >= 4:  # the curves of the first four poses, for the picture
+        first4 = Poses(ps.p[:4], ps.theta[:4], ps.centre, ps.size)
+        M, A, _ = centre_curve(first4, reach=3 * max(np.max(np.abs(ps.p)), 1.0))
+        out.curves = {"centre": ps.centre + ps.size * M, "circle": ps.centre + ps.size * A}
     out.seconds = time.perf_counter() - started
     return out
 

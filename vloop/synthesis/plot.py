@@ -80,6 +80,10 @@ def _poses(result: Candidates, c: Candidate, path: Path) -> Path:
     res = solve(c.mechanism, np.asarray(c.times))
     for k in range(len(res.t)):
         _draw(ax, c, res, k, alpha=0.35 + 0.65 * k / max(len(res.t) - 1, 1))
+    for key, style in (("centre", "C0"), ("circle", "C2")):
+        z = result.curves.get(key)
+        if z is not None and len(z):
+            ax.plot(z.real, z.imag, ".", ms=1.5, color=style, label=f"{key}-point curve (poses 1–4)")
     pts, ang = result.task.points, result.task.angles
     r = 0.15 * result.task.size
     for z, a in zip(pts, ang, strict=True):
@@ -87,6 +91,7 @@ def _poses(result: Candidates, c: Candidate, path: Path) -> Path:
                     arrowprops={"arrowstyle": "->", "color": "C3"})  # fmt: skip
     _targets(ax, pts)
     ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize=8)
     ax.set_xlabel(f"x [{result.task.units}]")
     ax.set_ylabel(f"y [{result.task.units}]")
     return _save(plt, fig, path)
