@@ -60,6 +60,10 @@ def __getattr__(name: str) -> Any:
         import importlib  # for vloop.solve must not look as if they depended on the studies built on them)
 
         return importlib.import_module(".studies.study", __name__).study
+    if name == "synthesis":  # design from motion (vloop.synthesis.function, motion, path), imported on first use
+        import importlib
+
+        return importlib.import_module(".synthesis", __name__)
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")
 
 
