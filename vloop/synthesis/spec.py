@@ -15,6 +15,7 @@ arrays refused), counts are bounded integers, point lists have the right shape.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -399,7 +400,12 @@ def run(spec: SynthSpec, progress: Any = None) -> Any:
     common = {"name": spec.name, "units": spec.units, "requirements": spec.requirements}
     opts = dict(spec.options)
     if spec.method == "function":
-        return function(**opts, **common)
-    if spec.method == "motion":
-        return motion(**opts, count=spec.candidates, **common)
-    return path(**opts, count=spec.candidates, seed=spec.seed, progress=progress, **common)
+        out = function(**opts, **common)
+    elif spec.method == "motion":
+        out = motion(**opts, count=spec.candidates, **common)
+    else:
+        out = path(**opts, count=spec.candidates, seed=spec.seed, progress=progress, **common)
+    if spec.title:
+        for c in out:
+            c.mechanism = dataclasses.replace(c.mechanism, title=f"{spec.title} ({c.name})")
+    return out
