@@ -113,8 +113,20 @@ def _instants(draw, n: int) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(gaps)])
 
 
+def _separated(coords: dict, t: np.ndarray) -> None:
+    """Discard draws where a dyad's link barely turns between two poses, absolutely or relative to the coupler
+    (the inverted positions of its pivot then nearly coincide): its pivot is an ill-conditioned intersection —
+    round-off grows like 1/turn² — which tests the draw, not the method."""
+    res = closed_form(coords, t)
+    for link in ("crank", "rocker"):
+        for th in (res[f"{link}.theta"], res[f"{link}.theta"] - res["coupler.theta"]):
+            gaps = np.abs(np.angle(np.exp(1j * (th[:, None] - th[None, :]))))[np.triu_indices(len(t), 1)]
+            assume(np.min(gaps) >= 0.05)
+
+
 def _two_positions(coords: dict, data) -> None:
     t = _instants(data.draw, 2)
+    _separated(coords, t)
     res = closed_form(coords, t)
     beta = float(res["crank.theta"][1] - res["crank.theta"][0])
     gamma = float(res["rocker.theta"][1] - res["rocker.theta"][0])
@@ -126,6 +138,7 @@ def _two_positions(coords: dict, data) -> None:
 
 def _three_positions(coords: dict, data) -> None:
     t = _instants(data.draw, 3)
+    _separated(coords, t)
     dyads = [{"fixed": (coords[k].real, coords[k].imag)} for k in ("O2", "O4")]
     out = syn.motion(poses(coords, t), dyads=dyads)
     c = own_pair(out, coords, size_of(coords))
