@@ -40,7 +40,10 @@ INFEASIBLE = 10.0  # the score of a member that cannot turn fully (the targets' 
 ORDER_PENALTY = 1.0
 FD_STEP = 1e-7  # forward-difference step of the polish's Jacobian (the targets' size is 1)
 COINCIDENT = 1e-9
-POLISH_REACH = 3.0  # the polish keeps every joint within this many times the search region
+# the polish keeps every joint within this many times the search region: a four-bar's within the region (room
+# beyond it mostly lets the polish wander off to large linkages), a six-bar's within three (moving off the four-bar
+# it was seeded with takes its extra dyad well outside the four-bar's span)
+POLISH_REACH = {"fourbar": 1.0, "stephenson3": 3.0}
 MAX_NFEV = 150  # least-squares evaluations of one polish (each a batched solve of the member and its neighbours)
 POLISH_AT = 0.1  # a member whose sampled score is within this (of the size) is worth polishing
 
@@ -149,7 +152,7 @@ def path(
     seed: int = 0,
     population: int = 10,
     generations: int = 400,
-    samples: int = 180,
+    samples: int = 120,
     restarts: int = 1,
     region: float = 1.5,
     requirements: Requirements | None = None,
@@ -398,8 +401,8 @@ def _polish(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray):
         return np.nan_to_num(np.concatenate([J.real, J.imag], 0))
 
     x0 = np.concatenate([coords, t[1:]]) if free_t else coords.copy()
-    # joints stay within a few search regions (or as far out as the member's own, re-anchored, already are)
-    reach = np.maximum(POLISH_REACH * p.box, 1.05 * np.abs(coords))
+    # joints stay within POLISH_REACH search regions (or as far out as the member's own, re-anchored, already are)
+    reach = np.maximum(POLISH_REACH[p.top.name] * p.box, 1.05 * np.abs(coords))
     lo = np.concatenate([-reach, np.zeros(len(t) - 1)]) if free_t else -reach
     hi = np.concatenate([reach, np.full(len(t) - 1, TWO_PI)]) if free_t else reach
     x0 = np.clip(x0, lo, hi)

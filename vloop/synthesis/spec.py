@@ -160,7 +160,7 @@ SECTIONS: tuple[Section, ...] = (
             ),
             Key("population", "integer 5..200", "10", "", "differential evolution: members per gene", 15),
             Key("generations", "integer 1..100000", "400", "", "differential evolution: at most this many", 200),
-            Key("samples", "integer 16..10000", "180", "", "input angles per turn the search scores", 360),
+            Key("samples", "integer 16..10000", "120", "", "input angles per turn the search scores", 360),
             Key("restarts", "integer 1..100", "1", "", "independent searches (more distinct candidates)", 2),
             Key("region", "0.1 ≤ number ≤ 100", "1.5", "", "joints searched within this many sizes of the points", 2.0),
         ),
