@@ -23,8 +23,9 @@ refuses at rtol), a branch sign change, a Newton step that does not converge, cl
 prediction, inputs too large to resolve or moving too far per sample, a non-finite number — is solved
 again on its own by the single-run solver (:func:`vloop.core.solver.solve` on the variant's LoopSystem: same
 structure, its own constants), which locates limits, passes change points and says why a motion stops,
-exactly as ``vloop.solve`` of that variant's file would. A variant that does not assemble at
-t = 0 on the nominal branch is reported, not solved.
+exactly as ``vloop.solve`` of that variant's file would (or, with ``solve(..., doubtful="fail")``, reported as
+not completed without that second solve). A variant that does not assemble at t = 0 on the nominal branch is
+reported, not solved.
 """
 
 from __future__ import annotations
@@ -885,8 +886,21 @@ class BatchOut(Outcomes):
     columns: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def solve(model: VariantModel, values: np.ndarray, grid: Grid, names: list[str]) -> BatchOut:
-    """Solve the variants whose parameter values are the rows of ``values`` on ``grid``; columns ``names``."""
+DOUBTFUL = 'doubtful: not solved on its own (solve(..., doubtful="fail"))'
+
+
+def solve(
+    model: VariantModel, values: np.ndarray, grid: Grid, names: list[str], *, doubtful: str = "single"
+) -> BatchOut:
+    """Solve the variants whose parameter values are the rows of ``values`` on ``grid``; columns ``names``.
+
+    ``doubtful``: what happens to a variant the batch is not sure of (module docstring): "single" (default)
+    solves it again with the single-run solver, which locates its limits and change points; "fail" reports it
+    as not completed (reason :data:`DOUBTFUL`, columns NaN) without solving it again — for a search that only
+    wants the variants the batch takes as they are (a synthesis scoring a random population, where many
+    variants reach limits and each single run would cost more than the whole batch)."""
+    if doubtful not in ("single", "fail"):
+        raise ValueError(f"doubtful must be 'single' or 'fail', got {doubtful!r}")
     run = _Run.build(model)
     values = np.atleast_2d(np.asarray(values, float))
     V = len(values)
@@ -898,11 +912,13 @@ def solve(model: VariantModel, values: np.ndarray, grid: Grid, names: list[str])
     for lo in range(0, V, per):
         hi = min(lo + per, V)
         with np.errstate(all="ignore"):
-            _solve_chunk(run, values[lo:hi], grid, names, out, lo)
+            _solve_chunk(run, values[lo:hi], grid, names, out, lo, doubtful == "single")
     return out
 
 
-def _solve_chunk(run: _Run, values: np.ndarray, grid: Grid, names: list[str], out: BatchOut, lo: int) -> None:
+def _solve_chunk(
+    run: _Run, values: np.ndarray, grid: Grid, names: list[str], out: BatchOut, lo: int, single: bool = True
+) -> None:
     model, sys = run.model, run.model.system
     d = model.designs(values)
     V = len(d)
@@ -936,6 +952,8 @@ def _solve_chunk(run: _Run, values: np.ndarray, grid: Grid, names: list[str], ou
             out.solver[lo + v] = "batch"
         elif not flags.assembled[v]:
             out.reason[lo + v] = flags.why[v]
+        elif not single:
+            out.reason[lo + v] = DOUBTFUL
         else:
             _single(run, values[v], d.take(slice(v, v + 1)), q0[v], pos[v], grid, names, out, lo + v)
 
