@@ -787,6 +787,25 @@ def test_inline_viewer_runs_in_its_sandboxed_frame(browser, eightbar, tmp_path: 
     assert requests == [] and problems == [], (requests, problems)
 
 
+def test_targets_are_drawn_where_they_are(open_page, tmp_path: Path) -> None:
+    """A synthesis's targets (points, and poses with their angle) are drawn as numbered crosses centred on
+    them, inside the fitted view."""
+    mech = vloop.load(MECHANISMS / "fourbar_textbook_example.toml")
+    result, _ = solve_for_view(mech)
+    targets = [(150.0, 40.0), (120.0, 90.0, 0.5), (-20.0, -30.0)]
+    o = open_page(write_view(mech, result, tmp_path / "targets.html", targets=targets))
+    crosses = o.page.locator("path[data-target]")
+    assert crosses.count() == 3
+    for k, t in enumerate(targets):
+        nums = [float(v) for v in re.findall(r"-?\d+(?:\.\d+)?(?:e[-+]?\d+)?", crosses.nth(k).get_attribute("d"))]
+        assert (nums[0] + nums[2]) / 2 == pytest.approx(t[0], abs=1e-9 * mech.scale)
+        assert -(nums[1] + nums[3]) / 2 == pytest.approx(t[1], abs=1e-9 * mech.scale)
+        assert (len(nums) == 12) == (len(t) == 3)  # a pose adds its angle's tick
+    box = [float(v) for v in o.page.locator("#view").get_attribute("viewBox").split()]
+    assert box[0] < -20.0 and box[1] < 30.0  # the far target is inside the view (SVG y down)
+    assert o.requests == [] and o.problems == [], o.problems
+
+
 def test_readme_screenshot_is_committed() -> None:
     shot = Path(__file__).resolve().parents[1] / "docs" / "viewer.png"
     assert shot.is_file() and shot.stat().st_size < 200_000

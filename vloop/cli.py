@@ -1,5 +1,5 @@
-"""Command line: ``vloop run | view | loops | info | validate | study | assemble | export``. One function per
-command.
+"""Command line: ``vloop run | view | loops | info | validate | study | synth | assemble | export``. One function
+per command.
 
 Exit codes: 0 success; 1 a validation that fails its tolerances; 2 bad input, an output that cannot be
 written, or a motion that cannot be completed (one line on stderr, no traceback; ``run`` still writes
@@ -583,6 +583,41 @@ def _engines(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("--engines: ")) from None
 
 
+# ---------------------------------------------------------------- synth
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    """Synthesize what a synthesis file asks; write the ranked candidates, the best solutions' mechanism files
+    and (with --plot, --html) their pictures and viewer pages into --out."""
+    from .files.output import default_folder
+    from .synthesis import load, run, write
+
+    spec = load(args.file)
+    out = Path(args.out) if args.out else default_folder(spec.name)
+    res = run(spec, progress=lambda msg: print(f"vloop: {msg}", file=sys.stderr))
+    files = write(res, out, files=spec.files, plot=args.plot, html=args.html)
+    for line in _synth_lines(res):
+        print(line)
+    print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _synth_lines(res: Any) -> list[str]:
+    """The result in a few lines: how many solutions, then one line per candidate."""
+    sols = res.solutions
+    lines = [
+        f"{res.task.method} generation: {len(res)} candidate{'s' if len(res) != 1 else ''}, {len(sols)} "
+        f"solution{'s' if len(sols) != 1 else ''} (no defect), in {res.seconds:.2f} s"
+    ]
+    for c in res:
+        what = "solution" if c.solution else "defective: " + ", ".join(c.defects)
+        lines.append(
+            f"  {c.name}: {c.topology}, largest error {c.error:.3g} of the size, Grashof: {c.grashof or '-'}, "
+            f"min transmission {np.degrees(c.min_transmission):.1f}°, {what}"
+        )
+    return lines
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command line: one sub-parser per command, each built by its own function."""
     p = _Parser(prog="vloop", description="Kinematics of planar linkages by automatic vector loops.")
@@ -597,6 +632,7 @@ def build_parser() -> argparse.ArgumentParser:
     _parser_study(sub)
     _parser_assemble(sub)
     _parser_export(sub)
+    _parser_synth(sub)
     return p
 
 
@@ -745,6 +781,15 @@ def _parser_study(sub: Any) -> None:
     _add_memory_budget(st, "study")
     _add_where(st, "chunks")
     st.set_defaults(func=cmd_study)
+
+
+def _parser_synth(sub: Any) -> None:
+    sy = sub.add_parser("synth", help="design from motion: function, motion or path generation (a synthesis file)")
+    sy.add_argument("file", help="synthesis file (TOML; README: Design from motion)")
+    sy.add_argument("--out", help="output folder (default: out/NAME)")
+    sy.add_argument("--plot", action="store_true", help="also write the picture (structural error, path or poses)")
+    sy.add_argument("--html", action="store_true", help="also write a viewer page per written candidate, targets drawn")
+    sy.set_defaults(func=cmd_synth)
 
 
 def _add_where(p: argparse.ArgumentParser, what: str) -> None:

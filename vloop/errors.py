@@ -50,3 +50,8 @@ class MechanismError(VloopError):
 
 class MotionError(VloopError):
     """The motion cannot be completed: limit position, toggle, branch flip, no convergence."""
+
+
+class SynthesisError(VloopError):
+    """A synthesis task that is malformed or cannot be met: too few positions for the method, coincident poses,
+    a function undefined on its range, free choices that admit no linkage."""

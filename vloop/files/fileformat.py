@@ -96,15 +96,21 @@ def loads(
     text: str, *, source: str = "<string>", base_dir: str | Path | None = None, allow_external_profiles: bool = False
 ) -> Mechanism:
     """Parse and validate a mechanism from TOML text (see :func:`load`). A leading byte-order mark is ignored."""
+    data = parse_toml(text, source)
+    return from_dict(data, source=source, base_dir=base_dir, allow_external_profiles=allow_external_profiles)
+
+
+def parse_toml(text: str, source: str) -> Any:
+    """The TOML structure of ``text`` (a leading byte-order mark ignored); MechanismError naming ``source`` for
+    a syntax error or nesting too deep to parse. Every vloop file (mechanism, study, synthesis) is read so."""
     try:
-        data = tomllib.loads(text.removeprefix("\ufeff"))
+        return tomllib.loads(text.removeprefix("\ufeff"))
     except tomllib.TOMLDecodeError as exc:
         raise MechanismError(f"{source}: TOML syntax error: {exc}", entry="toml") from None
     except RecursionError:
         raise MechanismError(
             f"{source}: TOML nested too deeply (arrays or tables inside each other)", entry="toml"
         ) from None
-    return from_dict(data, source=source, base_dir=base_dir, allow_external_profiles=allow_external_profiles)
 
 
 def from_dict(

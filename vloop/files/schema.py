@@ -300,12 +300,25 @@ class Problems:
             raise MechanismError(f"{self.where}: {text}{more}", entry=entry)
 
 
-def check_keys(table: dict, section: str, entry: str, probs: Problems, extra: set[str] | None = None) -> None:
-    """Every key of ``table`` must be one of the section's (plus ``extra``)."""
-    allowed = SECTION[section].allowed | (extra or set())
+def check_keys(table: dict, section: str | Section, entry: str, probs: Problems, extra: set[str] | None = None) -> None:
+    """Every key of ``table`` must be one of the section's (plus ``extra``); ``section`` names one of the
+    mechanism file's or is a Section of another file's schema."""
+    allowed = (SECTION[section] if isinstance(section, str) else section).allowed | (extra or set())
     for k in table:
         if k not in allowed:
             probs.add(entry, f"unknown key {show(k)} (allowed: {', '.join(sorted(allowed))})")
+
+
+def integer(table: dict, key: str, entry: str, lo: int, hi: int, probs: Problems, default: Any = None) -> Any:
+    """``table[key]`` as an integer in [lo, hi] (a float with an integer value is refused: counts are
+    integers), ``default`` if absent (or after recording a problem)."""
+    if key not in table:
+        return default
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        probs.add(entry, f"'{key}' must be an integer from {lo:,} to {hi:,}, got {show(v)}")
+        return default
+    return v
 
 
 def real(value: Any, what: str, entry: str, probs: Problems) -> float | None:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import MechanismError
-from ..files.schema import Key, Problems, Section, real, show
+from ..files.schema import Key, Problems, Section, check_keys, integer, real, show
 from ..files.schema import markdown as schema_markdown
 from ..model import Mechanism
 
@@ -205,16 +204,10 @@ class StudySpec:
 def load(path: str | Path) -> StudySpec:
     """Read and check a study file (and the mechanism it names). Raises MechanismError naming the entry."""
     from .. import load as load_mechanism  # (assembled at t = 0 if written from dimensions)
-    from ..files.fileformat import _read_text_file
+    from ..files.fileformat import _read_text_file, parse_toml
 
     path = Path(path)
-    text = _read_text_file(path, MAX_STUDY_BYTES, what="study file", entry=str(path))
-    try:
-        data = tomllib.loads(text.removeprefix("\ufeff"))
-    except tomllib.TOMLDecodeError as exc:
-        raise MechanismError(f"{path}: TOML syntax error: {exc}", entry="toml") from None
-    except RecursionError:
-        raise MechanismError(f"{path}: TOML nested too deeply", entry="toml") from None
+    data = parse_toml(_read_text_file(path, MAX_STUDY_BYTES, what="study file", entry=str(path)), str(path))
     probs = Problems(str(path))
     mech_name = data.get("mechanism") if isinstance(data, dict) else None
     if not isinstance(mech_name, str) or not mech_name.strip() or "\x00" in mech_name:
@@ -503,18 +496,8 @@ def _quantity_help(mech: Mechanism) -> str:
 
 
 def _check_keys(table: dict, section: str, entry: str, probs: Problems, extra: set[str] | None = None) -> None:
-    allowed = SECTION[section].allowed | (extra or set())
-    for k in table:
-        if k not in allowed:
-            probs.add(entry, f"unknown key {show(k)} (allowed: {', '.join(sorted(allowed))})")
+    check_keys(table, SECTION[section], entry, probs, extra)
 
 
 def _integer(table: dict, key: str, entry: str, lo: int, hi: int, probs: Problems) -> int | None:
-    """An integer in [lo, hi] (a float with an integer value is refused: counts are integers)."""
-    if key not in table:
-        return None
-    v = table[key]
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        probs.add(entry, f"'{key}' must be an integer from {lo:,} to {hi:,}, got {show(v)}")
-        return None
-    return v
+    return integer(table, key, entry, lo, hi, probs)

@@ -147,11 +147,18 @@ def _with_last(kept: list[Result], last: Result, done: int, every: int) -> Resul
 
 
 def build_payload(
-    mech: Mechanism, result: Result, *, forces: Any = None, error: str | None = None, system: Any = None
+    mech: Mechanism,
+    result: Result,
+    *,
+    forces: Any = None,
+    error: str | None = None,
+    system: Any = None,
+    targets: Any = None,
 ) -> dict[str, Any]:
     """Everything the page draws, as plain JSON-ready data (see the module docstring).
 
-    Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m.
+    Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m. ``targets``: a
+    synthesis's precision positions, drawn as numbered crosses: ``(x, y)`` points or ``(x, y, angle)`` poses.
     """
     from ..compiler import compile_system
 
@@ -186,6 +193,7 @@ def build_payload(
         "tracers": list(mech.points),
         "drivers": [{"kind": d.kind, "target": d.target, "symbol": d.symbol} for d in mech.drivers],
         "forces": _forces_meta(mech, forces),
+        "targets": _targets(mech, targets),
     }
 
 
@@ -201,6 +209,19 @@ def _fit_page(matrix: np.ndarray, page: dict | None) -> tuple[np.ndarray, dict |
     if total == 1:
         return matrix, None
     return matrix, {"every": total, "shown": matrix.shape[1], "of": before["of"]}
+
+
+def _targets(mech: Mechanism, targets: Any) -> list[dict[str, float]]:
+    """Target points or poses as {x, y[, angle]} (finite numbers only)."""
+    out = []
+    for k, t in enumerate(targets if targets is not None else ()):
+        vals = [float(v) for v in t]
+        if len(vals) not in (2, 3) or not all(math.isfinite(v) for v in vals):
+            raise ViewError(f"{mech.name}: target {k + 1} must be 2 or 3 finite numbers (x, y[, angle]), got {t!r:.60}")
+        out.append(dict(zip(("x", "y", "angle"), vals, strict=False)))
+    return out
+
+
 
 
 def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], np.ndarray]:
@@ -437,9 +458,17 @@ def _json_for_script(data: dict[str, Any]) -> str:
     return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
 
 
-def render(mech: Mechanism, result: Result, *, forces: Any = None, error: str | None = None, system: Any = None) -> str:
+def render(
+    mech: Mechanism,
+    result: Result,
+    *,
+    forces: Any = None,
+    error: str | None = None,
+    system: Any = None,
+    targets: Any = None,
+) -> str:
     """The viewer page (one HTML string, no external resource)."""
-    payload = build_payload(mech, result, forces=forces, error=error, system=system)
+    payload = build_payload(mech, result, forces=forces, error=error, system=system, targets=targets)
     script = _asset("viewer.js")
     digest = base64.b64encode(hashlib.sha256(script.encode("utf-8")).digest()).decode("ascii")
     csp = f"default-src 'none'; script-src 'sha256-{digest}'; style-src 'unsafe-inline'; img-src data:"
@@ -492,8 +521,9 @@ def write_view(
     forces: Any = None,
     error: str | None = None,
     system: Any = None,
+    targets: Any = None,
 ) -> Path:
     """Write the viewer page to ``path`` atomically (through :mod:`vloop.files.output`) and return the path."""
     from ..files.output import write_text
 
-    return write_text(path, render(mech, result, forces=forces, error=error, system=system))
+    return write_text(path, render(mech, result, forces=forces, error=error, system=system, targets=targets))

@@ -308,6 +308,19 @@
       d += "L" + xs[N - 1] + " " + -ys[N - 1];
       svg("path", { class: "v-path ns" + (tracers.has(p) ? " tracer" : ""), "stroke-width": tracers.has(p) ? 2 : 1.3, d, "data-path": p }, V.layers.paths);
     }
+    buildTargets();
+  }
+
+  function buildTargets() {
+    // a synthesis's targets: a cross at each point, a tick along the body's angle for a pose, its number
+    const r = 0.025 * D.scale;
+    (D.targets || []).forEach((t, k) => {
+      let d = `M${t.x - r} ${-(t.y - r)}L${t.x + r} ${-(t.y + r)}M${t.x - r} ${-(t.y + r)}L${t.x + r} ${-(t.y - r)}`;
+      if (t.angle !== undefined) d += `M${t.x} ${-t.y}L${t.x + 3 * r * Math.cos(t.angle)} ${-(t.y + 3 * r * Math.sin(t.angle))}`;
+      svg("path", { class: "v-target ns", "stroke-width": 2, d, "data-target": k + 1 }, V.layers.paths);
+      V.labels.push({ el: svg("text", { class: "v-label v-target-label", "text-anchor": "middle", "dominant-baseline": "central" }, V.layers.labels), fixed: [t.x, t.y], dir: [0.7, 0.7], text: String(k + 1) });
+    });
+    for (const l of V.labels) l.el.textContent = l.text;
   }
 
   function maxNorm(ax, ay) {
@@ -446,6 +459,7 @@
     }
     for (const s of D.sliders) if (s.ground) s.ends.forEach(([x, y]) => take(x, y));
     for (const j of D.joints) if (j.ground) take(X(j.name, 0), Y(j.name, 0) - 0.07 * D.scale);
+    for (const t of D.targets || []) take(t.x, t.y);
     const grow = (list, k, fx, fy) => {
       for (const e of list) {
         const ax = fx(e), ay = fy(e);
