@@ -41,9 +41,9 @@ sys.path.insert(0, str(ROOT))
 from bench_speed import rounds_of_each, worst_relative  # noqa: E402  (this script's folder is on sys.path)
 
 import vloop  # noqa: E402
-from vloop.core import newton as _newton  # noqa: E402
+from vloop.core import linalg, newton  # noqa: E402
 
-STAGES = {"coarse": "_coarse_pass", "exact_cond": "_condition_near"}
+STAGES = {"coarse": (newton, "_coarse_pass"), "exact_cond": (linalg, "_condition_near")}
 
 
 def timed(fn: Callable, spent: dict[str, float], label: str) -> Callable:
@@ -96,8 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=200)
     args = ap.parse_args(argv)
     spent = dict.fromkeys(STAGES, 0.0)
-    for label, fname in STAGES.items():
-        setattr(_newton, fname, timed(getattr(_newton, fname), spent, label))
+    for label, (module, fname) in STAGES.items():
+        setattr(module, fname, timed(getattr(module, fname), spent, label))
     for name in args.only:
         for steps in args.steps:
             print(report(name, steps, *rounds(name, steps, args.repeat, spent)), flush=True)

@@ -151,7 +151,7 @@ CASES = {
 }
 
 # an isosceles slider-crank (crank = rod = 1) reaches its change point at t = 1 s. Both the closed-form path
-# (tests/test_change_points.py) and the Newton-only path asked for here (tests/test_speed.py) continue through
+# (tests/test_change_points.py) and the Newton-only path asked for here (tests/test_chunks_and_budgets.py) continue through
 # it on the smooth branch.
 ISOSCELES = f"""
 name = "isosceles"

@@ -32,7 +32,7 @@ def test_stops_at_the_first_sample_past_the_limit():
     assert err.time == pytest.approx(mech.times[first_bad])
     assert err.driver_value[0] == pytest.approx(theta[first_bad])
     assert "t = 1.73 s" in str(err) and "θ_l2 = 2.4312 rad" in str(err) and "loop 1 (O2–A–B–O4)" in str(err)
-    # the limit itself, located by bisection, against the closed form (issue 7: to 1e-9 rad)
+    # the limit itself, located by bisection (to 1e-12 of the input range), against the closed form: 1e-9 rad
     assert abs(err.limit_value[0] - lim) < 1e-9
     # the rows before the failure are kept and correct (closed form, 1e-9 of scale)
     assert len(err.partial) == first_bad

@@ -28,11 +28,8 @@ def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     t = np.asarray(t, float)
     p = driver.profile
     if p is None:
-        return (
-            driver.x0 + driver.v0 * t + 0.5 * driver.a0 * t * t,
-            driver.v0 + driver.a0 * t,
-            np.full_like(t, driver.a0),
-        )
+        x, v = polynomial(driver.x0, driver.v0, driver.a0, t)
+        return x, v, np.full_like(t, driver.a0)
     lo, hi = p.t[0], p.t[-1]
     span = hi - lo
     bad = (t < lo - 1e-12 * span) | (t > hi + 1e-12 * span)
@@ -83,6 +80,12 @@ def _quintic_hermite(t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray)
     c4 = (-30 * dx + (14 * v1 + 16 * v0) * h + (3 * a0 - 2 * a1) * h**2) / (2 * h**4)
     c5 = (12 * dx - 6 * (v1 + v0) * h - (a0 - a1) * h**2) / (2 * h**5)
     return np.stack([c5, c4, c3, 0.5 * a0, v0, x0])
+
+
+def polynomial(x0: Any, v0: Any, a0: Any, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """x = x0 + v0·t + a0·t²/2 and ẋ = v0 + a0·t [rad or length; per s]: an input given by its numbers (arrays
+    broadcast against t: one set of numbers per variant)."""
+    return x0 + v0 * t + 0.5 * a0 * t * t, v0 + a0 * t
 
 
 def evaluate_all(mech: Mechanism, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
    by one (finer continuation, where the old sample-by-sample rules apply and decide).
 2. **Dense rows, all at once.** Every other row starts from the quintic Hermite interpolant of its
    coarse neighbours (positions, rates, accelerations). A square block takes one Newton step there
-   with the inverse Jacobians of all rows at once (:func:`kernels.invert_last`: Gauss–Jordan with
+   with the inverse Jacobians of all rows at once (:func:`vloop.core.linalg.invert_last`: Gauss–Jordan with
    the stack as the last axis, ~3× LAPACK's per-matrix calls at n ≤ 8), then chord steps with the
    same inverses until the steps fall below LOOSE; the loop sums are evaluated from the rows' known
    factors gathered once (:class:`_Rows`). A row must converge, close, keep the branch's determinant
@@ -35,18 +35,31 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import kernels as _s
-
-if TYPE_CHECKING:
-    from .kernels import _Plan, _Run, _State
+from .accuracy import EPS
+from .context import ChangePoint, Failure, Run, change_point_choices, impose_drivers
+from .data import TWO_PI, State
+from .linalg import (
+    apply_last,
+    cond_2norm,
+    condition_last,
+    condition_rows,
+    det_sign,
+    invert_last,
+    invert_rows,
+    least_squares_rows,
+    pinv_rows,
+    sum_squares,
+    svd_cond,
+)
+from .plans import Plan, store_rates
+from .sums import known_rhs
 
 COARSE_STEP = math.radians(15)  # motion between coarse rows (rad; sliders: 2π per mechanism size)
-TWO_PI = 2.0 * math.pi
 WINDOW = 8  # coarse rows predicted from one anchor and solved together
 JUMP = 0.5  # a step that corrects the predicted increment by more than this fraction is not trusted
 WINDOW_ITER = 8  # Newton iterations a window of coarse rows gets: a row needing more is not trusted (halving decides)
@@ -63,102 +76,107 @@ class Factor:
 
     J: np.ndarray  # (rows, 2m, nu)
     inv: np.ndarray  # (rows, nu, 2m): J⁻¹, or (JᵀJ)⁻¹Jᵀ for a rectangular block (least squares)
-    cond: np.ndarray  # condition number, angle columns divided by the mechanism size (see _condition)
+    cond: np.ndarray  # condition number, angle columns divided by the mechanism size (see condition_rows)
     sign: np.ndarray  # sign of det J (+1 for a rectangular block: no branch sign)
 
 
-class _Block:
+class NewtonBlock:
     """Index data to evaluate one Newton block's residual and Jacobian on any set of rows."""
 
-    def __init__(self, run: _Run, p: _Plan) -> None:
-        sys = run.sys
-        na = sys.n_angles
-        unk = p.block.unknowns
-        self.p = p
+    def __init__(self, plan: Plan, n_angles: int, scale: float) -> None:
+        na = n_angles
+        unk = plan.block.unknowns
+        self.plan = plan
         self.nu = len(unk)
-        self.m2 = 2 * p.C.shape[0]
+        self.m2 = 2 * plan.C.shape[0]
         self.square = self.m2 == self.nu
         self.ia = np.array([u for u, v in enumerate(unk) if v < na], int)
         self.isl = np.array([u for u, v in enumerate(unk) if v >= na], int)
         self.acol = np.array([v for v in unk if v < na], int)
         self.scol = np.array([v - na for v in unk if v >= na], int)
-        nt = len(p.ang)
-        D = np.zeros((2 * nt, p.C.shape[0], self.nu), complex)
-        for u, (v, mask) in enumerate(zip(unk, p.masks, strict=True)):
+        nt = len(plan.ang)
+        D = np.zeros((2 * nt, plan.C.shape[0], self.nu), complex)
+        for u, (v, mask) in enumerate(zip(unk, plan.masks, strict=True)):
             # ∂z/∂θ = j·z for every term turning with θ; ∂z/∂s = e for the slider's own term
-            D[np.nonzero(mask)[0] + (0 if v < na else nt), :, u] = p.C.T[mask]
+            D[np.nonzero(mask)[0] + (0 if v < na else nt), :, u] = plan.C.T[mask]
         self.D = D.reshape(2 * nt, -1)
-        self.colscale = np.where([v < na for v in unk], 1.0 / run.scale, 1.0)
-        self.scale = run.scale
+        self.colscale = np.where([v < na for v in unk], 1.0 / scale, 1.0)
+        self.scale = scale
         # per term: the position in x of its unknown angle and of its unknown slider (-1: none)
         where = {v: u for u, v in enumerate(unk)}
-        self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in p.ang], int)
-        self.t_us = np.array([where.get(int(q) + na, -1) if q >= 0 else -1 for q in p.sl], int)
+        self.t_ua = np.array([where.get(int(a), -1) if a >= 0 else -1 for a in plan.ang], int)
+        self.t_us = np.array([where.get(int(q) + na, -1) if q >= 0 else -1 for q in plan.sl], int)
         self.dep = np.nonzero((self.t_ua >= 0) | (self.t_us >= 0))[0]  # the terms the unknowns move
         self.known = np.setdiff1d(np.arange(nt), self.dep)
-        self._jacobian_entries(p)
+        self._jacobian_entries(plan)
 
-    def _jacobian_entries(self, p: _Plan) -> None:
+    def _jacobian_entries(self, plan: Plan) -> None:
         """J[l, u] = Σ_t C[l, t]·(j·z_t if u is t's angle; e_t if u is t's slider), as sums of signed rows of
         Re z, Im z, Re e, Im e over the moved terms: (entry of J, part, term, coefficient), by entry."""
         m, nu = self.m2 // 2, self.nu
         ent = []
         for k, t in enumerate(self.dep):
-            for lp in np.nonzero(p.C[:, t])[0]:
-                c = float(p.C[lp, t])
+            for lp in np.nonzero(plan.C[:, t])[0]:
+                c = float(plan.C[lp, t])
                 if self.t_ua[t] >= 0:  # j·z = −Im z + j·Re z
                     ent += [(lp * nu + int(self.t_ua[t]), 1, k, -c), ((lp + m) * nu + int(self.t_ua[t]), 0, k, c)]
                 if self.t_us[t] >= 0:
                     ent += [(lp * nu + int(self.t_us[t]), 2, k, c), ((lp + m) * nu + int(self.t_us[t]), 3, k, c)]
         self.j_entries = sorted(ent)
 
-    def read(self, st: _State, rows: np.ndarray) -> np.ndarray:
+    def read(self, state: State, rows: np.ndarray) -> np.ndarray:
         x = np.empty((len(rows), self.nu))
-        x[:, self.ia] = st.TH[rows][:, self.acol]
-        x[:, self.isl] = st.S[rows][:, self.scol]
+        x[:, self.ia] = state.theta[rows][:, self.acol]
+        x[:, self.isl] = state.s[rows][:, self.scol]
         return x
 
-    def read_last(self, st: _State, n: int) -> np.ndarray:
+    def read_last(self, state: State, n: int) -> np.ndarray:
         """The unknowns on rows 0..n-1, batch-last (nu, n)."""
         x = np.empty((self.nu, n))
-        x[self.ia] = st.TH[:n, self.acol].T
-        x[self.isl] = st.S[:n, self.scol].T
+        x[self.ia] = state.theta[:n, self.acol].T
+        x[self.isl] = state.s[:n, self.scol].T
         return x
 
-    def put(self, st: _State, rows: np.ndarray | slice, x: np.ndarray, cis: np.ndarray | None = None) -> None:
+    def put(self, state: State, rows: np.ndarray | slice, x: np.ndarray, cis: np.ndarray | None = None) -> None:
         """Store x (rows, nu) at the rows; ``cis``: e^{jθ} of its angles if known (rows, angles)."""
         r = rows if isinstance(rows, slice) else rows[:, None]
         if len(self.ia):
             th = x[:, self.ia]
-            st.TH[r, self.acol] = th
-            st.E[r, self.acol] = np.cos(th) + 1j * np.sin(th) if cis is None else cis
+            state.theta[r, self.acol] = th
+            state.e[r, self.acol] = np.cos(th) + 1j * np.sin(th) if cis is None else cis
         if len(self.isl):
-            st.S[r, self.scol] = x[:, self.isl]
+            state.s[r, self.scol] = x[:, self.isl]
 
-    def residual_jacobian(self, st: _State, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """[Re; Im] of the block's loop sums (rows, 2m) and their Jacobian (rows, 2m, nu)."""
-        p = self.p
-        z, e = st.z(rows, p.ang, p.sl, p.r, p.cd)
-        F = z @ p.Ct
-        Jc = (np.concatenate([1j * z, e], axis=1) @ self.D).reshape(len(rows), -1, self.nu)
+    def residual_jacobian(self, state: State, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """[Re; Im] of the block's loop sums (rows, 2m) and their Jacobian (rows, 2m, nu). Constants per row
+        (variants): each row summed on its own (einsum's loops; a BLAS product's rounding depends on how many
+        rows it is given)."""
+        plan = self.plan
+        z, e = state.term_vectors(rows, plan.ang, plan.sl, *plan.term_values(rows))
+        ze = np.concatenate([1j * z, e], axis=1)
+        if plan.per_row:
+            F, Jc = np.einsum("rt,tm->rm", z, plan.Ct), np.einsum("rt,tk->rk", ze, self.D)
+        else:
+            F, Jc = z @ plan.Ct, ze @ self.D
+        Jc = Jc.reshape(len(rows), -1, self.nu)
         return np.concatenate([F.real, F.imag], axis=1), np.concatenate([Jc.real, Jc.imag], axis=1)
 
-    def factor(self, st: _State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
+    def factor(self, state: State, rows: np.ndarray, rtol: float, tol: float) -> tuple[Factor, np.ndarray, np.ndarray]:
         """The Factor at the state's rows, the closure residual of each (fraction of the size) and whether
         the Newton step from there is below tol·(1 + |x|); that last step is applied (J is kept: it moves
         by the step, round-off for a converged row)."""
-        F, J = self.residual_jacobian(st, rows)
-        inv = _s.pinv_rows(J)  # by SVD when rectangular: normal equations would square the condition number
-        cond = _condition(J * self.colscale, inv / self.colscale[:, None], rtol)
+        F, J = self.residual_jacobian(state, rows)
+        inv = pinv_rows(J)  # by SVD when rectangular: normal equations would square the condition number
+        cond = condition_rows(J * self.colscale, inv / self.colscale[:, None], rtol)
         res = np.max(np.abs(F), axis=1, initial=0.0) / self.scale
         dx = -(inv @ F[..., None])[..., 0]
-        x = self.read(st, rows) + dx
+        x = self.read(state, rows) + dx
         with np.errstate(invalid="ignore"):
             step = np.max(np.abs(dx), axis=1, initial=0.0) / (1.0 + np.max(np.abs(x), axis=1, initial=0.0))
         conv = step <= tol
         fresh = step <= FRESH  # J at the rows that moved more is refreshed by the caller (rates use it)
         finite = np.all(np.isfinite(x), axis=1)
-        self.put(st, rows[finite], x[finite])
+        self.put(state, rows[finite], x[finite])
         return Factor(J, inv, cond, self.chain_sign(J, inv)), res, conv & fresh
 
     def chain_sign(self, J: np.ndarray, inv: np.ndarray) -> np.ndarray:
@@ -166,13 +184,13 @@ class _Block:
         every eigenvalue of J_{k−1}⁻¹J_k = I + E lies within 1 of 1, so det J_k has det J_{k−1}'s sign; rows
         where that bound fails (near a singular row) get their determinant computed."""
         if not self.square or len(J) < 2:
-            return _s.det_sign(J)
-        E = inv[:-1] @ (J[1:] - J[:-1])
+            return det_sign(J)
+        step = inv[:-1] @ (J[1:] - J[:-1])
         with np.errstate(invalid="ignore"):
-            close = np.sum(E * E, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
+            close = np.sum(step * step, axis=(1, 2)) < 0.25  # ‖E‖_F < 1/2: a margin for round-off
         exact = np.concatenate([[0], np.nonzero(~close)[0] + 1])
         sign = np.full(len(J), np.nan)
-        sign[exact] = _s.det_sign(J[exact])
+        sign[exact] = det_sign(J[exact])
         last = np.maximum.accumulate(np.where(np.isnan(sign), 0, np.arange(len(J))))
         return sign[last]
 
@@ -182,20 +200,22 @@ class _Rows:
     what the unknowns do not move (the other terms' sum, every moved term's known length and direction) is
     gathered once, so a Newton iteration costs a few small products over the rows."""
 
-    def __init__(self, blk: _Block, st: _State, n: int) -> None:
-        p, d = blk.p, blk.dep
-        E, S = st.E[:n], st.S[:n]
+    def __init__(self, blk: NewtonBlock, state: State, n: int) -> None:
+        plan, d = blk.plan, blk.dep
+        cis, lengths = state.e[:n], state.s[:n]
         kn = blk.known
         # batch-last and C-contiguous: arithmetic on a transposed view is several times slower
-        self.F0 = np.ascontiguousarray((((p.r[kn] + S[:, p.sl[kn]]) * (p.cd[kn] * E[:, p.ang[kn]])) @ p.Ct[kn]).T)
+        self.F0 = np.ascontiguousarray(
+            (((plan.r[kn] + lengths[:, plan.sl[kn]]) * (plan.cd[kn] * cis[:, plan.ang[kn]])) @ plan.Ct[kn]).T
+        )
         ua, us = blk.t_ua[d], blk.t_us[d]
         # a moved term's known direction and length (column -1 of E and S: the padding, 1 and 0)
-        self.W = np.ascontiguousarray((p.cd[d] * E[:, np.where(ua >= 0, -1, p.ang[d])]).T)
-        self.L = np.ascontiguousarray((p.r[d] + S[:, np.where(us >= 0, -1, p.sl[d])]).T)
+        self.direction = np.ascontiguousarray((plan.cd[d] * cis[:, np.where(ua >= 0, -1, plan.ang[d])]).T)
+        self.length = np.ascontiguousarray((plan.r[d] + lengths[:, np.where(us >= 0, -1, plan.sl[d])]).T)
         self.ta = np.nonzero(ua >= 0)[0]
         self.ta_u = np.searchsorted(blk.ia, ua[self.ta])  # which unknown angle turns each of those terms
         self.ts, self.xs = np.nonzero(us >= 0)[0], us[us >= 0]
-        self.Cd = np.ascontiguousarray(p.Ct[d].T)
+        self.Cd = np.ascontiguousarray(plan.Ct[d].T)
         self.blk = blk
         self.th: np.ndarray | None = None  # the unknown angles of the last evaluation and e^{jθ} there
         self.cis: np.ndarray | None = None
@@ -217,7 +237,7 @@ class _Rows:
         """[Re; Im] of the loop sums at x (2m, n) and, if ``jac``, their Jacobian (2m, nu, n), written into J
         if given (one this method wrote before: its structural zeros are not rewritten)."""
         blk = self.blk
-        e, ln = self.W, self.L
+        e, ln = self.direction, self.length
         with np.errstate(invalid="ignore"):
             if len(self.ta):
                 e = e.copy()
@@ -260,163 +280,52 @@ def _cis_series(d: np.ndarray) -> np.ndarray:
     return c + 1j * s
 
 
-def _apply(X: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """X·F per row of batch-last stacks: X (n, k, rows), F (k, rows)."""
-    return np.einsum("ukn,kn->un", X, F)
-
-
-def _condition_last(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
-    """:func:`_condition` on batch-last stacks (J and its inverse X, unscaled): an upper bound of the 2-norm
-    condition number on every row, the exact one (:func:`_condition_near`) where the bound reaches the flag level,
-    so flags and refusals follow the 2-norm rule exactly. The bound: ‖J‖_F·‖J⁻¹‖_F (≤ n× the exact one),
-    tightened where it reaches the level to (Σσ⁸)^⅛ of each (≤ n^¼×) by two Gram products."""
-    c2 = colscale * colscale
-    with np.errstate(invalid="ignore", over="ignore"):
-        fj, fx = c2 @ np.einsum("lun,lun->un", J, J), (1.0 / c2) @ np.einsum("uln,uln->un", X, X)
-        cond = np.sqrt(fj * fx)
-    cond = np.where(np.isfinite(cond), cond, np.inf)
-    level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
-    near = np.nonzero(cond > level)[0]
-    for lo in range(0, len(near), NEAR_CHUNK):  # in chunks: a few small stacks alive at a time
-        rows = near[lo : lo + NEAR_CHUNK]
-        cond[rows] = _condition_near(J[:, :, rows], X[:, :, rows], colscale, fj[rows], fx[rows], cond[rows], level)
-    return cond
-
-
-NEAR_CHUNK = 4096  # rows whose condition bound reaches the flag level, refined together
-
-
-def _condition_near(
-    J: np.ndarray, X: np.ndarray, colscale: np.ndarray, fj: np.ndarray, fx: np.ndarray, cond: np.ndarray, level: float
-) -> np.ndarray:
-    """The Frobenius bound ``cond`` (of J scaled by colscale, ‖·‖_F² = fj, and its inverse X, fx) tightened to
-    (Σσ⁸)^⅛ of each; the exact 2-norm condition number where that still reaches the level: σ_max of J and of
-    J⁻¹ by :func:`_sigma_max` (the Gram matrices' largest eigenvalues, bracketed to 1e-12), :func:`cond_2norm`
-    on the rows it cannot bracket or where J is within ~POWER_COND of singular."""
-    r = len(fj)
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        # scaled to unit Frobenius norm: the Gram matrices have trace 1, their powers neither overflow nor
-        # (the largest eigenvalue) underflow; row-major (rows, ·, ·): numpy's stacked matmul is ~4× faster on those
-        Js = np.multiply(J.transpose(2, 0, 1), colscale / np.sqrt(fj)[:, None, None], order="C")
-        Xs = np.multiply(X.transpose(2, 0, 1), 1.0 / (colscale[:, None] * np.sqrt(fx)[:, None, None]), order="C")
-        G = np.empty((2 * r, *Js.shape[1:]))
-        np.matmul(np.ascontiguousarray(Js.transpose(0, 2, 1)), Js, out=G[:r])
-        np.matmul(Xs, np.ascontiguousarray(Xs.transpose(0, 2, 1)), out=G[r:])  # X·Xᵀ: the singular values of X
-        G2 = G @ G
-        u2 = np.sqrt(np.sqrt(_sum_squares(G2)))  # (tr G⁴)^¼ ≥ λ_max: (Σσ⁸)^⅛ of J, of J⁻¹
-        tight = cond * np.sqrt(u2[:r] * u2[r:])
-    frobenius = cond
-    cond = np.where(tight < cond, tight, cond)
-    exact = np.nonzero(~(cond <= level))[0]
-    if not len(exact):
-        return cond
-    both = np.concatenate([exact, exact + r])
-    lam, ok = _sigma_max(G[both], G2[both])
-    m = len(exact)
-    c = frobenius[exact] * np.sqrt(lam[:m] * lam[m:])
-    ok = ok[:m] & ok[m:] & (c <= POWER_COND)
-    cond[exact[ok]] = c[ok]
-    rest = exact[~ok]
-    if len(rest):
-        cond[rest] = cond_2norm(Js[rest], G[rest])
-    return cond
-
-
-POWER_COND = 1e6  # past this condition number the exact one is taken by SVD, as numpy.linalg.cond would
-SQUARINGS = 4  # G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: bracketed where λ₂/λ₁ ≲ 0.44 (σ₂/σ₁ ≲ 0.66); others go to cond_2norm
-BRACKET = 1e-12  # the largest eigenvalue's upper and lower bounds agree to this (relative)
-
-
-def _sigma_max(G: np.ndarray, G2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The largest eigenvalue λ₁ of each symmetric positive semidefinite G (rows, n, n; trace 1) given G², and
-    whether it is bracketed to BRACKET: from below by the Rayleigh quotient of G's dominant column of G¹⁶
-    (G¹⁶ ∝ v₁v₁ᵀ + (λ₂/λ₁)¹⁶…: the quotient's error ∝ (λ₂/λ₁)³²), from above by (tr G³²)^(1/32) = ‖G¹⁶‖_F^(1/16)
-    (every other term of the trace is ≥ 0). G's powers by repeated squaring: λ₁ ≥ 1/n keeps λ₁¹⁶ far from
-    underflow."""
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore", under="ignore"):
-        P = G2
-        for _ in range(SQUARINGS - 1):
-            P = P @ P
-        upper = _sum_squares(P) ** (1 / 2 ** (SQUARINGS + 1))
-        d = np.argmax(np.diagonal(P, axis1=1, axis2=2), axis=1)
-        v = P[np.arange(len(P)), :, d]  # the dominant column
-        lower = np.einsum("ri,ri->r", v, np.einsum("rij,rj->ri", G, v)) / np.einsum("ri,ri->r", v, v)
-        ok = (upper - lower <= BRACKET * lower) & (lower > 0)
-    return lower, ok
-
-
-def _sum_squares(A: np.ndarray) -> np.ndarray:
-    """Σ A² over each matrix of a stack (rows, n, n): ‖A‖_F² (numpy's sum over two short axes is ~3× slower)."""
-    return np.einsum("rij,rij->r", A, A)
-
-
-def _svd_cond(A: np.ndarray) -> np.ndarray:
-    """2-norm condition numbers of a stack of rectangular matrices by SVD (infinite where not finite)."""
-    cond = np.full(len(A), np.inf)
-    ok = np.all(np.isfinite(A), axis=(1, 2))
-    if ok.any():
-        sv = np.linalg.svd(A[ok], compute_uv=False)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cond[ok] = sv[:, 0] / sv[:, -1]
-    return cond
-
-
-EIG_COND = 100.0  # up to this condition number the Gram matrix's eigenvalues give it to ~1e-11 (relative)
-
-
-def cond_2norm(A: np.ndarray, G: np.ndarray | None = None) -> np.ndarray:
-    """2-norm condition numbers of a stack of square matrices (rows, n, n), as numpy.linalg.cond's SVD gives
-    them: from the eigenvalues of the Gram matrix G = AᵀA (half an SVD's cost; given or computed) where
-    λ_min's round-off, ~n·ε·λ_max, stays below ~1e-11 of it (cond ≤ EIG_COND); by SVD where larger;
-    infinite where A is not finite."""
-    out = np.full(len(A), np.inf)
-    ok = np.nonzero(np.all(np.isfinite(A), axis=(1, 2)))[0]
-    if not len(ok):
-        return out
-    A = A[ok]
-    lam = np.linalg.eigvalsh(A.transpose(0, 2, 1) @ A if G is None else G[ok])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        c = np.sqrt(lam[:, -1] / lam[:, 0])
-    svd = np.nonzero(~(c <= EIG_COND))[0]
-    if len(svd):
-        sv = np.linalg.svd(A[svd], compute_uv=False)
-        with np.errstate(divide="ignore"):
-            c[svd] = np.where(sv[:, -1] > 0, sv[:, 0] / np.where(sv[:, -1] > 0, sv[:, -1], 1.0), np.inf)
-    out[ok] = c
-    return out
-
-
-def _condition(Js: np.ndarray, Jinv_s: np.ndarray, rtol: float) -> np.ndarray:
-    """Condition number of the scaled Jacobians: the Frobenius-norm one ‖J‖_F·‖J⁺‖_F (an upper bound
-    of the 2-norm one, at most nu times it) on every row, replaced by the exact 2-norm one (singular
-    values) where the bound reaches the level at which a sample is flagged (cond³·ε > ILL_FRACTION·rtol),
-    so flags and refusals follow the 2-norm rule exactly while most rows skip the SVD."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum(Jinv_s * Jinv_s, axis=(1, 2)))
-    cond = np.where(np.isfinite(cond), cond, np.inf)
-    level = (_s.ILL_FRACTION * rtol / _s.EPS) ** (1 / 3)
-    near = np.nonzero(cond > level)[0]
-    if len(near):
-        sv = np.linalg.svd(Js[near], compute_uv=False)
-        with np.errstate(divide="ignore"):
-            cond[near] = np.where(sv[:, -1] > 0, sv[:, 0] / np.where(sv[:, -1] > 0, sv[:, -1], 1.0), np.inf)
-    return cond
+def newton_rows(
+    residual: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    x: np.ndarray,
+    tol: float,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched Newton–Raphson from ``x`` (rows, nu): ``residual(act, x_act)`` stores x_act on the rows ``act`` and
+    gives their residuals and Jacobians (F, J); a row stops as its step falls below tol·(1 + |x|) (least squares
+    where J has more rows than columns). Returns (solution, converged mask); the caller stores the finite rows."""
+    x = x.copy()
+    conv = np.zeros(len(x), bool)
+    act = np.arange(len(x))
+    for _ in range(max_iter):
+        F, J = residual(act, x[act])
+        dx = least_squares_rows(J, -F)
+        xa = x[act] + dx
+        x[act] = xa
+        finite = np.all(np.isfinite(xa), axis=1)
+        with np.errstate(invalid="ignore"):
+            done = finite & (np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(xa), axis=1)))
+        conv[act[done]] = True
+        act = act[finite & ~done]
+        if not len(act):
+            break
+    return x, conv
 
 
 def newton(
-    blk: _Block, st: _State, rows: np.ndarray, x: np.ndarray, tol: float, max_iter: int
+    blk: NewtonBlock, state: State, rows: np.ndarray, x: np.ndarray, tol: float, max_iter: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched Newton from ``x`` on ``rows``: (solution, converged mask); rows stop as their step falls
     below tol·(1 + |x|)."""
 
     def residual(act: np.ndarray, xa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        blk.put(st, rows[act], xa)
-        return blk.residual_jacobian(st, rows[act])
+        blk.put(state, rows[act], xa)
+        return blk.residual_jacobian(state, rows[act])
 
-    x, conv = _s.newton_rows(residual, x, tol, max_iter)
+    x, conv = newton_rows(residual, x, tol, max_iter)
     good = np.all(np.isfinite(x), axis=1)
-    blk.put(st, rows[good], x[good])
+    blk.put(state, rows[good], x[good])
     return x, conv
+
+
+def factor_rates(plan: Plan, state: State, k: slice, inv: np.ndarray, what: str) -> np.ndarray:
+    """Rates of a Newton block from its factored Jacobians (J⁻¹, or the least-squares (JᵀJ)⁻¹Jᵀ)."""
+    return (inv @ known_rhs(plan.vel_sum if what == "v" else plan.total, state, k, what)[..., None])[..., 0]
 
 
 # ------------------------------------------------------------------ the block over a run
@@ -425,13 +334,13 @@ def newton(
 class _Ctx:
     """One Newton block being solved on rows 0..n-1 of a state (row 0 assembled)."""
 
-    def __init__(self, run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int) -> None:
-        self.run, self.st, self.tg, self.i, self.p, self.n = run, st, tg, i, p, n
-        cache = run.sys.cache.setdefault("newton", {})
+    def __init__(self, run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, n: int) -> None:
+        self.run, self.state, self.t_grid, self.i, self.plan, self.n = run, state, t_grid, i, plan, n
+        cache = run.system.cache.setdefault("newton", {})
         if i not in cache:
-            cache[i] = _Block(run, p)
-        self.blk: _Block = cache[i]
-        self.na = run.sys.n_angles
+            cache[i] = NewtonBlock(plan, run.system.n_angles, run.scale)
+        self.blk: NewtonBlock = cache[i]
+        self.na = run.system.n_angles
         self.xd = np.zeros((n, self.blk.nu))  # rates at the rows continued one by one (predictors)
         self.xdd = np.zeros((n, self.blk.nu))
         self.weak = np.zeros(n, bool)  # rows whose rates are too ill-conditioned to predict from
@@ -440,64 +349,66 @@ class _Ctx:
     def expected_sign(self, rows: np.ndarray) -> np.ndarray:
         """The determinant sign of the run's assembly branch at these rows (flipped after change points)."""
         ref = self.run.newton_sign.get(self.i)
-        return ref * self.run.sigma(self.i, self.tg[rows])
+        return ref * self.run.sigma(self.i, self.t_grid[rows])
 
     def rates_rows(self, rows: np.ndarray, J: np.ndarray) -> None:
         """ẋ and ẍ of the block at these rows (exact linear solves; least squares for a redundant block), kept
         for the Taylor predictor; a row too ill-conditioned to predict from is marked weak."""
-        p, st, na, blk = self.p, self.st, self.na, self.blk
-        X = _s.invert_rows(J) if blk.square else None  # one inverse for both right-hand sides
+        plan, state, na, blk = self.plan, self.state, self.na, self.blk
+        X = invert_rows(J) if blk.square else None  # one inverse for both right-hand sides
         for what, out in (("v", self.xd), ("a", self.xdd)):
-            rhs = _s.known_rhs(p.total, st, rows, what)
-            val = _s.least_squares_rows(J, rhs) if X is None else (X @ rhs[..., None])[..., 0]
+            rhs = known_rhs(plan.total, state, rows, what)
+            val = least_squares_rows(J, rhs) if X is None else (X @ rhs[..., None])[..., 0]
             out[rows] = val
             if what == "v":
-                _s._store(p, st, rows, val, "v", na)
-        _s._store(p, st, rows, np.zeros((len(rows), blk.nu)), "v", na)
+                store_rates(plan, state, rows, val, "v", na)
+        store_rates(plan, state, rows, np.zeros((len(rows), blk.nu)), "v", na)
         Js = J * blk.colscale
         if X is None:
-            cond = cond_2norm(Js) if Js.shape[1] == Js.shape[2] else _svd_cond(Js)
+            cond = cond_2norm(Js) if Js.shape[1] == Js.shape[2] else svd_cond(Js)
         else:  # the Frobenius bound, the exact 2-norm one where it decides
             with np.errstate(invalid="ignore", over="ignore"):
                 Xs = X / blk.colscale[:, None]
-                cond = np.sqrt(_sum_squares(Js) * _sum_squares(Xs))
-            exact = np.nonzero(~(cond * cond * _s.EPS <= self.run.rtol))[0]
+                cond = np.sqrt(sum_squares(Js) * sum_squares(Xs))
+            exact = np.nonzero(~(cond * cond * EPS <= self.run.rtol))[0]
             if len(exact):
                 cond[exact] = cond_2norm(Js[exact])
         # next to a singular row (a change point) the rates are not accurate enough to predict from
         finite = np.all(np.isfinite(self.xd[rows]), axis=1) & np.all(np.isfinite(self.xdd[rows]), axis=1)
-        self.weak[rows] = ~(cond * cond * _s.EPS <= self.run.rtol) | ~finite
+        self.weak[rows] = ~(cond * cond * EPS <= self.run.rtol) | ~finite
 
     def rates_at(self, k: int, J: np.ndarray) -> None:
         """:meth:`rates_rows` at row k alone."""
         self.rates_rows(np.array([k]), J[None])
 
 
-def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int) -> tuple[_s._Failure | None, Factor]:
+def solve_block(
+    run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, n: int
+) -> tuple[Failure | None, Factor]:
     """Solve Newton block ``i`` on rows 0..n-1; returns (the first failure or None, the Factor of the rows
     before it). Rows from the failure on are left unsolved."""
-    ctx = _Ctx(run, st, tg, i, p, n)
+    ctx = _Ctx(run, state, t_grid, i, plan, n)
     blk = ctx.blk
-    _, J0 = blk.residual_jacobian(st, np.array([0]))
+    _, J0 = blk.residual_jacobian(state, np.array([0]))
     if i not in run.newton_sign:
-        run.newton_sign[i] = float(_s.det_sign(J0)[0] or 1.0) * float(run.sigma(i, tg[:1])[0])
+        run.newton_sign[i] = float(det_sign(J0)[0] or 1.0) * float(run.sigma(i, t_grid[:1])[0])
     if n > 1:
         ctx.rates_at(0, J0[0])
     coarse, n_ok, failure = _coarse_pass(ctx)
     coarse = coarse[coarse < n_ok]
     if blk.square and n_ok:
-        rows, j, far, fac, res, conv = _dense_square(ctx, coarse, n_ok)
+        rows, j, far, factor, res, conv = _dense_square(ctx, coarse, n_ok)
     else:
         rows, j, far = _dense_newton(ctx, coarse, n_ok)
-        fac, res, conv = blk.factor(st, np.arange(n_ok), run.rtol, run.tol)
+        factor, res, conv = blk.factor(state, np.arange(n_ok), run.rtol, run.tol)
     again = np.nonzero(~conv)[0]
     if len(again):  # one more step where the last one was above tol: its Jacobian is refreshed too
-        fac2, res2, conv2 = blk.factor(st, again, run.rtol, run.tol)
+        fac2, res2, conv2 = blk.factor(state, again, run.rtol, run.tol)
         for name in ("J", "inv", "cond", "sign"):
-            getattr(fac, name)[again] = getattr(fac2, name)
+            getattr(factor, name)[again] = getattr(fac2, name)
         res[again], conv[again] = np.maximum(res[again], res2), conv2
     if len(rows):  # every dense row must converge, close, stay near its prediction, on the branch
-        bad = ~conv[rows] | far | ~(res[rows] <= CLOSURE) | (fac.sign[rows] != ctx.expected_sign(rows))
+        bad = ~conv[rows] | far | ~(res[rows] <= CLOSURE) | (factor.sign[rows] != ctx.expected_sign(rows))
         for jj in np.unique(j[bad]):  # continue those intervals one row at a time
             lo, hi = int(coarse[jj]), int(coarse[jj + 1])
             for k in range(lo + 1, hi):
@@ -508,27 +419,27 @@ def solve_block(run: _Run, st: _State, tg: np.ndarray, i: int, p: _Plan, n: int)
             if failure is not None and failure.sample <= hi:
                 break
         if np.any(bad):
-            fac, _, _ = _refactor(blk, st, n_ok, run)
-    return failure, fac
+            factor, _, _ = _refactor(blk, state, n_ok, run)
+    return failure, factor
 
 
-def _refactor(blk: _Block, st: _State, n: int, run: _Run) -> tuple[Factor, np.ndarray, np.ndarray]:
+def _refactor(blk: NewtonBlock, state: State, n: int, run: Run) -> tuple[Factor, np.ndarray, np.ndarray]:
     """The Factor of rows 0..n-1 as they stand (a last Newton step applied)."""
     if blk.square and n:
-        return _factor_square(_Rows(blk, st, n), st, blk.read_last(st, n), run.rtol, run.tol)
-    return blk.factor(st, np.arange(n), run.rtol, run.tol)
+        return _factor_square(_Rows(blk, state, n), state, blk.read_last(state, n), run.rtol, run.tol)
+    return blk.factor(state, np.arange(n), run.rtol, run.tol)
 
 
 def _input_travel(ctx: _Ctx) -> np.ndarray:
     """Cumulative travel [rad; sliders: 2π per mechanism size] of the block's known variables over the rows."""
-    st, n, sys = ctx.st, ctx.n, ctx.run.sys
-    na = sys.n_angles
+    state, n, system = ctx.state, ctx.n, ctx.run.system
+    na = system.n_angles
     mine = set()
-    for li in ctx.p.block.loops:
-        mine.update(sys.loops[li].variables)
+    for li in ctx.plan.block.loops:
+        mine.update(system.loops[li].variables)
     travel = np.zeros(max(n - 1, 0))
-    for v in sorted(mine - set(ctx.p.block.unknowns)):
-        d = np.diff(st.TH[:n, v]) if v < na else np.diff(st.S[:n, v - na]) * (TWO_PI / ctx.run.scale)
+    for v in sorted(mine - set(ctx.plan.block.unknowns)):
+        d = np.diff(state.theta[:n, v]) if v < na else np.diff(state.s[:n, v - na]) * (TWO_PI / ctx.run.scale)
         travel = np.maximum(travel, np.abs(d))
     return np.concatenate([[0.0], np.cumsum(travel)])
 
@@ -547,12 +458,12 @@ def _next_row(ctx: _Ctx, a: int, cum: np.ndarray) -> int:
         else:
             continue
         h_max = h if h < h_max else h_max
-    b = int(np.searchsorted(ctx.tg[: ctx.n], ctx.tg[a] + h_max, side="right")) - 1
+    b = int(np.searchsorted(ctx.t_grid[: ctx.n], ctx.t_grid[a] + h_max, side="right")) - 1
     b = min(b, int(np.searchsorted(cum, cum[a] + COARSE_STEP, side="right")) - 1, ctx.n - 1)
     return max(b, a + 1)
 
 
-def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, _s._Failure | None]:
+def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, Failure | None]:
     """Adaptive continuation: from each solved row, the furthest row the predictor is trusted to reach;
     an untrusted step is halved, down to single rows where the sample-by-sample rules decide.
     Returns (the rows solved on the way, rows solved, failure)."""
@@ -582,7 +493,7 @@ def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
     """Up to WINDOW coarse rows ahead of row ``a``, (b − a) rows apart (closer where the inputs pass k·COARSE_STEP
     of travel sooner), predicted from a's Taylor series and solved together; returns the leading rows that pass
     every check of a strict step (their rates computed)."""
-    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
+    run, state, blk, t_grid = ctx.run, ctx.state, ctx.blk, ctx.t_grid
     if ctx.weak[a] or b - a < 2:
         return np.zeros(0, int)
     k = np.arange(1, WINDOW + 1)
@@ -592,15 +503,15 @@ def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
     rows = rows[rows > a]
     if len(rows) < 2:
         return np.zeros(0, int)
-    h = (tg[rows] - tg[a])[:, None]
-    x_a = blk.read(st, np.array([a]))
+    h = (t_grid[rows] - t_grid[a])[:, None]
+    x_a = blk.read(state, np.array([a]))
     incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
     pred = x_a + incr
-    x, conv = newton(blk, st, rows, pred, run.tol, min(run.max_iter, WINDOW_ITER))
-    F, J = blk.residual_jacobian(st, rows)
+    x, conv = newton(blk, state, rows, pred, run.tol, min(run.max_iter, WINDOW_ITER))
+    F, J = blk.residual_jacobian(state, rows)
     with np.errstate(invalid="ignore"):
         res = np.max(np.abs(F), axis=1) / run.scale
-    ok = conv & (res <= CLOSURE) & ~_far(blk, x - pred, incr, x_a) & (_s.det_sign(J) == ctx.expected_sign(rows))
+    ok = conv & (res <= CLOSURE) & ~_far(blk, x - pred, incr, x_a) & (det_sign(J) == ctx.expected_sign(rows))
     m = int(np.argmin(ok)) if not ok.all() else len(rows)
     if m == 0:
         return np.zeros(0, int)
@@ -610,50 +521,50 @@ def _window(ctx: _Ctx, a: int, b: int, cum: np.ndarray) -> np.ndarray:
     return rows
 
 
-def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> _s._Failure | None:
+def _step(ctx: _Ctx, a: int, k: int, strict: bool) -> Failure | None:
     """Continue from solved row ``a`` (its rates known) to row ``k``. Strict: any doubt returns a
     failure (the caller refines); otherwise a branch sign change may be a change point."""
-    run, st, blk, tg = ctx.run, ctx.st, ctx.blk, ctx.tg
-    h = tg[k] - tg[a]
-    x_a = blk.read(st, np.array([a]))[0]
+    run, state, blk, t_grid = ctx.run, ctx.state, ctx.blk, ctx.t_grid
+    h = t_grid[k] - t_grid[a]
+    x_a = blk.read(state, np.array([a]))[0]
     if ctx.weak[a]:  # the secant through the row before instead of the (unreliable) Taylor series
         b = ctx.prev[a]
-        incr = (x_a - blk.read(st, np.array([b]))[0]) * (h / (tg[a] - tg[b])) if b >= 0 else np.zeros(blk.nu)
+        incr = (x_a - blk.read(state, np.array([b]))[0]) * (h / (t_grid[a] - t_grid[b])) if b >= 0 else np.zeros(blk.nu)
     else:
         incr = ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
     pred = x_a + incr
     rows = np.array([k])
-    x, conv = newton(blk, st, rows, pred[None], run.tol, run.max_iter)
-    F, J = blk.residual_jacobian(st, rows)
+    x, conv = newton(blk, state, rows, pred[None], run.tol, run.max_iter)
+    F, J = blk.residual_jacobian(state, rows)
     res = float(np.max(np.abs(F))) / run.scale if np.all(np.isfinite(F)) else math.inf
     far = bool(_far(blk, x - pred, incr[None], x_a[None])[0])
-    sign = float(_s.det_sign(J)[0])
+    sign = float(det_sign(J)[0])
     flipped = sign != float(ctx.expected_sign(rows)[0])
     if strict:
         if not conv[0] or res > CLOSURE or far or flipped:
-            return _s._Failure(k, ctx.p.block.loops[0], "untrusted coarse step")
+            return Failure(k, ctx.plan.block.loops[0], "untrusted coarse step")
     else:
         if not conv[0] or res > CLOSURE or not np.all(np.isfinite(J)):
-            worst = ctx.p.block.loops[
-                int(np.argmax(np.abs(F[0]) if np.all(np.isfinite(F)) else 0)) % len(ctx.p.block.loops)
+            worst = ctx.plan.block.loops[
+                int(np.argmax(np.abs(F[0]) if np.all(np.isfinite(F)) else 0)) % len(ctx.plan.block.loops)
             ]
-            return _s._Failure(k, worst, f"Newton did not converge (closure {res:.2g} of the mechanism size)")
+            return Failure(k, worst, f"Newton did not converge (closure {res:.2g} of the mechanism size)")
         if flipped and sign != 0 and far and run.detect:  # Newton may have jumped: follow the path in small steps
             smooth = _smooth_to(ctx, a, k)
             if smooth is not None:
-                blk.put(st, rows, smooth[None])
-                F, J = blk.residual_jacobian(st, rows)
-                sign = float(_s.det_sign(J)[0])
+                blk.put(state, rows, smooth[None])
+                F, J = blk.residual_jacobian(state, rows)
+                sign = float(det_sign(J)[0])
                 flipped, far = sign != float(ctx.expected_sign(rows)[0]), False
         if flipped and sign != 0:
             if not (run.detect and not far and _passes_change_point(ctx, a, k)):
-                return _s._Failure(
+                return Failure(
                     k,
-                    ctx.p.block.loops[0],
+                    ctx.plan.block.loops[0],
                     "the assembly branch flipped (the Jacobian changed sign): a toggle was crossed",
                 )
         elif sign == 0:
-            return _s._Failure(k, ctx.p.block.loops[0], "the loop Jacobian is singular (a toggle)")
+            return Failure(k, ctx.plan.block.loops[0], "the loop Jacobian is singular (a toggle)")
     ctx.rates_at(k, J[0])
     ctx.prev[k] = a
     return None
@@ -663,10 +574,10 @@ def _passes_change_point(ctx: _Ctx, a: int, k: int) -> bool:
     """Between rows a and k the determinant changed sign on the smooth continuation: locate where
     (bisection on det J along the continuation from row a) and record the change point."""
     run, i = ctx.run, ctx.i
-    choices = _s._change_point_choices(run.sys, run.sys.loops[ctx.p.block.loops[0]].index + 1)
+    choices = change_point_choices(run.system, run.system.loops[ctx.plan.block.loops[0]].index + 1)
     if "other" in choices:
         return False  # only a closed-form dyad can be sent onto the other branch
-    lo, hi = float(ctx.tg[a]), float(ctx.tg[k])
+    lo, hi = float(ctx.t_grid[a]), float(ctx.t_grid[k])
     s_lo = float(ctx.expected_sign(np.array([a]))[0])
     for _ in range(LOCATE_STEPS):
         mid = 0.5 * (lo + hi)
@@ -677,9 +588,9 @@ def _passes_change_point(ctx: _Ctx, a: int, k: int) -> bool:
             lo = mid
         else:
             hi = mid
-        if hi - lo <= 1e-12 * (ctx.tg[k] - ctx.tg[a]):
+        if hi - lo <= 1e-12 * (ctx.t_grid[k] - ctx.t_grid[a]):
             break
-    run.events.setdefault(i, []).append(_s._ChangePoint(i, 0.5 * (lo + hi), True, True))
+    run.events.setdefault(i, []).append(ChangePoint(i, 0.5 * (lo + hi), True, True))
     return True
 
 
@@ -688,10 +599,10 @@ def _smooth_to(ctx: _Ctx, a: int, k: int) -> np.ndarray | None:
     times, each predicted by the secant through the two before, the step halved wherever a solve corrects
     its prediction by more than JUMP of the move (a path bending fast next to a singular point); None if the
     step falls below 2⁻¹⁶ of the interval or a solve does not converge."""
-    t_a, t_k = float(ctx.tg[a]), float(ctx.tg[k])
+    t_a, t_k = float(ctx.t_grid[a]), float(ctx.t_grid[k])
     span = t_k - t_a
     t, dt = t_a, span / SUBSTEPS
-    x_prev = ctx.blk.read(ctx.st, np.array([a]))[0]
+    x_prev = ctx.blk.read(ctx.state, np.array([a]))[0]
     rate = ctx.xd[a]
     while t < t_k - 1e-12 * span:
         dt = min(dt, t_k - t)
@@ -707,16 +618,16 @@ def _smooth_to(ctx: _Ctx, a: int, k: int) -> np.ndarray | None:
     return x_prev
 
 
-def _trial_at(ctx: _Ctx, a: int, t: float) -> _State | None:
+def _trial_at(ctx: _Ctx, a: int, t: float) -> State | None:
     """A two-row state: row 0 a copy of row a, row 1 at time t with the inputs there and the blocks before this
     one solved (None if one of them cannot be)."""
     run = ctx.run
     sub_run = dataclasses.replace(run, detect=False, check=False, rates=False)
-    trial = _s._State(2, run.sys.n_angles, len(run.sys.slider_names))
-    for name in ("E", "TH", "S", "W", "AL", "SD", "SDD"):
-        getattr(trial, name)[0] = getattr(ctx.st, name)[a]
-    grid = np.array([ctx.tg[a], t])
-    _s._impose_drivers(run.sys, trial, *run.inputs(grid))
+    trial = State(2, run.system.n_angles, len(run.system.slider_names))
+    for name in ("e", "theta", "s", "omega", "alpha", "s_dot", "s_ddot"):
+        getattr(trial, name)[0] = getattr(ctx.state, name)[a]
+    grid = np.array([ctx.t_grid[a], t])
+    impose_drivers(run.system, trial, *run.inputs(grid))
     if ctx.i > 0 and sub_run.blocks(sub_run, trial, grid, 2, upto=ctx.i - 1).n_ok < 2:
         return None
     return trial
@@ -737,8 +648,8 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     trial = _trial_at(ctx, a, t)
     if trial is None:
         return None
-    h = t - ctx.tg[a]
-    x_a = ctx.blk.read(ctx.st, np.array([a]))[0]
+    h = t - ctx.t_grid[a]
+    x_a = ctx.blk.read(ctx.state, np.array([a]))[0]
     pred = x_a + ctx.xd[a] * h + 0.5 * ctx.xdd[a] * h * h
     _, conv = newton(ctx.blk, trial, np.array([1]), pred[None], run.tol, run.max_iter)
     if not conv[0]:
@@ -747,7 +658,7 @@ def _det_at(ctx: _Ctx, a: int, t: float) -> float | None:
     return float(np.linalg.det(J[0])) if ctx.blk.square else 1.0
 
 
-def _far(blk: _Block, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
+def _far(blk: NewtonBlock, correction: np.ndarray, move: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Rows whose Newton correction exceeds JUMP of the predicted move (largest component, angles in rad,
     sliders in 2π per mechanism size): the predictor is not trusted to have led to the same branch."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)
@@ -762,9 +673,9 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) ->
     the quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶):
     batch-last (nu, rows), from the coarse rows' positions xc (nu, coarse rows). The quintic's coefficients
     in u (0..1 across an interval) are taken once per interval; each row gathers them and runs Horner."""
-    tg = ctx.tg
+    t_grid = ctx.t_grid
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
-    tc = tg[coarse]
+    tc = t_grid[coarse]
     H = tc[1:] - tc[:-1]
     v, acc = ctx.xd[coarse].T, ctx.xdd[coarse].T
     xa, xb = xc[:, :-1], xc[:, 1:]
@@ -784,16 +695,16 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) ->
     # rows sorted: each interval's coefficients repeated over its rows (contiguous, unlike C[:, :, j]: ~5× faster
     # arithmetic after)
     C = np.repeat(C, np.bincount(j, minlength=len(H)), axis=2)
-    u = (tg[rows] - tc[j]) / H[j]
+    u = (t_grid[rows] - tc[j]) / H[j]
     pred = C[5] * u
-    for p in range(4, 0, -1):
-        pred += C[p]
+    for power in range(4, 0, -1):
+        pred += C[power]
         pred *= u
     pred += C[0]
     return j, pred
 
 
-def _far_dense(blk: _Block, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
+def _far_dense(blk: NewtonBlock, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
     """:func:`_far` for rows between coarse rows (batch-last: correction (nu, rows), the coarse rows' x (nu, ·),
     each row's interval j): the move and the scale of each interval taken once, not per row."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
@@ -810,9 +721,9 @@ def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     rows = _between(coarse, n_ok)
     if not len(rows):
         return rows, rows, np.zeros(0, bool)
-    xc = ctx.blk.read(ctx.st, coarse).T
+    xc = ctx.blk.read(ctx.state, coarse).T
     j, pred = _predict(ctx, coarse, rows, xc)
-    x, _ = newton(ctx.blk, ctx.st, rows, pred.T, LOOSE, ctx.run.max_iter)
+    x, _ = newton(ctx.blk, ctx.state, rows, pred.T, LOOSE, ctx.run.max_iter)
     return rows, j, _far_dense(ctx.blk, x.T - pred, xc, j)
 
 
@@ -824,10 +735,10 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
     from the predictions, then chord steps with the same inverses (a prediction off by δ converges by a
     factor ~cond·δ per step), plain Newton for the few rows still above LOOSE after CHORD of them; then the
     factor. Returns (rows, interval of each, far, Factor, closure, converged and fresh)."""
-    run, st, blk = ctx.run, ctx.st, ctx.blk
+    run, state, blk = ctx.run, ctx.state, ctx.blk
     rows = _between(coarse, n_ok)
-    ev = _Rows(blk, st, n_ok)
-    x = blk.read_last(st, n_ok)
+    ev = _Rows(blk, state, n_ok)
+    x = blk.read_last(state, n_ok)
     far = np.zeros(0, bool)
     j = rows
     J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
@@ -837,10 +748,10 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
         j, pred = _predict(ctx, coarse, rows, xc)
         x[:, rows] = pred
         F, _ = ev.eval(x, True, J)
-        _s.invert_last(J, out=X)
+        invert_last(J, out=X)
         for _ in range(CHORD):
             with np.errstate(invalid="ignore"):
-                dx = -_apply(X, F)
+                dx = -apply_last(X, F)
                 x += dx
                 act = ~(_step_size(dx, x) <= LOOSE) & np.all(np.isfinite(x), axis=0)
             if not act.any():
@@ -848,11 +759,11 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
             F, _ = ev.eval(x, False)
         else:
             sub = np.nonzero(act)[0]
-            x[:, sub] = newton(blk, st, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
+            x[:, sub] = newton(blk, state, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
         far = _far_dense(blk, x[:, rows] - pred, xc, j)
         del pred, F  # not kept through the factor
-    fac, res, conv = _factor_square(ev, st, x, run.rtol, run.tol, J, X)
-    return rows, j, far, fac, res, conv
+    factor, res, conv = _factor_square(ev, state, x, run.rtol, run.tol, J, X)
+    return rows, j, far, factor, res, conv
 
 
 def _between(coarse: np.ndarray, n: int) -> np.ndarray:
@@ -869,24 +780,25 @@ def _step_size(dx: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def _factor_square(
     ev: _Rows,
-    st: _State,
+    state: State,
     x: np.ndarray,
     rtol: float,
     tol: float,
     J: np.ndarray | None = None,
     X: np.ndarray | None = None,
 ) -> tuple[Factor, np.ndarray, np.ndarray]:
-    """:meth:`_Block.factor` on rows 0..n-1 of a square block at x (batch-last), by :func:`kernels.invert_last`:
-    the Factor, the closure of each row and whether its last step was below tol and FRESH (it is applied).
+    """:meth:`NewtonBlock.factor` on rows 0..n-1 of a square block at x (batch-last), by
+    :func:`vloop.core.linalg.invert_last`: the Factor, the closure of each row and whether its last step was
+    below tol and FRESH (it is applied).
     J, X: buffers for the Jacobian (one :meth:`_Rows.eval` wrote) and its inverse."""
     blk = ev.blk
     F, J = ev.eval(x, True, J)
-    X, sign = _s.invert_last(J, out=X)
-    cond = _condition_last(J, X, blk.colscale, rtol)
+    X, sign = invert_last(J, out=X)
+    cond = condition_last(J, X, blk.colscale, rtol)
     sign[~np.all(np.isfinite(J), axis=(0, 1))] = np.nan  # as numpy's det gives it
     with np.errstate(invalid="ignore"):
         res = np.max(np.abs(F), axis=0, initial=0.0) / blk.scale
-        dx = -_apply(X, F)
+        dx = -apply_last(X, F)
         x = x + dx
         step = _step_size(dx, x)
     cis = None
@@ -894,9 +806,9 @@ def _factor_square(
         cis = (ev.cis * _cis_series(dx[blk.ia])).T  # e^{jθ} carried along, not recomputed
     finite = np.all(np.isfinite(x), axis=0)
     if finite.all():
-        blk.put(st, slice(0, x.shape[1]), x.T, cis)
+        blk.put(state, slice(0, x.shape[1]), x.T, cis)
     else:
         rows = np.nonzero(finite)[0]
-        blk.put(st, rows, x[:, rows].T, None if cis is None else cis[rows])
-    fac = Factor(J.transpose(2, 0, 1), X.transpose(2, 0, 1), cond, sign)
-    return fac, res, (step <= tol) & (step <= FRESH)
+        blk.put(state, rows, x[:, rows].T, None if cis is None else cis[rows])
+    factor = Factor(J.transpose(2, 0, 1), X.transpose(2, 0, 1), cond, sign)
+    return factor, res, (step <= tol) & (step <= FRESH)

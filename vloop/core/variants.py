@@ -264,22 +264,22 @@ class VariantModel:
         geo = _Geometry(self, values)
         r, delta = geo.terms()
         coords_q = geo.coords_q()
-        sys = self.system
+        system = self.system
         nom = _Geometry(self, self.nominal_values()[None, :])
         dq = coords_q - nom.coords_q()
-        na = sys.n_angles
+        na = system.n_angles
         dq[:, :na] = np.angle(np.exp(1j * dq[:, :na]))  # a coordinate angle that wraps past 2π moves by a little
         x0, v0, a0 = self._drivers(values, dq)
-        q_start = sys.q0[None, :] + dq
-        for j, v in enumerate(sys.drivers):
+        q_start = system.q0[None, :] + dq
+        for j, v in enumerate(system.drivers):
             q_start[:, v] = x0[:, j]
         return Designs(r, delta, np.exp(1j * delta), x0, v0, a0, q_start, geo.out_offsets(), coords_q)
 
     def _drivers(self, values: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        sys, mech = self.system, self.mechanism
+        system, mech = self.system, self.mechanism
         V = len(values)
         nums = [np.tile([d.x0, d.v0, d.a0], (V, 1)).astype(float) for d in mech.drivers]
-        for j, v in enumerate(sys.drivers):
+        for j, v in enumerate(system.drivers):
             nums[j][:, 0] += dq[:, v]  # x0 keeps its offset from the coordinates
         for k, p in enumerate(self.params):
             if p.section == "drivers":
@@ -292,9 +292,9 @@ class VariantModel:
     def _check_nominal(self) -> None:
         """The nominal values must give back the compiled constants (guards this module against the graph's)."""
         d = self.designs(self.nominal_values()[None, :])
-        sys = self.system
+        system = self.system
         scale = self.mechanism.scale
-        dz = np.abs(d.r[0] * d.cd[0] - sys.t_r * np.exp(1j * sys.t_delta))
+        dz = np.abs(d.r[0] * d.cd[0] - system.t_r * np.exp(1j * system.t_delta))
         if np.any(dz > 1e-9 * scale) or np.any(np.abs(d.x0[0] - [x.x0 for x in self.mechanism.drivers]) > 1e-12):
             raise RuntimeError("vloop.core.variants does not reproduce the compiled vector terms (graph changed?)")
 
@@ -351,10 +351,10 @@ class VariantModel:
     def _turned_world_axis(self, sl: Slider, d: Designs, q0: np.ndarray) -> Slider:
         """A slider on a moving guide: its world axis turned as the guide turned from its coordinates to the
         assembly (the axis is fixed to the guide)."""
-        sys = self.system
-        if sl.guide not in sys.angle_links:
+        system = self.system
+        if sl.guide not in system.angle_links:
             return sl
-        a = sys.angle_links.index(sl.guide)
+        a = system.angle_links.index(sl.guide)
         turn = float(q0[a] - d.coords_q[0, a])
         c, s = math.cos(turn), math.sin(turn)
         return dataclasses.replace(sl, axis=(c * sl.axis[0] - s * sl.axis[1], s * sl.axis[0] + c * sl.axis[1]))
@@ -484,15 +484,15 @@ class _Geometry:
 
     def coords_q(self) -> np.ndarray:
         """The variables the coordinates give: every rotating link's θ0, every slider's s0."""
-        sys = self.model.system
-        q = [self.frames[n][1] for n in sys.angle_links]
-        q += [self.slider_line(i)[1] for i in range(len(sys.slider_names))]
+        system = self.model.system
+        q = [self.frames[n][1] for n in system.angle_links]
+        q += [self.slider_line(i)[1] for i in range(len(system.slider_names))]
         return np.stack(q, axis=1) if q else np.zeros((self.V, 0))
 
     def out_offsets(self) -> np.ndarray:
         """The θ offset of every output body (links: 0; blocks: axis − guide)."""
-        sys = self.model.system
-        cols = [self.frame_offset(name) for name, _, _ in sys.link_outputs]
+        system = self.model.system
+        cols = [self.frame_offset(name) for name, _, _ in system.link_outputs]
         return np.stack(cols, axis=1) if cols else np.zeros((self.V, 0))
 
 
@@ -502,12 +502,12 @@ def _stated_length(lk: Link, V: int) -> np.ndarray | None:
     return None if stated is None else np.full(V, stated)
 
 
-def _term_roles(mech: Mechanism, sys: LoopSystem) -> list[tuple]:
+def _term_roles(mech: Mechanism, system: LoopSystem) -> list[tuple]:
     """What each term is: ("body", body, member), ("slider", i) or ("offset", i), read from the graph's edges, or
     ("chord", parts): a body's vectors that a loop crosses, summed (:func:`vloop.graph.crossings`)."""
-    roles: list[tuple | None] = [None] * len(sys.t_r)
+    roles: list[tuple | None] = [None] * len(system.t_r)
     slider_index = {n: i for i, n in enumerate(mech.sliders)}
-    for u, v, data in sys.graph.edges(data=True):
+    for u, v, data in system.graph.edges(data=True):
         kind = data.get("kind")
         if kind == "link":
             node = v if data["start"] == u else u
@@ -516,62 +516,62 @@ def _term_roles(mech: Mechanism, sys: LoopSystem) -> list[tuple]:
             block = u[0] if u[0] in mech.sliders else v[0]
             i = slider_index[block]
             for tid, _ in data["terms"]:
-                roles[tid] = ("slider", i) if sys.t_sl[tid] >= 0 else ("offset", i)
-    for t, extra in sys.cache.get("study_offset_terms", {}).items():
+                roles[tid] = ("slider", i) if system.t_sl[tid] >= 0 else ("offset", i)
+    for t, extra in system.cache.get("study_offset_terms", {}).items():
         roles[t] = ("offset", extra)
-    for t, parts in sys.chords:
+    for t, parts in system.chords:
         roles[t] = ("chord", parts)
     if any(r is None for r in roles):
         raise RuntimeError("vloop.core.variants cannot tell what every vector term is (graph changed?)")
     return roles  # type: ignore[return-value]
 
 
-def _with_zero_terms(sys: LoopSystem) -> LoopSystem:
+def _with_zero_terms(system: LoopSystem) -> LoopSystem:
     """The loops' coefficients of vectors of zero length restored (the compiler drops them: a ground joint at the
     world origin adds nothing), so a variant that moves such a joint off the origin keeps its vector. Only
     vectors fixed to the ground are zero-length in a loop (joints on one link never coincide), so the loops'
     variables do not change."""
-    C = np.zeros_like(sys.C)
-    for li, lp in enumerate(sys.loops):
-        for tid, c, _ in loop_row(sys.graph.adj, list(lp.nodes)):
+    C = np.zeros_like(system.C)
+    for li, lp in enumerate(system.loops):
+        for tid, c, _ in loop_row(system.graph.adj, list(lp.nodes)):
             C[li, tid] += c
-    for t, parts in sys.chords:  # a chord stands for its parts in the loops that cross its body that way
-        for li in np.flatnonzero(sys.C[:, t]):
+    for t, parts in system.chords:  # a chord stands for its parts in the loops that cross its body that way
+        for li in np.flatnonzero(system.C[:, t]):
             for p, c in parts:
-                C[li, p] -= sys.C[li, t] * c
-            C[li, t] += sys.C[li, t]
-    restored = (C != sys.C) & (sys.t_r == 0) & (sys.t_sl < 0) & (sys.t_ang < 0)
+                C[li, p] -= system.C[li, t] * c
+            C[li, t] += system.C[li, t]
+    restored = (C != system.C) & (system.t_r == 0) & (system.t_sl < 0) & (system.t_ang < 0)
     if not restored.any():
-        return sys
-    if np.any((C != sys.C) & ~restored):
+        return system
+    if np.any((C != system.C) & ~restored):
         raise RuntimeError("vloop.core.variants cannot rebuild the loop coefficients (graph changed?)")
-    return dataclasses.replace(sys, C=np.where(restored, C, sys.C), cache={})
+    return dataclasses.replace(system, C=np.where(restored, C, system.C), cache={})
 
 
-def _with_offset_terms(mech: Mechanism, sys: LoopSystem, params: tuple[ParamRef, ...]) -> LoopSystem:
+def _with_offset_terms(mech: Mechanism, system: LoopSystem, params: tuple[ParamRef, ...]) -> LoopSystem:
     """A slider whose offset varies but whose file line passes through its guide's origin has no offset term:
     add one of zero length (same loops and points as the slider's own term), so variants have room for it."""
     names = list(mech.sliders)
     want = {names.index(p.target) for p in params if p.section == "sliders" and p.field == "offset"}
-    have = {names.index(s) for s in mech.sliders if any("offset of " + s == lbl for lbl in sys.t_label)}
+    have = {names.index(s) for s in mech.sliders if any("offset of " + s == lbl for lbl in system.t_label)}
     missing = sorted(want - have)
     if not missing:
-        return sys
-    t_ang, t_sl, t_r, t_delta = list(sys.t_ang), list(sys.t_sl), list(sys.t_r), list(sys.t_delta)
-    C, path, labels = sys.C.copy(), sys.path.copy(), list(sys.t_label)
+        return system
+    t_ang, t_sl, t_r, t_delta = list(system.t_ang), list(system.t_sl), list(system.t_r), list(system.t_delta)
+    C, path, labels = system.C.copy(), system.path.copy(), list(system.t_label)
     extra = {}
     for i in missing:
-        ts = int(np.nonzero(sys.t_sl == i)[0][0])
-        t_ang.append(sys.t_ang[ts])
+        ts = int(np.nonzero(system.t_sl == i)[0][0])
+        t_ang.append(system.t_ang[ts])
         t_sl.append(-1)
         t_r.append(0.0)
-        t_delta.append((sys.t_delta[ts] + math.pi / 2) % TWO_PI)
+        t_delta.append((system.t_delta[ts] + math.pi / 2) % TWO_PI)
         labels.append(f"offset of {names[i]}")
         C = np.concatenate([C, C[:, ts : ts + 1]], axis=1)
         path = np.concatenate([path, path[ts : ts + 1]], axis=0)
         extra[len(t_r) - 1] = i
     out = dataclasses.replace(
-        sys,
+        system,
         t_ang=np.array(t_ang, int),
         t_sl=np.array(t_sl, int),
         t_r=np.array(t_r),

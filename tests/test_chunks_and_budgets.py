@@ -1,4 +1,6 @@
-"""The fast paths keep every guarantee: vectorized Newton blocks, chunked runs, streamed output, memory budget.
+"""Long runs solved in chunks give the run in one piece, streamed outputs and memory budgets hold, and the
+solver's faster evaluations give the direct ones: sums entry by entry or by products, condition numbers
+against the SVD, Newton blocks on change points, parallelograms and redundant loops, the grid by one bound.
 
 References are independent of vloop's loop equations: hand closed forms written out here or in
 validators/analytic_*.py, and the run solved in one piece (a chunk border must change nothing).
@@ -24,7 +26,9 @@ from tests.test_change_points import parallelogram
 from validators import analytic, analytic_fourbar
 from vloop.cli import main
 from vloop.compare import assert_histories_close
-from vloop.core import kernels, solver
+from vloop.core import grid as sample_grid
+from vloop.core import plans, solver
+from vloop.core import sums as vector_sums
 from vloop.files.budget import MemoryBudgetError, parse_size
 from vloop.method.loops import LoopSystem, loop_jacobian
 
@@ -133,10 +137,10 @@ def test_point_outputs_are_their_terms_summed(path, entry_by_entry, monkeypatch)
     too) is evaluated entry by entry or by the dense product (each forced here; vloop picks the cheaper per sum).
     Tolerance 1e-12 of each quantity's peak over the points: the definition recomputes e^{jθ} from the
     unwrapped θ (≈ |θ|·ε)."""
-    monkeypatch.setattr(kernels._Entries, "pay", lambda self: self if entry_by_entry else None)
+    monkeypatch.setattr(vector_sums.Entries, "pay", lambda self: self if entry_by_entry else None)
     system = vloop.compile(vloop.load(path))
     res, _ = outcome(lambda: vloop.solve(system, np.linspace(0.0, system.mechanism.times[-1], 240)))
-    sums = [*kernels._system_sums(system), *(s for p in kernels._plans(system) for s in (p.total, p.known_sum))]
+    sums = [*plans.system_sums(system), *(s for p in plans.block_plans(system) for s in (p.total, p.known_sum))]
     assert all((s.entries is not None) == entry_by_entry for s in sums)
     for ref, (x, y) in zip(points_by_definition(system, res), (("x", "y"), ("vx", "vy"), ("ax", "ay")), strict=True):
         got = np.stack([res.columns[f"{p}.{x}"] + 1j * res.columns[f"{p}.{y}"] for p in system.point_names], axis=1)
@@ -433,7 +437,7 @@ def test_a_crank_angle_too_large_to_resolve_is_refused_where_its_spacing_exceeds
     bound = 2.0 ** (math.floor(math.log2(rtol)) + 53)
     X[1, 0], X[2, 0] = np.nextafter(bound, 0), bound
     assert np.spacing(X[1, 0]) <= rtol < np.spacing(X[2, 0])
-    failure = solver._check_inputs(system, X, np.zeros_like(X), np.zeros_like(X), 0, rtol)
+    failure = sample_grid.check_inputs(system, X, np.zeros_like(X), np.zeros_like(X), 0, rtol)
     assert failure is not None and failure.sample == 2 and "too large to resolve" in failure.why
 
 
@@ -447,10 +451,10 @@ def test_one_bound_for_the_whole_grid_gives_the_row_by_row_grid(omega, alpha, st
     system = vloop.compile(vloop.loads(text + "[time]\nstart = 0.0\nstop = 2.0\nstep = 0.5\n"))
     run, times = solver._prepare(system, np.linspace(0.0, 2.0, steps), None, None, None, None)
     for lead in (np.zeros(0), np.array([-0.3, -0.2, -0.1])):
-        fast = solver._grid(run, lead, times)
+        fast = sample_grid.internal_grid(run, lead, times)
         with monkeypatch.context() as m:
-            m.setattr(solver, "_within_one_step", lambda *a: False)
-            slow = solver._grid(run, lead, times)
+            m.setattr(sample_grid, "_within_one_step", lambda *a: False)
+            slow = sample_grid.internal_grid(run, lead, times)
         assert np.array_equal(fast.t, slow.t) and np.array_equal(fast.out, slow.out)
         if fast.inputs is not None:
             for a, b in zip(fast.inputs, run.inputs(fast.t), strict=True):

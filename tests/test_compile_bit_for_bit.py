@@ -1,5 +1,4 @@
-"""The compiler's fast paths give exactly what the straightforward computations give (issue 15, "compile once,
-cheaply"): networkx's traversals and matching, numpy's loop residuals and Jacobians, np.add.at sums, the SVD rank
+"""The compiler's fast paths give exactly what the straightforward computations give: networkx's traversals and matching, numpy's loop residuals and Jacobians, np.add.at sums, the SVD rank
 test and the drivers' arrays at t = 0 — compared bit for bit on every catalog mechanism and on generated ones.
 The t = 0 checks still refuse what they refused, with the same messages."""
 
@@ -18,7 +17,7 @@ import vloop
 from tests.conftest import ROOT, mechanism_files
 from tests.test_bad_input import FOURBAR
 from validators import corpus
-from vloop.core import kernels
+from vloop.core import plans, sums
 from vloop.drivers import evaluate_all
 from vloop.errors import MechanismError
 from vloop.method import assembly, graph, structure
@@ -325,16 +324,16 @@ def test_sums_are_np_add_at_ones(systems, plans_first):
     for sys in systems:
         sys = dataclasses.replace(sys, cache={})
         if plans_first:
-            kernels._plans(sys)
+            plans.block_plans(sys)
         everything = np.arange(len(sys.t_r))
-        built = list(zip(kernels._system_sums(sys), ((everything, sys.path), (everything, sys.C.T)), strict=True))
-        for p in kernels._plans(sys):
-            terms, Cb, ang, sl, unk_ang, _, known = kernels.block_terms(sys, p.block)
+        built = list(zip(plans.system_sums(sys), ((everything, sys.path), (everything, sys.C.T)), strict=True))
+        for p in plans.block_plans(sys):
+            terms, Cb, ang, sl, unk_ang, _, known = plans.block_terms(sys, p.block)
             still = ~((sl < 0) & np.isin(ang, unk_ang))
             built += [(p.total, (terms, Cb.T)), (p.known_sum, (terms[known], -Cb.T[known]))]
             built += [(p.vel_sum, (terms[still], Cb.T[still]))]
         for s, args in built:
-            large += args[1].size > kernels.SMALL_SUM
+            large += args[1].size > sums.SMALL_SUM
             ref = reference_sum(sys, *args)
             for name, value in ref.items():
                 mine = getattr(s, name)
@@ -357,9 +356,9 @@ def reference_block_terms(sys, b) -> tuple:
 def test_plan_constants_are_numpy_scalar_ones(systems):
     for sys in systems:
         cd = np.exp(1j * sys.t_delta)
-        for p in kernels._plans(sys):
+        for p in plans.block_plans(sys):
             ref = reference_block_terms(sys, p.block)
-            for mine, theirs in zip(kernels.block_terms(sys, p.block), ref, strict=True):
+            for mine, theirs in zip(plans.block_terms(sys, p.block), ref, strict=True):
                 assert mine == theirs if isinstance(mine, list) else same(mine, theirs)
             terms, Cb, ang, sl, unk_ang, unk_sl, known = ref
             assert same(p.C, Cb) and same(p.Ct, Cb.T.astype(complex)) and same(p.known, known)

@@ -1,5 +1,5 @@
 """The batched linear algebra behind the fast Newton path, against numpy's LAPACK references, and the Newton
-path itself against the hand closed forms and against the SVD rule for flags and refusals (issue 15)."""
+path itself against the hand closed forms and against the SVD rule for flags and refusals."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ from tests.conftest import MECHANISMS
 from tests.test_change_points import parallelogram
 from validators import analytic
 from vloop.compare import assert_histories_close
-from vloop.core import kernels, newton
+from vloop.core import accuracy, linalg, newton
 
 RNG = np.random.default_rng(15)
 EPS = np.finfo(float).eps
-LEVEL = (kernels.ILL_FRACTION * kernels.DEFAULT_RTOL / EPS) ** (1 / 3)  # cond³·ε > 1e-3·rtol: flagged
+LEVEL = (accuracy.ILL_FRACTION * accuracy.DEFAULT_RTOL / EPS) ** (1 / 3)  # cond³·ε > 1e-3·rtol: flagged
 
 
 def _stack(rows: int, n: int, cond: float | np.ndarray) -> np.ndarray:
@@ -37,7 +37,7 @@ def test_invert_last_matches_lapack(n):
     A = np.concatenate([RNG.standard_normal((500, n, n)), _stack(500, n, RNG.uniform(1, 1e8, 500))])
     if n > 1:
         A[:50, 0, 0] = 0.0  # a structural zero on the diagonal: pivoting needed
-    X, sign = kernels.invert_last(_last(A))
+    X, sign = linalg.invert_last(_last(A))
     X = X.transpose(2, 0, 1)
     ref = np.linalg.inv(A)
     err = np.abs(X - ref).max(axis=(1, 2)) / np.abs(ref).max(axis=(1, 2))
@@ -45,7 +45,7 @@ def test_invert_last_matches_lapack(n):
     assert np.array_equal(sign, np.sign(np.linalg.det(A)))
     # a Newton step by the inverses (batch-last) against numpy.linalg.solve
     b = RNG.standard_normal((len(A), n))
-    step = newton._apply(X.transpose(1, 2, 0), b.T).T
+    step = linalg.apply_last(X.transpose(1, 2, 0), b.T).T
     ref_step = np.linalg.solve(A, b[..., None])[..., 0]
     scale = np.abs(ref_step).max(axis=1)
     assert np.all(np.abs(step - ref_step).max(axis=1) <= 10 * n * EPS * np.linalg.cond(A) * scale)
@@ -59,7 +59,7 @@ def test_invert_last_on_structurally_sparse_stacks():
         mask[np.arange(n), RNG.permutation(n)] = True  # structurally nonsingular
         A = RNG.standard_normal((600, n, n)) * mask
         A[:300] *= 10.0 ** RNG.uniform(-3, 3, (300, n, 1))  # rows of very different sizes: the pivots differ
-        X, sign = kernels.invert_last(_last(A))
+        X, sign = linalg.invert_last(_last(A))
         X = X.transpose(2, 0, 1)
         ref = np.linalg.inv(A)
         err = np.abs(X - ref).max(axis=(1, 2)) / np.abs(ref).max(axis=(1, 2))
@@ -72,7 +72,7 @@ def test_invert_last_pivots_per_matrix_and_flags_singular_ones():
     A[0] = np.eye(5)[[3, 0, 4, 1, 2]]  # a permutation: odd, det −1
     A[1, 2] = 2.0 * A[1, 4]  # singular: exactly dependent rows
     A[2] = 0.0
-    X, sign = kernels.invert_last(_last(A))
+    X, sign = linalg.invert_last(_last(A))
     X = X.transpose(2, 0, 1)
     assert np.array_equal(X[0], A[0].T) and sign[0] == -1.0
     assert sign[2] == 0.0 and not np.all(np.isfinite(X[2]))
@@ -86,14 +86,14 @@ def test_cond_2norm_matches_svd():
     for n in (2, 4, 6, 8):
         A = _stack(len(conds), n, conds)
         ref = np.linalg.cond(A)
-        got = newton.cond_2norm(A)
+        got = linalg.cond_2norm(A)
         ok = ref < 1e12  # beyond, SVD itself is not accurate: compare only the order of magnitude
         assert np.all(np.abs(got[ok] / ref[ok] - 1) <= 1e-10)
         assert np.all(np.abs(np.log10(got[~ok] / ref[~ok])) < 1)
     A = RNG.standard_normal((4, 3, 3))
     A[0, 1] = A[0, 0]  # singular
     A[1, 0, 0] = np.nan
-    got = newton.cond_2norm(A)
+    got = linalg.cond_2norm(A)
     assert got[0] > 1e15 and got[1] == np.inf
     np.testing.assert_allclose(got[2:], np.linalg.cond(A[2:]), rtol=1e-12)
 
@@ -108,7 +108,7 @@ def test_sigma_max_brackets_the_largest_eigenvalue(n):
     U = np.linalg.qr(RNG.standard_normal((len(gaps), n, n)))[0]
     G = (U * s[:, None, :]) @ U.transpose(0, 2, 1)
     G /= np.trace(G, axis1=1, axis2=2)[:, None, None]
-    lam, ok = newton._sigma_max(G, G @ G)
+    lam, ok = linalg.sigma_max(G, G @ G)
     ref = np.linalg.eigvalsh(G)[:, -1]
     assert np.all(np.abs(lam[ok] / ref[ok] - 1) <= 1e-12)
     assert np.all(lam <= ref * (1 + 1e-14))  # a Rayleigh quotient: never above λ₁
@@ -125,12 +125,12 @@ def test_condition_follows_the_svd_rule(n):
     A = _stack(len(conds), n, conds)
     colscale = np.where(np.arange(n) % 2, 1.0, 0.25)  # angle columns divided by the mechanism size
     J = A / colscale  # so that J·colscale is A
-    X = kernels.invert_last(_last(J))[0]
-    got = newton._condition_last(_last(J), X, colscale, kernels.DEFAULT_RTOL)
+    X = linalg.invert_last(_last(J))[0]
+    got = linalg.condition_last(_last(J), X, colscale, accuracy.DEFAULT_RTOL)
     ref = np.linalg.cond(A)
     ok = ref < 1e12
     assert np.array_equal(got[ok] > LEVEL, ref[ok] > LEVEL)
-    assert np.array_equal(got**2 * EPS > kernels.DEFAULT_RTOL, ref**2 * EPS > kernels.DEFAULT_RTOL)
+    assert np.array_equal(got**2 * EPS > accuracy.DEFAULT_RTOL, ref**2 * EPS > accuracy.DEFAULT_RTOL)
     flagged = ok & (ref > LEVEL)
     tol = np.maximum(1e-10, 100 * ref * EPS)  # an SVD is itself reproducible to ~cond·ε (of J scaled, or not)
     assert np.all(np.abs(got[flagged] / ref[flagged] - 1) <= tol[flagged])
@@ -170,13 +170,13 @@ def test_newton_path_matches_the_closed_form(name, steps):
 
 
 def _svd_condition(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: float) -> np.ndarray:
-    """The rule before issue 15: Frobenius bound, replaced by numpy's SVD where it reaches the level."""
+    """The SVD rule: the Frobenius bound, replaced by numpy's SVD where it reaches the level."""
     Js = (J * colscale[:, None]).transpose(2, 0, 1)
     Xs = (X / colscale[:, None, None]).transpose(2, 0, 1)
     with np.errstate(invalid="ignore", over="ignore"):
         cond = np.sqrt(np.sum(Js * Js, axis=(1, 2)) * np.sum(Xs * Xs, axis=(1, 2)))
     cond = np.where(np.isfinite(cond), cond, np.inf)
-    near = np.nonzero(cond > (kernels.ILL_FRACTION * rtol / EPS) ** (1 / 3))[0]
+    near = np.nonzero(cond > (accuracy.ILL_FRACTION * rtol / EPS) ** (1 / 3))[0]
     ok = near[np.all(np.isfinite(Js[near]), axis=(1, 2))]
     cond[ok] = np.linalg.cond(Js[ok])
     return cond
@@ -185,7 +185,7 @@ def _svd_condition(J: np.ndarray, X: np.ndarray, colscale: np.ndarray, rtol: flo
 def _run(monkeypatch, reference: bool, mech: vloop.Mechanism, **kw) -> tuple[vloop.Result, str]:
     with monkeypatch.context() as m:
         if reference:
-            m.setattr(newton, "_condition_last", _svd_condition)
+            m.setattr(newton, "condition_last", _svd_condition)
         try:
             return vloop.solve(mech, method="newton", **kw), ""
         except vloop.MotionError as exc:
