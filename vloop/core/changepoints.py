@@ -10,13 +10,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from ..errors import MechanismError
+from ..method.loops import LoopSystem
 from .accuracy import EPS, error_bound
 from .context import ChangePoint, Failure, Run, Solved, change_point_choices, impose_drivers, input_units
-from .data import State
+from .data import Probe, State
+from .dyads import closed_form, dyad_rates, jacobian_columns
 from .plans import Plan, block_plans, store_rates
 
 CHANGE_GAP = 1e-6  # two assembly branches closer than this fraction of the mechanism size meet: a change point
@@ -116,69 +119,233 @@ def probe(run: Run, state: State, t_grid: np.ndarray, base: int, times: np.ndarr
     return sub.blocks(sub, trial, grid, len(grid), upto=upto), trial
 
 
-def find_change_points(run: Run, state: State, t_grid: np.ndarray, i: int, h: np.ndarray) -> list[ChangePoint]:
+def find_change_points(
+    run: Run, state: State, t_grid: np.ndarray, i: int, h: np.ndarray
+) -> tuple[list[ChangePoint], Failure | None]:
     """Locate where block ``i``'s two assembly branches meet between samples, and pick the continuation.
 
-    A sampled minimum of the discriminant h is refined by zooming probes; where the branches come
-    within CHANGE_GAP of the mechanism size of each other it is a change point. The continuation
+    Every sampled minimum of the discriminant h that dips is refined at once (:func:`locate_minima`); where the
+    branches come within CHANGE_GAP of the mechanism size of each other it is a change point. The continuation
     is the one whose rates stay continuous across it (or the other one where the file asks so in
-    ``[solver] change_points``). h < 0 between samples means the motion passes a limit there.
+    ``[solver] change_points``). h < 0 between samples means the motion passes a limit there: returned as the
+    failure, with the change points found before it.
     """
-    found = []
     loop = run.system.loops[block_plans(run.system)[i].block.loops[0]]
     choices = change_point_choices(run.system, loop.index + 1)
-    for _, lo, hi in candidate_minima(h[None, :], run.tail).tolist():
-        if any(t_grid[lo] <= ev.time <= t_grid[hi] for ev in run.events.get(i, ())):
-            continue  # found already (by the chunk before, whose last rows this chunk starts from)
-        t_star, h_min = _zoom(run, state, t_grid, i, lo, hi)
-        if h_min < 0:
-            raise Failure(hi, loop.index, "the loop cannot close between samples: the input passes a limit position")
-        if 2.0 * math.sqrt(h_min) > CHANGE_GAP * run.scale:
+    brackets = [  # (not those found already: by the chunk before, whose last rows this chunk starts from)
+        (lo, hi) for _, lo, hi in candidate_minima(h[None, :], run.tail).tolist() if not _passed(run, i, t_grid, lo, hi)
+    ]
+    if not brackets:
+        return [], None
+    lo, hi = np.array(brackets).T
+    a, b = t_grid[lo], t_grid[hi]
+    eta = times_to_move(run, 0.5 * (a + b), b - a)
+    t_star, h_min = locate_minima(_Discriminants(run, state, t_grid, i, lo), a, b, eta, run.scale)
+    with np.errstate(invalid="ignore"):
+        meets = 2.0 * np.sqrt(h_min) <= CHANGE_GAP * run.scale
+    continuations = _Continuations(run, state, t_grid, i, lo[meets], t_star[meets])
+    found: list[ChangePoint] = []
+    for k in np.nonzero(meets | (h_min < 0))[0].tolist():  # (the others: no change point, no limit)
+        if found and _passed(run, i, t_grid, lo[k], hi[k]):
+            continue  # (brackets around neighbouring minima can overlap: the change point is found already)
+        if h_min[k] < 0:
+            why = "the loop cannot close between samples: the input passes a limit position"
+            return found, Failure(int(hi[k]), loop.index, why)
+        if not meets[k]:
             continue
-        smooth_flip = _smooth_continuation(run, state, t_grid, i, lo, t_star)
+        smooth_flip = continuations.smooth_flip(int(np.count_nonzero(meets[:k])))
         choice = choices[min(len(found), len(choices) - 1)]
         flip = smooth_flip if choice == "smooth" else not smooth_flip
-        ev = ChangePoint(i, t_star, flip, choice == "smooth")
+        ev = ChangePoint(i, float(t_star[k]), flip, choice == "smooth")
         run.events.setdefault(i, []).append(ev)
         found.append(ev)
-    return found
+    return found, None
 
 
-def _zoom(run: Run, state: State, t_grid: np.ndarray, i: int, lo: int, hi: int) -> tuple[float, float]:
-    """(t*, h(t*)): where block ``i``'s discriminant h is least between samples lo and hi.
+def _passed(run: Run, i: int, t_grid: np.ndarray, lo: int, hi: int) -> bool:
+    """Whether a change point of block ``i`` is known between samples lo and hi."""
+    return any(t_grid[lo] <= ev.time <= t_grid[hi] for ev in run.events.get(i, ()))
 
-    Zooms on the sign change of g(t) = h(t + η) − h(t − η), which crosses zero linearly at the
-    minimum (h itself is flat there), so t* is found to ~1e-12 of the bracket, not to √ε.
+
+def locate_minima(
+    probe_h: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    a: np.ndarray,
+    b: np.ndarray,
+    eta: np.ndarray,
+    scale: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(t*, h(t*)) of every bracket [a, b] (one per entry): where a discriminant h is least, every bracket zoomed
+    at once. ``probe_h(which, times)`` gives h at ``times`` (len(which), p) for the brackets ``which`` (indices)
+    and whether every block it depends on closes at all of them; η: the offset of g below, per bracket.
+
+    Zooms on the sign change of g(t) = h(t + η) − h(t − η), which crosses zero linearly at the minimum (h
+    itself is flat there), so t* is found to ~1e-12 of the bracket, not to √ε. A bracket where no change point
+    can hide (the first look) or where an earlier block cannot close gets h(t*) = ∞; one where h < 0 (a limit)
+    its least sampled h.
     """
-    a, b = float(t_grid[lo]), float(t_grid[hi])
-    eta = time_to_move(run, 0.5 * (a + b), b - a)
-    first = True
-    for _ in range(ZOOM_STEPS):
-        times = look_times(np.array(a), np.array(b), np.array(eta))
-        h = _discriminant(run, state, t_grid, lo, i, times)
-        if h is None:  # an earlier block cannot be solved in the bracket: leave it to the main run
-            return a, math.inf
-        ts, mid, g = times[:ZOOM_POINTS], h[:ZOOM_POINTS], h[2 * ZOOM_POINTS :] - h[ZOOM_POINTS : 2 * ZOOM_POINTS]
-        look = first_look(h[None], run.scale)[0]
-        if look == LIMIT:
-            j = int(np.argmin(mid))
-            return float(ts[j]), float(mid[j])
-        if first and look == CLEAR:  # no change point in the bracket
-            return a, math.inf
-        first = False
-        j = int(np.argmax(g >= 0)) if np.any(g >= 0) else len(ts) - 1
-        a, b = float(ts[max(j - 1, 0)]), float(ts[j])
-        if b - a <= 1e-9 * (t_grid[hi] - t_grid[lo]):
+    n = len(a)
+    t_star, h_min = np.asarray(a, float).copy(), np.full(n, np.inf)
+    lo, hi, width = t_star.copy(), np.asarray(b, float).copy(), np.asarray(b, float) - a
+    final = np.zeros(n, bool)  # zoomed to the end: h at the middle of the last bracket
+    act = np.arange(n)
+    for step in range(ZOOM_STEPS):
+        times = look_times(lo[act], hi[act], eta[act])
+        h, solvable = _first_look_h(probe_h, act, times, scale) if step == 0 else probe_h(act, times)
+        look = first_look(h, scale)
+        ts, mid = times[:, :ZOOM_POINTS], h[:, :ZOOM_POINTS]
+        limit = solvable & (look == LIMIT)
+        j = np.argmin(np.where(limit[:, None], mid, np.inf), axis=1)[limit]
+        t_star[act[limit]], h_min[act[limit]] = ts[limit, j], mid[limit, j]
+        out = ~solvable | (look == CLEAR) if step == 0 else ~solvable
+        t_star[act[out]] = lo[act[out]]
+        go = np.nonzero(~out & ~limit)[0]
+        up = h[go, 2 * ZOOM_POINTS :] >= h[go, ZOOM_POINTS : 2 * ZOOM_POINTS]  # g ≥ 0
+        j = np.where(up.any(axis=1), np.argmax(up, axis=1), ZOOM_POINTS - 1)
+        act = act[go]
+        lo[act], hi[act] = ts[go, np.maximum(j - 1, 0)], ts[go, j]
+        narrow = hi[act] - lo[act] <= 1e-9 * width[act]
+        final[act[narrow]] = True
+        act = act[~narrow]
+        if not len(act):
             break
-    t_star = 0.5 * (a + b)
-    h = _discriminant(run, state, t_grid, lo, i, np.array([t_star]))
-    return t_star, (math.inf if h is None else float(h[0]))
+    final[act] = True
+    which = np.nonzero(final)[0]
+    if len(which):
+        t_star[which] = 0.5 * (lo[which] + hi[which])
+        h, solvable = probe_h(which, t_star[which][:, None])
+        h_min[which] = np.where(solvable, h[:, 0], np.inf)
+    return t_star, h_min
+
+
+FIRST = np.r_[0 : ZOOM_POINTS + 1, 2 * ZOOM_POINTS - 1, 2 * ZOOM_POINTS, 3 * ZOOM_POINTS - 1]  # what a first look reads
+REST = np.setdiff1d(np.arange(3 * ZOOM_POINTS), FIRST)  # ... and what the zoom reads besides: g inside the bracket
+
+
+def _first_look_h(
+    probe_h: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    which: np.ndarray,
+    times: np.ndarray,
+    scale: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """h at :func:`look_times` and whether every block closes there, as ``probe_h`` gives them, probed in two
+    steps: what :func:`first_look` reads (h between the samples and g at the bracket's ends) for every bracket,
+    the rest only for brackets it does not find CLEAR (most are: a broad minimum that dips between coarse
+    samples). Entries not probed are NaN."""
+    h = np.full(times.shape, np.nan)
+    h[:, FIRST], solvable = probe_h(which, times[:, FIRST])
+    rest = np.nonzero(solvable & (first_look(h, scale) != CLEAR))[0]
+    if len(rest):
+        h[np.ix_(rest, REST)], more = probe_h(which[rest], times[np.ix_(rest, REST)])
+        solvable[rest] &= more
+    return h, solvable
+
+
+class _Discriminants:
+    """Block ``i``'s discriminant at probe times of brackets that start at samples ``base``: for
+    :func:`locate_minima`. Where the blocks before it are closed forms, every row is solved on its own, all at
+    once (each on its branch at its time); past a Newton block, bracket by bracket, continued from its base."""
+
+    def __init__(self, run: Run, state: State, t_grid: np.ndarray, i: int, base: np.ndarray) -> None:
+        self.run, self.state, self.t_grid, self.i, self.base = run, state, t_grid, i, base
+
+    def __call__(self, which: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        run, i = self.run, self.i
+        if closed_forms_upto(run.system, i):
+            try:
+                solved = dyads_at(run, times.reshape(-1), i)
+            except MechanismError:  # a probe past the end of a tabulated input: bracket by bracket below
+                solved = None
+            if solved is not None:
+                _, h, ok = solved
+                return h.reshape(times.shape), ok.reshape(times.shape).all(axis=1)
+        h = np.full(times.shape, np.inf)
+        solvable = np.zeros(len(which), bool)
+        for r, (w, ts) in enumerate(zip(which.tolist(), times, strict=True)):
+            got = _discriminant(run, self.state, self.t_grid, int(self.base[w]), i, ts)
+            if got is not None:
+                h[r], solvable[r] = got, True
+        return h, solvable
+
+
+def closed_forms_upto(system: LoopSystem, i: int) -> bool:
+    """Whether blocks 0..i are all closed-form dyads (rows are then solved each on its own)."""
+    return all(plan.block.kind != "newton" for plan in block_plans(system)[: i + 1])
+
+
+def dyads_at(
+    run: Run, times: np.ndarray, upto: int, sigma: np.ndarray | None = None, rates: bool = False
+) -> tuple[State, np.ndarray, np.ndarray]:
+    """Closed-form blocks 0..upto at ``times`` (any order: each row solved on its own, on each block's branch at
+    its time; block ``upto`` on ``sigma`` if given), in chunks of ROWS rows. Returns the probe's state, block
+    upto's discriminant h and whether every block closes, per row; with ``rates``, velocities and accelerations.
+    Raises MechanismError where a time is outside a tabulated input."""
+    system = run.system
+    n, na = len(times), system.n_angles
+    trial = Probe(n, na, len(system.slider_names))
+    order = np.argsort(times, kind="stable")  # (ascending: a lead-in path is told by the first time)
+    inputs = np.empty((3, n, len(system.drivers)))
+    inputs[:, order] = run.inputs(times[order])
+    impose_drivers(system, trial, *inputs)
+    h, ok = np.empty(n), np.ones(n, bool)
+    plans = block_plans(system)
+    for start in range(0, n, ROWS):
+        k = slice(start, min(start + ROWS, n))
+        for b in range(upto + 1):
+            plan = plans[b]
+            s = sigma[k] if sigma is not None and b == upto else run.sigma(b, times[k])
+            closes, h[k] = closed_form(plan, trial, k, s)
+            ok[k] &= closes
+            if rates:
+                cols = jacobian_columns(plan, trial, k)
+                for what in ("v", "a"):
+                    store_rates(plan, trial, k, dyad_rates(plan, trial, k, what, cols), what, na)
+    return trial, h, ok
+
+
+ROWS = 16_000  # probe rows solved together (complex temporaries below numpy's in-place threshold, as a run's)
+
+
+class _Continuations:
+    """Which continuation keeps block ``i``'s rates continuous across each change point t* (after samples
+    ``lo``): its rates at t* − η and t* + η on either branch, all at once where the blocks before it are closed
+    forms (by probes from sample lo otherwise, as each is met)."""
+
+    def __init__(self, run: Run, state: State, t_grid: np.ndarray, i: int, lo: np.ndarray, t_star: np.ndarray) -> None:
+        self.run, self.state, self.t_grid, self.i, self.lo, self.t_star = run, state, t_grid, i, lo, t_star
+        self.eta = times_to_move(run, t_star, t_grid[lo + 1] - t_grid[lo])
+        self.rates: np.ndarray | None = None
+        if len(lo) and closed_forms_upto(run.system, i):
+            # per change point: t* − η and t* + η, each on σ = +1 and −1
+            times = (t_star[:, None] + self.eta[:, None] * np.array([-1.0, -1.0, 1.0, 1.0])).reshape(-1)
+            sigma = np.tile(np.array([1.0, -1.0, 1.0, -1.0]), len(lo))
+            try:
+                trial, _, ok = dyads_at(run, times, i, sigma, rates=True)
+            except MechanismError:
+                return
+            r = _block_rates(run, trial, i, slice(0, len(times)))
+            r[~ok] = np.nan
+            self.rates = r.reshape(len(lo), 2, 2, -1)  # (change point, before/after, σ = +1/−1, unknown)
+
+    def smooth_flip(self, k: int) -> bool:
+        """Whether flipping σ at change point k keeps the rates continuous (else keeping it does), given the
+        change points recorded before it."""
+        run, i, t_star = self.run, self.i, float(self.t_star[k])
+        if self.rates is None:
+            return _smooth_continuation(run, self.state, self.t_grid, i, int(self.lo[k]), t_star)
+        eta = float(self.eta[k])
+        before, after = run.sigma(i, np.array([t_star - eta, t_star + eta]))
+        side = {1.0: 0, -1.0: 1}
+        r0 = self.rates[k, 0, side[before]]
+        jumps = [float(np.max(np.abs(self.rates[k, 1, side[s]] - r0))) for s in (-after, after)]
+        jumps = [math.inf if math.isnan(j) else j for j in jumps]
+        return jumps[0] <= jumps[1]
 
 
 def _discriminant(
     run: Run, state: State, t_grid: np.ndarray, base: int, i: int, times: np.ndarray
 ) -> np.ndarray | None:
-    """Block ``i``'s discriminant h at ``times`` (None if an earlier block fails there)."""
+    """Block ``i``'s discriminant h at ``times`` by a probe continued from sample ``base`` (None if a block
+    fails there)."""
     order = np.argsort(times, kind="stable")
     solved, _ = probe(run, state, t_grid, base, times[order], i, check=False, rates=False)
     if solved.n_ok < len(times) + 1 or len(solved.discs) <= i:
@@ -190,8 +357,15 @@ def _discriminant(
 
 def time_to_move(run: Run, t_star: float, width: float, move: float = ETA_INPUT) -> float:
     """A time offset over which the inputs move ``move`` (radians, or mechanism sizes for sliders)."""
-    _, XD, _ = run.inputs(np.array([t_star]))
-    return float(eta_of_rates(XD[0], input_units(run.system.mechanism, run.scale), np.array(width), move))
+    return float(times_to_move(run, np.array([t_star]), np.array([width]), move)[0])
+
+
+def times_to_move(run: Run, t: np.ndarray, width: np.ndarray, move: float = ETA_INPUT) -> np.ndarray:
+    """:func:`time_to_move` at each of the times ``t`` (at most a quarter of each ``width``)."""
+    order = np.argsort(t, kind="stable")  # (ascending: a lead-in path is told by the first time)
+    XD = np.empty((len(t), len(run.system.mechanism.drivers)))
+    XD[order] = run.inputs(t[order])[1]
+    return eta_of_rates(XD, input_units(run.system.mechanism, run.scale), width, move)
 
 
 def _block_rates(run: Run, trial: State, i: int, rows: slice) -> np.ndarray:

@@ -188,7 +188,7 @@ def solve(
     """
     run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
     chunk = _in_memory_chunk(len(times))
-    budget.check(run.system, len(times), False, 2 * chunk, run.memory_budget)
+    budget.check(run.system, len(times), False, chunk_rows(chunk), run.memory_budget)
     run.sink = _Sink(len(times)) if len(times) > chunk else None  # several chunks: written in place, not joined
     with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
         return _solve(run, times, chunk)
@@ -234,6 +234,12 @@ CHUNK = 16_384  # requested samples solved together: the state stays in cache, m
 
 
 CHUNK_ROWS = 2 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
+
+
+def chunk_rows(chunk: int) -> int:
+    """Internal rows a chunk of ``chunk`` requested samples may hold before it is split: twice as many, and at least
+    CHUNK_ROWS (a short chunk sampled coarsely, several rows inserted per sample, stays one chunk)."""
+    return max(2 * chunk, CHUNK_ROWS)
 
 
 IN_MEMORY = 4  # solve() takes chunks up to this many times longer than streamed runs
@@ -317,7 +323,7 @@ def solve_chunks(run: Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Re
     i0, n_total, size, at_least = 0, len(times), chunk, 1
     while i0 < n_total:
         i1 = min(i0 + size, n_total)
-        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, 2 * chunk)
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
         run.tail = grid.offset + len(grid.out) == n_total
         state = initial_state(system, len(grid.t))
         if carry is not None:
@@ -397,7 +403,8 @@ def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) ->
     X, XD, XDD = grid.inputs if grid.inputs is not None else run.inputs(t_grid)
     impose_drivers(system, state, X, XD, XDD)
     early = check_inputs(system, X, XD, XDD, first, run.rtol)
-    solved = run_blocks(run, state, t_grid, early.sample if early else n)
+    rated = None if len(grid.out) == n else grid.out  # rows inserted (or a lead-in): rates at the requested ones
+    solved = run_blocks(run, state, t_grid, early.sample if early else n, rated=rated)
     failure = solved.failure if early is None or (solved.failure and solved.failure.sample < early.sample) else early
     n_ok = min(solved.n_ok, failure.sample if failure else n)
     free = [v for v in range(system.n_angles) if v not in system.drivers and turns[v]] if turns is not None else []
