@@ -48,8 +48,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import vloop  # noqa: E402
 from bench_speed import rounds_of_each, worst_relative  # noqa: E402
+
+import vloop  # noqa: E402
 from validators import analytic  # noqa: E402
 from vloop.files.budget import keep_heap  # noqa: E402
 
@@ -73,7 +74,9 @@ def rocking(lib, mech: vloop.Mechanism, periods: int) -> vloop.Mechanism:
     amp = 0.5 * (ROCK_TOP - d.x0)
     w = 2 * math.pi / ROCK_PERIOD
     t = np.linspace(0.0, periods * ROCK_PERIOD, periods * ROCK_ROWS + 1)
-    profile = lib.model.Profile(t, d.x0 + amp * (1 - np.cos(w * t)), amp * w * np.sin(w * t), amp * w * w * np.cos(w * t))
+    profile = lib.model.Profile(
+        t, d.x0 + amp * (1 - np.cos(w * t)), amp * w * np.sin(w * t), amp * w * w * np.cos(w * t)
+    )
     return dataclasses.replace(mech, drivers=(dataclasses.replace(d, profile=profile),))
 
 
@@ -175,6 +178,65 @@ def bench(name: str, turns: tuple[int, ...], n: int, repeat: int, other) -> list
     return lines
 
 
+BIG_MECHANISM = "fourbar_crank_rocker_open"
+
+
+def big_file(folder: Path, samples: int, turns: int) -> Path:
+    """The four-bar's file with [time] over ``turns`` turns of its crank in ``samples`` samples, evenly in time
+    (θ2 − θ2(0) = ω0·t + α·t²/2 solved for the stop time)."""
+    text = (ROOT / "mechanisms" / f"{BIG_MECHANISM}.toml").read_text(encoding="utf-8")
+    mech = vloop.load(ROOT / "mechanisms" / f"{BIG_MECHANISM}.toml")
+    d = mech.drivers[0]
+    angle = turns * 2 * math.pi
+    stop = (-d.v0 + math.sqrt(d.v0 * d.v0 + 2 * d.a0 * angle)) / d.a0
+    step = stop / (samples - 1)
+    path = folder / f"{BIG_MECHANISM}_{turns}.toml"
+    path.write_text(
+        text.split("[time]")[0] + f"[time]\nstart = 0.0\nstop = {stop!r}\nstep = {step!r}\n", encoding="utf-8"
+    )
+    return path
+
+
+def big_run(samples: int, turns: int, fmt: str = "parquet") -> tuple[float, float, int]:
+    """(seconds, peak RSS [MB], rows written) of ``vloop run FILE --format parquet`` in a process of its own (the
+    peak is that process's ru_maxrss, read by a wrapper so runs never mix)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        path = big_file(folder, samples, turns)
+        probe = (
+            "import resource, sys, time; from vloop.cli import main; t0 = time.perf_counter(); "
+            f"rc = main(['run', {str(path)!r}, '--out', {str(folder / 'out')!r}, '--format', {fmt!r}]); "
+            "print(time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, rc)"
+        )
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=False)
+        seconds, peak, rc = proc.stdout.strip().splitlines()[-1].split()
+        if rc != "0":
+            raise SystemExit(proc.stdout + proc.stderr)
+        import pyarrow.parquet as pq
+
+        rows = pq.ParquetFile(folder / "out" / "results.parquet").metadata.num_rows
+    return float(seconds), float(peak) / 1024.0, rows
+
+
+def big_table(samples: int, repeat: int) -> list[str]:
+    """The million-sample runs over one turn and over 10,000 turns, interleaved ``repeat`` times: medians."""
+    runs: dict[int, list[tuple[float, float, int]]] = {1: [], 10_000: []}
+    for _ in range(repeat):
+        for turns in runs:
+            runs[turns].append(big_run(samples, turns))
+    lines = [f"vloop run {BIG_MECHANISM} --format parquet, {samples:,} samples (median of {repeat}):"]
+    base = statistics.median(r[0] for r in runs[1])
+    for turns, rs in runs.items():
+        t, peak = statistics.median(r[0] for r in rs), statistics.median(r[1] for r in rs)
+        lines.append(
+            f"  {turns:>6,} turns ({degrees_per_sample(turns, samples):7.4f}°/sample): {t:6.2f} s "
+            f"({samples / t / 1e3:6.0f} k samples/s, {t / base:4.2f}× one turn), peak RSS {peak:5.0f} MB, "
+            f"{rs[0][2]:,} rows written; all times {', '.join(f'{r[0]:.2f}' for r in rs)} s"
+        )
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--samples", type=int, default=4800)
@@ -182,6 +244,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--only", nargs="+", default=list(MECHANISMS), choices=MECHANISMS)
     p.add_argument("--compare", default=None, help="a git commit or source folder timed alongside this tree")
+    p.add_argument("--big", type=int, default=0, help="also N-sample `vloop run`s over 1 and 10,000 turns")
+    p.add_argument("--big-repeat", type=int, default=3)
     args = p.parse_args(argv)
     try:
         from threadpoolctl import threadpool_limits
@@ -194,6 +258,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     for name in args.only:
         print("\n".join(bench(name, tuple(args.turns), args.samples, args.repeat, other)), flush=True)
+    if args.big:
+        print("\n".join(big_table(args.big, args.big_repeat)), flush=True)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
     return 0
 

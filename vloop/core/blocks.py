@@ -130,7 +130,7 @@ def dyad_positions(run: Run, state: State, t_grid: np.ndarray, i: int, plan: Pla
     k = slice(0, out.n_ok)
     sigma = run.sigma(i, t_grid[k])
     ok, h = closed_form(plan, state, k, sigma)
-    if run.detect and plan.block.kind != "PP":
+    if run.detect and run.chart is None and plan.block.kind != "PP":  # (a chart has seen none on the way)
         n_lim = int(np.argmin(ok)) if not ok.all() else out.n_ok
         found, failure = find_change_points(run, state, t_grid, i, h[:n_lim])
         if failure is not None:

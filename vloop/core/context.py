@@ -95,6 +95,7 @@ class Run:
     memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
     sink: Any = None  # solve()'s whole-run output columns, filled chunk by chunk (vloop.core.solver)
     blocks: Callable[..., Any] | None = None  # the solver's block runner, for probes (set by vloop.core.solver)
+    chart: Any = None  # the run's chart over its one input, where one is drawn (vloop.core.charts)
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""

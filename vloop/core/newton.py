@@ -41,7 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accuracy import EPS
-from .context import ChangePoint, Failure, Inputs, Run, change_point_choices, impose_drivers
+from .charts import ChartMiss, hermite
+from .context import ChangePoint, Failure, Run, change_point_choices, impose_drivers
 from .data import TWO_PI, State
 from .linalg import (
     apply_last,
@@ -391,11 +392,8 @@ def solve_block(
     run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, n: int
 ) -> tuple[Failure | None, Factor]:
     """Solve Newton block ``i`` on rows 0..n-1; returns (the first failure or None, the Factor of the rows
-    before it). Rows from the failure on are left unsolved.
-
-    A run whose one input travels far (many turns, or a rocking input's range many times over) is predicted
-    from a chart of the block over the input's range (:func:`_chart`: one turn of a crank, continued as today),
-    every row at once; the rows from the first one that fails a check on are continued as without a chart."""
+    before it). Rows from the failure on are left unsolved. Under a chart of the run (:mod:`vloop.core.charts`)
+    every row is predicted from it at once (:func:`_from_chart`), else continued from row 0."""
     ctx = _Ctx(run, state, t_grid, i, plan, n)
     blk = ctx.blk
     _, J0 = blk.residual_jacobian(state, np.array([0]))
@@ -403,20 +401,10 @@ def solve_block(
         run.newton_sign[i] = float(det_sign(J0)[0] or 1.0) * float(run.sigma(i, t_grid[:1])[0])
     if n > 1:
         ctx.rates_at(0, J0[0])
-    start = 0
-    chart = _chart(ctx) if n > 2 else None
-    if chart is not None:
-        rows = np.arange(1, n)
-        pred, move = chart.predict(ctx.inputs()[rows])
-        factor, res, conv, far = _settle(ctx, rows, pred, move, n)
-        bad = _bad_rows(ctx, rows, factor, res, conv, far)
-        if not bad.any():
-            return None, factor
-        start = int(rows[np.argmax(bad)]) - 1  # continued from the row before the first one that fails
-        _, J = blk.residual_jacobian(state, np.array([start]))
-        ctx.rates_at(start, J[0])
-    coarse, n_ok, failure = _coarse_pass(ctx, start)
-    coarse = np.concatenate([np.arange(start), coarse[coarse < n_ok]])
+    if run.chart is not None and n > 1:
+        return None, _from_chart(ctx)
+    coarse, n_ok, failure = _coarse_pass(ctx)
+    coarse = coarse[coarse < n_ok]
     rows = _between(coarse, n_ok)
     j, pred, move = _predict(ctx, coarse, rows)
     factor, res, conv, far = _settle(ctx, rows, pred, move, n_ok)
@@ -436,121 +424,19 @@ def solve_block(
     return failure, factor
 
 
-CHART_STEP = COARSE_STEP / 4  # a chart's rows are this far apart in its input (rad; sliders: 2π per size)
-CHART_TRAVEL = 2.0  # a chart is drawn for a run whose input travels more than this many times the chart's span
-SPARSE = 0.5  # ... or whose rows are on average more than this fraction of COARSE_STEP apart (and span a chart)
-CLOSED_TURN = 1e-9  # a one-turn chart closes: its unknowns come back to within this (rad; sizes for sliders)
-
-
-@dataclass
-class _Chart:
-    """A Newton block's unknowns as a function of the run's one input x, on the branch the run is on: positions q,
-    dq/dx and d²q/dx² (each (nu, nodes)) at ascending input values x. A crank's chart covers one turn (``turn`` =
-    2π): past it, the unknowns add ``wind`` (whole turns of the angles) per turn."""
-
-    x: np.ndarray
-    q: np.ndarray
-    dq: np.ndarray
-    ddq: np.ndarray
-    turn: float = 0.0
-    wind: np.ndarray | None = None
-    unit: np.ndarray | None = None  # the unknowns' units for the move of an interval (as _moves)
-
-    def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The unknowns at inputs ``x`` by the quintic Hermite interpolant in x (nu, len(x)), and the move of
-        the chart's interval each falls in (what a Newton correction from there is measured against)."""
-        lo = self.x[0]
-        turns = np.floor((x - lo) / self.turn) if self.turn else np.zeros(len(x))
-        xs = x - turns * self.turn if self.turn else x
-        j = np.clip(np.searchsorted(self.x, xs, side="right") - 1, 0, len(self.x) - 2)
-        pred = hermite(self.x, self.q, self.dq, self.ddq, xs, j, ordered=False)
-        if self.turn:
-            pred += self.wind[:, None] * turns
-        return pred, self.moves[j]
-
-    @property
-    def moves(self) -> np.ndarray:
-        with np.errstate(invalid="ignore"):
-            move = np.max(np.abs(np.diff(self.q, axis=1)) * self.unit, axis=0)
-            return move + 1e-9 * (1.0 + np.max(np.abs(self.q[:, :-1]) * self.unit, axis=0))
-
-
-def _chart(ctx: _Ctx) -> _Chart | None:
-    """The block's chart over the range of the run's one input, where drawing it costs less than continuing
-    row after row (the input travels over its range many times, or the rows lie far apart): one turn of a crank
-    whose range spans a turn, else from the first row's input up to the largest and down to the smallest. None
-    where the run has several inputs, a change point among the rows (before this block or on it: the unknowns
-    are then not a function of the input alone), or where the chart cannot be drawn (a limit, a toggle, a
-    change point on the way, a turn that does not close: the run then meets it row after row)."""
-    run, n, i = ctx.run, ctx.n, ctx.i
-    system = run.system
-    if len(system.drivers) != 1 or not run.detect:
-        return None
-    t0, t1 = ctx.t_grid[0], ctx.t_grid[n - 1]
-    if any(t0 <= ev.time <= t1 for b in range(i + 1) for ev in run.events.get(b, ())):
-        return None
-    x = ctx.inputs()
-    crank = system.mechanism.drivers[0].kind == "crank"
-    unit = 1.0 if crank else TWO_PI / run.scale
-    lo, hi = float(np.min(x)), float(np.max(x))
-    turn = TWO_PI if crank and hi - lo >= TWO_PI else 0.0
-    span = (turn or hi - lo) * unit
-    travel = float(np.sum(np.abs(np.diff(x)))) * unit
-    if not span > 0 or not (travel > CHART_TRAVEL * span or travel > SPARSE * COARSE_STEP * (n - 1) >= span):
-        return None
-    legs = [_chart_leg(ctx, x[0], turn)] if turn else [_chart_leg(ctx, x[0], d) for d in (lo - x[0], hi - x[0]) if d]
-    if any(leg is None for leg in legs):
-        return None
-    if turn:
-        (leg,) = legs
-        gain = leg[1][:, -1] - leg[1][:, 0]
-        wind = np.where(ctx.blk.colscale < 1.0, TWO_PI * np.round(gain / TWO_PI), 0.0)
-        unit_q = np.where(ctx.blk.colscale < 1.0, 1.0, 1.0 / run.scale)
-        if not np.all(np.abs(gain - wind) * unit_q <= CLOSED_TURN):
-            return None  # (one turn does not bring the block back: a double turn, or another circuit)
-    else:
-        legs = [tuple(a[..., ::-1] for a in leg) if leg[0][-1] < leg[0][0] else leg for leg in legs]
-        legs.sort(key=lambda leg: leg[0][0])
-        if len(legs) == 2:  # the first row's input ends one leg and starts the other
-            legs[1] = tuple(a[..., 1:] for a in legs[1])
-        wind = None
-    xs, q, dq, ddq = (np.concatenate([leg[k] for leg in legs], axis=-1) for k in range(4))
-    units = np.where(ctx.blk.colscale < 1.0, 1.0, TWO_PI / run.scale)[:, None]
-    return _Chart(xs, q, dq, ddq, turn, wind, units)
-
-
-def _chart_leg(ctx: _Ctx, x0: float, travel: float) -> tuple[np.ndarray, ...] | None:
-    """Blocks 0..i continued from row 0 along the input from x0 to x0 + travel (rows CHART_STEP apart, on the
-    branches the run is on, checked as the run's own rows are): (x, q, dq/dx, d²q/dx²), or None if they cannot
-    be or pass a change point on the way."""
-    run, i, state = ctx.run, ctx.i, ctx.state
-    system = run.system
-    unit = 1.0 if system.mechanism.drivers[0].kind == "crank" else TWO_PI / run.scale
-    m = max(8, math.ceil(abs(travel) * unit / CHART_STEP)) + 1
-    u = np.linspace(0.0, 1.0, m)
-    inputs = Inputs(system.mechanism, math.inf, 0.0, 1.0, np.array([x0]), np.array([travel]))
-    flipped = {  # each block's branch as at the run's first row, whatever the chart's own time
-        b: [ChangePoint(b, -math.inf, True, True)]
-        for b in range(i + 1)
-        if sum(ev.flip for ev in run.events.get(b, ()) if ev.time < ctx.t_grid[0]) % 2
-    }
-    sub = dataclasses.replace(run, inputs=inputs, events=flipped, tail=True, sink=None)
-    trial = State(m, system.n_angles, len(system.slider_names))
-    for name in State.POSITIONS:
-        getattr(trial, name)[0] = getattr(state, name)[0]
-    impose_drivers(system, trial, *inputs(u))
-    solved = sub.blocks(sub, trial, u, m, upto=i)
-    if solved.n_ok < m or any(len(sub.events.get(b, ())) != len(flipped.get(b, ())) for b in range(i + 1)):
-        return None
-    blk = ctx.blk
-    rows = np.arange(m)
-    rates = []
-    for ang, sl in ((trial.omega, trial.s_dot), (trial.alpha, trial.s_ddot)):
-        r = np.empty((blk.nu, m))
-        r[blk.ia] = ang[:, blk.acol].T
-        r[blk.isl] = sl[:, blk.scol].T
-        rates.append(r)
-    return x0 + travel * u, blk.read(trial, rows).T, rates[0] / travel, rates[1] / (travel * travel)
+def _from_chart(ctx: _Ctx) -> Factor:
+    """Rows 1..n-1 solved at once from the run's chart (its quintic Hermite interpolant at each row's input), each
+    checked as a row between coarse rows is (converged, closed, near its prediction, on the run's branch): the
+    Factor of rows 0..n-1. Raises ChartMiss if a row fails a check (the chunk is then solved without the chart)."""
+    blk, na = ctx.blk, ctx.na
+    cols = np.empty(blk.nu, int)  # the block's unknowns among the chart's variables (angles, then sliders)
+    cols[blk.ia], cols[blk.isl] = blk.acol, na + blk.scol
+    rows = np.arange(1, ctx.n)
+    pred, move = ctx.run.chart.predict(ctx.inputs()[rows], cols)
+    factor, res, conv, far = _settle(ctx, rows, pred, move, ctx.n)
+    if _bad_rows(ctx, rows, factor, res, conv, far).any():
+        raise ChartMiss(f"block {ctx.i}: a row predicted from the chart fails a check")
+    return factor
 
 
 def _settle(
@@ -836,39 +722,6 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray) -> tuple[np.ndarra
     tc = ctx.t_grid[coarse]
     pred = hermite(tc, xc, ctx.xd[coarse].T, ctx.xdd[coarse].T, ctx.t_grid[rows], j, ordered=True)
     return j, pred, _moves(ctx.blk, xc)[j]
-
-
-def hermite(
-    tc: np.ndarray, xc: np.ndarray, v: np.ndarray, acc: np.ndarray, t: np.ndarray, j: np.ndarray, ordered: bool
-) -> np.ndarray:
-    """The quintic Hermite interpolant through positions xc, rates v and accelerations acc at nodes tc (each
-    (nu, nodes), batch-last) at the times t, each in interval j (tc[j] ≤ t ≤ tc[j + 1]): (nu, len(t)). The
-    coefficients in u (0..1 across an interval) are taken once per interval; each time gathers them and runs
-    Horner (``ordered``: t sorted by interval, the coefficients repeated, not gathered)."""
-    H = tc[1:] - tc[:-1]
-    xa, xb = xc[:, :-1], xc[:, 1:]
-    va, vb = v[:, :-1] * H, v[:, 1:] * H  # rates and accelerations in units of the interval
-    aa, ab = acc[:, :-1] * (H * H), acc[:, 1:] * (H * H)
-    d = xb - xa
-    C = np.stack(
-        [
-            xa,
-            va,
-            0.5 * aa,
-            10 * d - 6 * va - 4 * vb - 1.5 * aa + 0.5 * ab,
-            -15 * d + 8 * va + 7 * vb + 1.5 * aa - ab,
-            6 * d - 3 * va - 3 * vb - 0.5 * aa + 0.5 * ab,
-        ]
-    )
-    # each interval's coefficients repeated over its rows (contiguous: ~5× faster arithmetic after)
-    C = np.repeat(C, np.bincount(j, minlength=len(H)), axis=2) if ordered else np.take(C, j, axis=2)
-    u = (t - tc[j]) / H[j]
-    pred = C[5] * u
-    for power in range(4, 0, -1):
-        pred += C[power]
-        pred *= u
-    pred += C[0]
-    return pred
 
 
 def _moves(blk: NewtonBlock, xc: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ from ..errors import MechanismError, MotionError
 from ..files import budget
 from ..method.loops import LoopSystem
 from ..result import Result
+from . import charts
 from .accuracy import DEFAULT_MAX_ITER, DEFAULT_RTOL, DEFAULT_TOL, ILL_FRACTION, error_bound
 from .blocks import run_blocks
 from .changepoints import (
@@ -30,9 +31,10 @@ from .changepoints import (
     probe,
     time_to_move,
 )
-from .context import Failure, Inputs, Run, impose_drivers, initial_state
+from .context import Failure, Inputs, Run, impose_drivers, initial_state, input_units
 from .data import TWO_PI, State
 from .grid import Grid, check_inputs, internal_grid
+from .grid import input_travel as grid_travel
 from .plans import block_plans
 from .results import chunk_result, first_non_finite, motion_error
 
@@ -319,22 +321,27 @@ def solve_chunks(run: Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Re
     system = run.system
     lead, run.inputs, turns = _lead_in(system, run, float(times[0]))
     run.t_start = float(times[0])
+    chart = _chart(run, times)
     carry: tuple[np.ndarray, State] | None = None
     i0, n_total, size, at_least = 0, len(times), chunk, 1
     while i0 < n_total:
         i1 = min(i0 + size, n_total)
         grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
         run.tail = grid.offset + len(grid.out) == n_total
-        state = initial_state(system, len(grid.t))
-        if carry is not None:
-            for name in ("e", "theta", "s"):
-                getattr(state, name)[:2] = getattr(carry[1], name)
         events = {i: list(evs) for i, evs in run.events.items()}
-        try:
-            res = _solve_grid(run, grid, state, turns if carry is None else None)
+        charted = _on_chart(run, chart, lead, carry, times, grid)
+        solved = None if charted is None else _solve_on_chart(run, chart, charted, carry, turns)
+        if solved is not None:
+            grid, state, res = charted, *solved
             failure = None
-        except MotionError as exc:
-            res, failure = exc.partial, exc
+        else:
+            run.events = {i: list(evs) for i, evs in events.items()}
+            state = _start_state(system, grid, carry)
+            try:
+                res = _solve_grid(run, grid, state, turns if carry is None else None)
+                failure = None
+            except MotionError as exc:
+                res, failure = exc.partial, exc
         reach = math.inf if run.tail else _border_reach(run, grid)
         cut = len(grid.out) - 1 if run.tail else _cut(run, grid, res, reach)
         if failure is not None and (run.tail or failure.time is None or failure.time <= reach):
@@ -352,6 +359,61 @@ def solve_chunks(run: Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Re
         row = int(grid.out[cut])
         carry = (grid.t[row - 1 : row + 1], state.copy_positions(slice(row - 1, row + 1)))
         i0, size, at_least = grid.offset + cut + 1, chunk, 1
+
+
+def _start_state(system: LoopSystem, grid: Grid, carry: tuple | None) -> State:
+    """A chunk's state: row 0 the t = 0 assembly, or rows 0–1 carried from the chunk before."""
+    state = initial_state(system, len(grid.t))
+    if carry is not None:
+        for name in State.POSITIONS:
+            getattr(state, name)[:2] = getattr(carry[1], name)
+    return state
+
+
+CHART_MIN_STEP = math.radians(1.0)  # closed forms alone: a chart is drawn where samples are this far apart on average
+
+
+def _chart(run: Run, times: np.ndarray) -> charts.Chart | None:
+    """The run's chart over its one input (:mod:`vloop.core.charts`), where it saves work: Newton blocks whose
+    input travels its range many times, closed forms only where, besides, the samples lie far apart (rows would be
+    inserted between them, dips of the discriminants searched: finely sampled, closed forms cost less)."""
+    newton = any(b.kind == "newton" for b in run.system.blocks)
+    trip = charts.input_travel(run, times)
+    if not charts.worth_drawing(run, trip, 0.0 if newton else CHART_MIN_STEP):
+        return None
+    return charts.draw(run, trip)
+
+
+def _on_chart(
+    run: Run, chart: charts.Chart | None, lead: np.ndarray, carry: tuple | None, times: np.ndarray, grid: Grid
+) -> Grid | None:
+    """The chunk's grid without inserted rows, where the chart covers every input value of ``grid`` (the chunk's
+    grid with its rows inserted: the input between samples too) and no change point has been passed."""
+    if chart is None or any(run.events.values()):
+        return None
+    if not chart.turn and not chart.covers(run.inputs(grid.t)[0][:, 0]):
+        return None
+    i0, i1 = grid.offset + (carry is not None), grid.offset + len(grid.out)
+    if carry is None:
+        charted = internal_grid(run, lead, times[i0:i1], insert=False)
+    else:
+        charted = internal_grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]), insert=False)
+    return dataclasses.replace(charted, skip=grid.skip, offset=grid.offset, total=grid.total)
+
+
+def _solve_on_chart(
+    run: Run, chart: charts.Chart, grid: Grid, carry: tuple | None, turns: np.ndarray
+) -> tuple[State, Result] | None:
+    """The chunk solved on the chart (its state and Result), or None where a row misses it or the motion stops
+    (the chunk is then solved without it, as if none had been drawn, and says so)."""
+    state = _start_state(run.system, grid, carry)
+    run.chart = chart
+    try:
+        return state, _solve_grid(run, grid, state, turns if carry is None else None)
+    except (charts.ChartMiss, MotionError):
+        return None
+    finally:
+        run.chart = None
 
 
 def _chunk_grid(
@@ -396,6 +458,26 @@ def _cut(run: Run, grid: Grid, res: Result, reach: float) -> int:
     return grid.skip + len(res) - 1 if not len(unsafe) else grid.skip + int(unsafe[0]) - 1
 
 
+def _count_turns(run: Run, state: State, grid: Grid, X: np.ndarray, XD: np.ndarray, every: bool) -> None:
+    """The whole turns of the angles on a chunk's rows from the run's chart (they lie too far apart to count them
+    from row to row): of each angle that could turn π/4 or more between two rows (:meth:`charts.Chart.steep`), or
+    of ``every`` angle (a late start: the turns before the lead-in's are counted from t = 0)."""
+    system, chart = run.system, run.chart
+    first, n = grid.first, len(grid.t)
+    if n - first < 1:
+        return
+    if every:
+        cols = np.arange(system.n_angles)
+    else:
+        units = input_units(system.mechanism, system.mechanism.scale / TWO_PI)
+        travel = grid_travel(X[first:], XD[first:], np.diff(grid.t[first:])[:, None], units)
+        cols = chart.steep(float(np.max(travel, initial=0.0)))
+    cols = np.setdiff1d(cols, system.drivers)
+    if len(cols):
+        rows = slice(first, n)
+        state.theta[rows, cols] += chart.turns(state.theta[rows][:, cols], X[rows, 0], cols)
+
+
 def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) -> Result:
     """Solve one chunk's grid (row 0 assembled; rows 0–1 carried from the chunk before, if any)."""
     system = run.system
@@ -405,6 +487,11 @@ def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) ->
     early = check_inputs(system, X, XD, XDD, first, run.rtol)
     rated = None if len(grid.out) == n else grid.out  # rows inserted (or a lead-in): rates at the requested ones
     solved = run_blocks(run, state, t_grid, early.sample if early else n, rated=rated)
+    if run.chart is not None:
+        if early is not None or solved.failure is not None:
+            raise charts.ChartMiss("the motion stops")
+        _count_turns(run, state, grid, X, XD, every=turns is not None and bool(np.any(turns)))
+        turns = None
     failure = solved.failure if early is None or (solved.failure and solved.failure.sample < early.sample) else early
     n_ok = min(solved.n_ok, failure.sample if failure else n)
     free = [v for v in range(system.n_angles) if v not in system.drivers and turns[v]] if turns is not None else []
