@@ -8,9 +8,11 @@ Rates at rows next to one, where the Jacobian is singular, come from a well-cond
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,7 +21,7 @@ from ..method.loops import LoopSystem
 from .accuracy import EPS, error_bound
 from .context import ChangePoint, Failure, Run, Solved, change_point_choices, impose_drivers, input_units
 from .data import Probe, State
-from .dyads import closed_form, dyad_rates, jacobian_columns
+from .dyads import closed_form, dyad_health, dyad_rates, jacobian_columns
 from .plans import Plan, block_plans, store_rates
 
 CHANGE_GAP = 1e-6  # two assembly branches closer than this fraction of the mechanism size meet: a change point
@@ -132,12 +134,12 @@ def find_change_points(
     """
     loop = run.system.loops[block_plans(run.system)[i].block.loops[0]]
     choices = change_point_choices(run.system, loop.index + 1)
-    brackets = [  # (not those found already: by the chunk before, whose last rows this chunk starts from)
-        (lo, hi) for _, lo, hi in candidate_minima(h[None, :], run.tail).tolist() if not _passed(run, i, t_grid, lo, hi)
-    ]
-    if not brackets:
+    lo, hi = candidate_minima(h[None, :], run.tail)[:, 1:].T
+    known = sorted(ev.time for ev in run.events.get(i, ()))
+    fresh = ~_passed(known, t_grid[lo], t_grid[hi])  # (found already: by the chunk before, whose last rows this
+    lo, hi = lo[fresh], hi[fresh]  # chunk starts from)
+    if not len(lo):
         return [], None
-    lo, hi = np.array(brackets).T
     a, b = t_grid[lo], t_grid[hi]
     eta = times_to_move(run, 0.5 * (a + b), b - a)
     t_star, h_min = locate_minima(_Discriminants(run, state, t_grid, i, lo), a, b, eta, run.scale)
@@ -146,7 +148,7 @@ def find_change_points(
     continuations = _Continuations(run, state, t_grid, i, lo[meets], t_star[meets])
     found: list[ChangePoint] = []
     for k in np.nonzero(meets | (h_min < 0))[0].tolist():  # (the others: no change point, no limit)
-        if found and _passed(run, i, t_grid, lo[k], hi[k]):
+        if found and _passed(known, t_grid[lo[k : k + 1]], t_grid[hi[k : k + 1]])[0]:
             continue  # (brackets around neighbouring minima can overlap: the change point is found already)
         if h_min[k] < 0:
             why = "the loop cannot close between samples: the input passes a limit position"
@@ -158,13 +160,18 @@ def find_change_points(
         flip = smooth_flip if choice == "smooth" else not smooth_flip
         ev = ChangePoint(i, float(t_star[k]), flip, choice == "smooth")
         run.events.setdefault(i, []).append(ev)
+        bisect.insort(known, ev.time)
         found.append(ev)
     return found, None
 
 
-def _passed(run: Run, i: int, t_grid: np.ndarray, lo: int, hi: int) -> bool:
-    """Whether a change point of block ``i`` is known between samples lo and hi."""
-    return any(t_grid[lo] <= ev.time <= t_grid[hi] for ev in run.events.get(i, ()))
+def _passed(known: list[float], a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether a change point is known (at a time of the sorted ``known``) in each bracket [a, b]."""
+    if not known:
+        return np.zeros(len(a), bool)
+    times = np.array(known)
+    j = np.searchsorted(times, a)
+    return (j < len(times)) & (times[np.minimum(j, len(times) - 1)] <= b)
 
 
 def locate_minima(
@@ -273,12 +280,13 @@ def closed_forms_upto(system: LoopSystem, i: int) -> bool:
 
 
 def dyads_at(
-    run: Run, times: np.ndarray, upto: int, sigma: np.ndarray | None = None, rates: bool = False
-) -> tuple[State, np.ndarray, np.ndarray]:
+    run: Run, times: np.ndarray, upto: int, sigma: np.ndarray | None = None, rates: bool = False, health: bool = False
+) -> tuple:
     """Closed-form blocks 0..upto at ``times`` (any order: each row solved on its own, on each block's branch at
     its time; block ``upto`` on ``sigma`` if given), in chunks of ROWS rows. Returns the probe's state, block
-    upto's discriminant h and whether every block closes, per row; with ``rates``, velocities and accelerations.
-    Raises MechanismError where a time is outside a tabulated input."""
+    upto's discriminant h and whether every block closes, per row (and with ``health`` block upto's condition
+    number); with ``rates``, velocities and accelerations. Raises MechanismError where a time is outside a
+    tabulated input."""
     system = run.system
     n, na = len(times), system.n_angles
     trial = Probe(n, na, len(system.slider_names))
@@ -286,7 +294,7 @@ def dyads_at(
     inputs = np.empty((3, n, len(system.drivers)))
     inputs[:, order] = run.inputs(times[order])
     impose_drivers(system, trial, *inputs)
-    h, ok = np.empty(n), np.ones(n, bool)
+    h, ok, cond = np.empty(n), np.ones(n, bool), np.empty(n)
     plans = block_plans(system)
     for start in range(0, n, ROWS):
         k = slice(start, min(start + ROWS, n))
@@ -295,11 +303,13 @@ def dyads_at(
             s = sigma[k] if sigma is not None and b == upto else run.sigma(b, times[k])
             closes, h[k] = closed_form(plan, trial, k, s)
             ok[k] &= closes
+            cols = jacobian_columns(plan, trial, k) if rates or (health and b == upto) else None
+            if health and b == upto:
+                cond[k] = dyad_health(plan, trial, k, run.scale, cols)[0]
             if rates:
-                cols = jacobian_columns(plan, trial, k)
                 for what in ("v", "a"):
                     store_rates(plan, trial, k, dyad_rates(plan, trial, k, what, cols), what, na)
-    return trial, h, ok
+    return (trial, h, ok, cond) if health else (trial, h, ok)
 
 
 ROWS = 16_000  # probe rows solved together (complex temporaries below numpy's in-place threshold, as a run's)
@@ -428,18 +438,30 @@ def rates_across(
     falls to STENCIL_COND (the stencil's own points then carry ~STENCIL_COND³·ε), and again at 2η: their
     difference bounds the narrower one's truncation error (conservatively: where the branch bends fast the
     error does not yet fall like η⁸). Each row keeps whichever is better: the interpolated rates (that
-    estimate) or its direct ones (their bound cond³·ε).
+    estimate) or its direct ones (their bound cond³·ε). The stencils of every change point are probed at once.
     """
-    for ev in run.events[i]:
-        eta = _stencil_eta(run, state, t_grid, i, ev.time)
-        near = np.abs(t_grid[rows] - ev.time) < 8.0 * eta
-        mine = rows[near]
-        if not len(mine):
-            continue
-        narrow = _stencil_rates(run, state, t_grid, i, plan, ev.time, eta, t_grid[mine])
-        wide = _stencil_rates(run, state, t_grid, i, plan, ev.time, 2.0 * eta, t_grid[mine])
+    events = run.events[i]
+    t_star = np.array([ev.time for ev in events])
+    widest = times_to_move(run, t_star, np.full(len(t_star), math.inf), STENCIL_INPUT)  # (η is at most this)
+    t_rows = t_grid[rows]
+    reach = np.abs(t_rows[None, :] - t_star[:, None]) < 8.0 * widest[:, None]
+    k = np.nonzero(reach.any(axis=1))[0]
+    if not len(k):
+        return
+    t_star, widest = t_star[k], widest[k]
+    eta = _stencil_eta(run, state, t_grid, i, t_star, widest)
+    near = np.abs(t_rows[None, :] - t_star[:, None]) < 8.0 * eta[:, None]
+    k = np.nonzero(near.any(axis=1))[0]
+    stencils = [t_star[j] + f * eta[j] * STENCIL for j in k for f in (1.0, 2.0)]  # narrow, then wide
+    probed = _probe_groups(run, state, t_grid, i, stencils, rates=True)
+    na = run.system.n_angles
+    for n, j in enumerate(k.tolist()):
+        narrow, wide = probed[2 * n], probed[2 * n + 1]
         if narrow is None or wide is None:
             continue  # a stencil leaves the feasible range: keep the direct rates (flagged)
+        mine = rows[near[j]]
+        u = (t_grid[mine] - t_star[j]) / eta[j]
+        narrow, wide = _interpolated(narrow, u), _interpolated(wide, 0.5 * u)
         use = np.zeros(len(mine), bool)
         for what in ("v", "a"):
             scale = _rate_scale(run, plan, narrow["scale_" + what], narrow["scale_v"], what)
@@ -448,23 +470,65 @@ def rates_across(
             use |= np.all(err_stencil < err_direct, axis=1)
         if use.any():
             for what in ("v", "a"):
-                store_rates(plan, state, mine[use], narrow[what][use], what, run.system.n_angles)
+                store_rates(plan, state, mine[use], narrow[what][use], what, na)
             out.at_change[mine[use]] = True
 
 
-def _stencil_rates(
-    run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, t_star: float, eta: float, at: np.ndarray
-) -> dict[str, np.ndarray] | None:
-    """Block ``i``'s rates interpolated at times ``at`` from the stencil t* ± k·η, and their magnitudes."""
+@dataclass
+class _Probed:
+    """Block ``i``'s condition number (rows,) and the rates of its unknowns (rows, unknowns: ω [rad/s], ṡ
+    [length/s]; α, s̈) at a group of probe times."""
+
+    cond: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+def _probe_groups(
+    run: Run, state: State, t_grid: np.ndarray, i: int, groups: list[np.ndarray], rates: bool
+) -> list[_Probed | None]:
+    """Blocks 0..i solved at each group of times (ascending), on the run's branches: block i's condition number and
+    (with ``rates``) its rates there, or None for a group where a block cannot be solved. Every row at once where
+    blocks 0..i are closed forms; else a probe per group, continued from the sample before its first time."""
+    plan = block_plans(run.system)[i]
+    if closed_forms_upto(run.system, i) and groups:
+        try:
+            trial, _, ok, cond = dyads_at(run, np.concatenate(groups), i, rates=rates, health=True)
+        except MechanismError:  # a probe past the end of a tabulated input: group by group below
+            trial = None
+        if trial is not None:
+            v, a = _unknown_rates(run, trial, plan, slice(None))
+            ends = np.cumsum([0] + [len(g) for g in groups])
+            return [
+                _Probed(cond[p:q], v[p:q], a[p:q]) if ok[p:q].all() else None
+                for p, q in zip(ends[:-1].tolist(), ends[1:].tolist(), strict=True)
+            ]
+    out: list[_Probed | None] = []
+    for g in groups:
+        base = max(int(np.searchsorted(t_grid, g[0])) - 1, 0)
+        solved, trial = probe(run, state, t_grid, base, g, i, check=False, rates=rates)
+        if solved.n_ok < len(g) + 1 or len(solved.conds) <= i:
+            out.append(None)
+            continue
+        v, a = _unknown_rates(run, trial, plan, slice(1, None))
+        out.append(_Probed(solved.conds[i][1:], v, a))
+    return out
+
+
+def _unknown_rates(run: Run, trial: State, plan: Plan, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """The rates and accelerations of a block's unknowns on ``rows`` of a probe, (rows, unknowns) each."""
     na = run.system.n_angles
-    base = max(int(np.searchsorted(t_grid, t_star - 4.0 * eta)) - 1, 0)
-    solved, trial = probe(run, state, t_grid, base, t_star + eta * STENCIL, i, check=False)
-    if solved.n_ok < len(STENCIL) + 1:
-        return None
-    u = (at - t_star) / eta
+    return tuple(
+        np.stack([ang[rows, v] if v < na else sl[rows, v - na] for v in plan.block.unknowns], 1)
+        for ang, sl in ((trial.omega, trial.s_dot), (trial.alpha, trial.s_ddot))
+    )
+
+
+def _interpolated(probed: _Probed, u: np.ndarray) -> dict[str, np.ndarray]:
+    """The rates at stencil coordinates ``u`` (multiples of its step from t*) by the degree-7 polynomial through the
+    stencil's, and their magnitudes."""
     out = {}
-    for what, ang, sl in (("v", trial.omega, trial.s_dot), ("a", trial.alpha, trial.s_ddot)):
-        vals = np.stack([ang[1:, v] if v < na else sl[1:, v - na] for v in plan.block.unknowns], 1)
+    for what, vals in (("v", probed.v), ("a", probed.a)):
         fit = np.polynomial.polynomial.polyfit(STENCIL, vals, len(STENCIL) - 1)
         out[what] = np.polynomial.polynomial.polyval(u, fit).T
         out["scale_" + what] = np.max(np.abs(vals), axis=0)
@@ -485,17 +549,22 @@ def _rate_scale(run: Run, plan: Plan, scale: np.ndarray, scale_v: np.ndarray, wh
     return out
 
 
-def _stencil_eta(run: Run, state: State, t_grid: np.ndarray, i: int, t_star: float) -> float | None:
-    """The stencil's step [s]: where block ``i``'s condition number falls to STENCIL_COND (it grows like
-    1/|t − t*| next to a change point), at most the time the inputs take to move STENCIL_INPUT."""
-    widest = time_to_move(run, t_star, math.inf, STENCIL_INPUT)
+def _stencil_eta(
+    run: Run, state: State, t_grid: np.ndarray, i: int, t_star: np.ndarray, widest: np.ndarray
+) -> np.ndarray:
+    """The stencil's step [s] at each change point t*: where block ``i``'s condition number falls to STENCIL_COND
+    (it grows like 1/|t − t*| next to a change point), at most ``widest`` (the time the inputs take to move
+    STENCIL_INPUT)."""
     d = 0.02 * widest
-    base = max(int(np.searchsorted(t_grid, t_star - d)) - 1, 0)
-    solved, _ = probe(run, state, t_grid, base, np.array([t_star - d, t_star + d]), i, check=False, rates=False)
-    if solved.n_ok < 3 or len(solved.conds) <= i:
-        return widest
-    k = float(np.min(solved.conds[i][1:])) * d  # cond·|t − t*|, about constant near the change point
-    return float(np.clip(k / STENCIL_COND, 0.02 * widest, widest))
+    looks = _probe_groups(
+        run, state, t_grid, i, [np.array([t - e, t + e]) for t, e in zip(t_star, d, strict=True)], False
+    )
+    eta = widest.copy()
+    for j, look in enumerate(looks):
+        if look is not None:
+            k = float(np.min(look.cond)) * d[j]  # cond·|t − t*|, about constant near the change point
+            eta[j] = float(np.clip(k / STENCIL_COND, 0.02 * widest[j], widest[j]))
+    return eta
 
 
 def find_singular_points(run: Run, state: State, t_grid: np.ndarray, i: int, cond: np.ndarray) -> None:
