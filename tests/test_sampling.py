@@ -217,3 +217,31 @@ def test_streamed_chunks_on_a_chart_join_to_the_run_in_memory():
     assert len(parts) > 5
     for c in whole.columns:
         assert np.array_equal(np.concatenate([p[c] for p in parts]), whole[c]), c
+
+
+def test_the_batch_zooms_every_dip_of_every_variant():
+    """Near-parallelograms (rocker 2 + δ): their discriminants dip to ~δ at every folding, too close for a first
+    look to dismiss; the batch zooms on all of them at once and finds the branches apart, so it solves them itself
+    (before, each went to the single run): bit for bit the single run, and the law of cosines on its fixed branch
+    (validators.analytic_fourbar). The parallelogram itself (δ = 0) passes change points: the single run's."""
+    from validators import analytic_fourbar
+    from vloop.core import batch
+    from vloop.core.variants import VariantModel, resolve
+
+    text = PARALLELOGRAM.format(alpha=0.0, stop=1.5 * math.pi, step=0.05, solver="")
+    mech = vloop.loads(
+        text.replace('rocker = { joints = ["O4", "B"] }', 'rocker = { joints = ["O4", "B"], length = 2.001 }')
+    )
+    model = VariantModel.build(mech, vloop.compile(mech), (resolve(mech, "links.rocker.length", "rocker"),))
+    values = np.array([[2.0 + d] for d in (1e-3, 1e-5, 1e-7, 1e-8, 0.0)])
+    d = model.designs(values)
+    out = batch.solve(model, values, batch.make_grid(model, d, mech.times), ["B.x", "B.y", "rocker.theta"])
+    assert out.solver == ["batch"] * 4 + ["single"] and out.completed.all()
+    for v in range(4):
+        _, own = batch.variant_system(model, values[v], d.take(slice(v, v + 1)), out.q0[v], out.positions[v])
+        single = vloop.solve(own, mech.times)
+        assert single.meta["change_points"] == []
+        ref = analytic_fourbar.solve(own.mechanism, mech.times)
+        for c in ("B.x", "B.y", "rocker.theta"):
+            assert np.array_equal(out.columns[c][v], single[c]), (v, c)
+            assert np.max(np.abs(out.columns[c][v] - ref[c])) <= 1e-9 * 4.0, (v, c)
