@@ -80,15 +80,20 @@ def rocking(lib, mech: vloop.Mechanism, periods: int) -> vloop.Mechanism:
     return dataclasses.replace(mech, drivers=(dataclasses.replace(d, profile=profile),))
 
 
+EVEN = ["angle"]  # how the samples are spread: evenly in the input's angle, or ("time") evenly in time
+
+
 def sample_times(mech: vloop.Mechanism, turns: int, n: int) -> np.ndarray:
-    """``n`` times at which the input has turned evenly over ``turns`` turns (of its crank, or rocking periods)."""
+    """``n`` times at which the input has turned evenly over ``turns`` turns (of its crank, or rocking periods);
+    with EVEN = ["time"], ``n`` times evenly spaced up to the time of the last turn."""
     d = mech.drivers[0]
     if d.profile is not None:
         return np.linspace(0.0, turns * ROCK_PERIOD, n)
     angle = np.linspace(0.0, turns * 2 * math.pi, n)
     if d.a0 == 0.0:
         return angle / abs(d.v0)
-    return (-d.v0 + np.sqrt(d.v0 * d.v0 + 2 * d.a0 * angle)) / d.a0  # θ − θ0 = ω0·t + α·t²/2, ω0, α > 0
+    t = (-d.v0 + np.sqrt(d.v0 * d.v0 + 2 * d.a0 * angle)) / d.a0  # θ − θ0 = ω0·t + α·t²/2, ω0, α > 0
+    return np.linspace(0.0, t[-1], n) if EVEN[0] == "time" else t
 
 
 @dataclasses.dataclass
@@ -244,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--only", nargs="+", default=list(MECHANISMS), choices=MECHANISMS)
     p.add_argument("--compare", default=None, help="a git commit or source folder timed alongside this tree")
+    p.add_argument("--even", choices=["angle", "time"], default="angle", help="samples evenly in input or in time")
     p.add_argument("--big", type=int, default=0, help="also N-sample `vloop run`s over 1 and 10,000 turns")
     p.add_argument("--big-repeat", type=int, default=3)
     args = p.parse_args(argv)
@@ -254,6 +260,7 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:  # the environment variables above already ask for one thread
         pass
     keep_heap()
+    EVEN[0] = args.even
     other = load_tree(args.compare) if args.compare else None
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     for name in args.only:

@@ -245,3 +245,22 @@ def test_the_batch_zooms_every_dip_of_every_variant():
         for c in ("B.x", "B.y", "rocker.theta"):
             assert np.array_equal(out.columns[c][v], single[c]), (v, c)
             assert np.max(np.abs(out.columns[c][v] - ref[c])) <= 1e-9 * 4.0, (v, c)
+
+
+@pytest.mark.parametrize("index", [77, 218])
+@pytest.mark.parametrize("chart", [True, False])
+def test_rocked_stephenson_six_bars_stay_on_their_branch(index, chart, monkeypatch):
+    """Seed 2027 of the generated corpus: two Stephenson III six-bars rocked at their rocker, solved as one Newton
+    block. Continued row after row, a window of coarse rows predicted from one row's Taylor series reached the
+    other assembly near the input's reversal (closure, determinant sign and the jump allowance all passed) and
+    kept it: the rows after it were wrong by up to twice the peak. The rows between coarse rows, continued one by
+    one, now must lead to the coarse row after them, else the run continues from there; on the chart, every row is
+    near the chart's. The reference: the closed form (validators.analytic: the four-bar by the law of cosines, the
+    dyad on its coupler point)."""
+    from validators import corpus
+
+    mech = corpus.draw_item(2027, index).item.mechanism
+    if not chart:
+        monkeypatch.setattr(solver, "_chart", lambda run, times: None)
+    res = vloop.solve(vloop.compile(mech, method="newton"))
+    vloop.compare.assert_histories_close(res, analytic.solve(mech), rtol=1e-9, floor=1e-9, min_columns=15)

@@ -403,25 +403,50 @@ def solve_block(
         ctx.rates_at(0, J0[0])
     if run.chart is not None and n > 1:
         return None, _from_chart(ctx)
-    coarse, n_ok, failure = _coarse_pass(ctx)
-    coarse = coarse[coarse < n_ok]
-    rows = _between(coarse, n_ok)
-    j, pred, move = _predict(ctx, coarse, rows)
-    factor, res, conv, far = _settle(ctx, rows, pred, move, n_ok)
-    if len(rows):
-        bad = _bad_rows(ctx, rows, factor, res, conv, far)
+    start = 0
+    while True:  # (again from a coarse row found on another branch than the rows before it lead to)
+        coarse, n_ok, failure = _coarse_pass(ctx, start)
+        coarse = np.concatenate([np.arange(start), coarse[coarse < n_ok]])
+        rows = _between(coarse, n_ok)
+        j, pred, move = _predict(ctx, coarse, rows)
+        factor, res, conv, far = _settle(ctx, rows, pred, move, n_ok)
+        bad = _bad_rows(ctx, rows, factor, res, conv, far) if len(rows) else np.zeros(0, bool)
+        if not bad.any():
+            return failure, factor
+        start = 0
         for jj in np.unique(j[bad]):  # continue those intervals one row at a time
             lo, hi = int(coarse[jj]), int(coarse[jj + 1])
-            for k in range(lo + 1, hi):
-                f = _step(ctx, k - 1, k, strict=False)
+            for k in range(lo + 1, hi + 1):  # ... and on to the coarse row after them: do they lead to it?
+                f = _step(ctx, k - 1, k, strict=False) if k < hi else _joins(ctx, k)
                 if f is not None:
-                    n_ok, failure = k, f
+                    n_ok, failure = (k, f) if isinstance(f, Failure) else (n_ok, failure)
+                    start = k if f is True else 0
                     break
-            if failure is not None and failure.sample <= hi:
+            if start or (failure is not None and failure.sample <= hi):
                 break
-        if np.any(bad):
+        if not start:
             factor, _, _ = _refactor(blk, state, n_ok, run)
-    return failure, factor
+            return failure, factor
+
+
+def _joins(ctx: _Ctx, k: int) -> Failure | bool | None:
+    """Continue from row k − 1 to coarse row k: None where it lands where the coarse pass put row k (that row kept
+    as it was), True where it does not (the coarse pass jumped to another solution there: row k now holds the
+    continued one), or the step's failure."""
+    state, blk = ctx.state, ctx.blk
+    kept = [getattr(state, name)[k].copy() for name in State.FIELDS]
+    carried = (ctx.xd[k].copy(), ctx.xdd[k].copy(), ctx.weak[k], ctx.prev[k])
+    x = blk.read(state, np.array([k]))[0]
+    f = _step(ctx, k - 1, k, strict=False)
+    if f is not None:
+        return f
+    stepped = blk.read(state, np.array([k]))[0]
+    if np.max(np.abs(stepped - x)) > 1e-8 * (1.0 + np.max(np.abs(x))):
+        return True
+    for name, values in zip(State.FIELDS, kept, strict=True):
+        getattr(state, name)[k] = values
+    ctx.xd[k], ctx.xdd[k], ctx.weak[k], ctx.prev[k] = carried
+    return None
 
 
 def _from_chart(ctx: _Ctx) -> Factor:
