@@ -86,15 +86,15 @@ def _health_and_rates(
         cond, branch_sign = factor.cond[rows], factor.sign[rows]
         if plan.C.shape[0] * 2 > len(plan.block.unknowns):  # redundant: one branch, singular points passed
             find_singular_points(run, state, t_grid, i, cond)
-    where = np.arange(n) if every else rows
-    near = near_change_point(run, i, t_grid[where], cond)
+    near = near_change_point(run, i, t_grid[rows], cond)  # (rows: a slice of every row, or the rated rows)
     if run.check:
-        signed = branch_sign * sigma[where]
+        signed = branch_sign * sigma[rows]
         bad = np.nonzero(((velocity_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
         if len(bad):
-            fail(out, Failure(int(where[bad[0]]), plan.block.loops[0], _toggle_reason(cond[bad[0]], run.rtol)))
             m = int(bad[0])
-            n, rows, where = out.n_ok, (slice(0, out.n_ok) if every else rows[:m]), where[:m]
+            row = m if every else int(rows[m])
+            fail(out, Failure(row, plan.block.loops[0], _toggle_reason(cond[m], run.rtol)))
+            n, rows = out.n_ok, (slice(0, out.n_ok) if every else rows[:m])
             cond, branch_sign, near = cond[:m], branch_sign[:m], near[:m]
             cols = None if cols is None else cols.head(m)
     if every:
@@ -102,7 +102,7 @@ def _health_and_rates(
         out.signs.append(branch_sign)
     else:  # (cond 1 where not rated: nothing refused there, nothing flagged)
         full_cond, full_sign = np.ones(n), np.full(n, np.nan)
-        full_cond[where], full_sign[where] = cond, branch_sign
+        full_cond[rows], full_sign[rows] = cond, branch_sign
         out.conds.append(full_cond)
         out.signs.append(full_sign)
     if n == 0 or not run.rates:
@@ -114,7 +114,7 @@ def _health_and_rates(
             vals = newton.factor_rates(plan, state, rows, factor.inv[rows], what)
         store_rates(plan, state, rows, vals, what, na)
     if near.any():
-        rates_across(run, state, t_grid, i, plan, where[near], out, out.conds[-1])
+        rates_across(run, state, t_grid, i, plan, (np.flatnonzero(near) if every else rows[near]), out, out.conds[-1])
 
 
 def _toggle_reason(cond: float, rtol: float) -> str:

@@ -134,7 +134,10 @@ def find_change_points(
     """
     loop = run.system.loops[block_plans(run.system)[i].block.loops[0]]
     choices = change_point_choices(run.system, loop.index + 1)
-    lo, hi = candidate_minima(h[None, :], run.tail)[:, 1:].T
+    found_minima = candidate_minima(h[None, :], run.tail)
+    if not len(found_minima):
+        return [], None
+    lo, hi = found_minima[:, 1:].T
     known = sorted(ev.time for ev in run.events.get(i, ()))
     fresh = ~_passed(known, t_grid[lo], t_grid[hi])  # (found already: by the chunk before, whose last rows this
     lo, hi = lo[fresh], hi[fresh]  # chunk starts from)

@@ -136,6 +136,13 @@ def input_travel(run: Run, times: np.ndarray, block: int = 1 << 16) -> Travel | 
     mech = run.system.mechanism
     if len(mech.drivers) != 1:
         return None
+    d = mech.drivers[0]
+    if d.profile is None:  # x = x0 + v0·t + a0·t²/2 is monotonic but for one turning point: no sample needed
+        t0, t1 = float(times[0]), float(times[-1])
+        ts = [0.0, t0, t1] + ([-d.v0 / d.a0] if d.a0 and t0 < -d.v0 / d.a0 < t1 else [])
+        x = [d.x0 + d.v0 * t + 0.5 * d.a0 * t * t for t in ts]
+        path = abs(x[1] - x[3]) + abs(x[3] - x[2]) if len(x) > 3 else abs(x[2] - x[1])
+        return Travel(min(x), max(x), path, len(times))
     try:
         x0 = float(Inputs(mech)(np.zeros(1))[0][0, 0])
         lo = hi = x0

@@ -100,9 +100,9 @@ class Run:
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
         sigma = np.full(len(t), block_plans(self.system)[i].block.sigma)
-        flips = np.sort([ev.time for ev in self.events.get(i, ()) if ev.flip])
-        if len(flips):  # flipped once for each event before t
-            sigma[np.searchsorted(flips, t) % 2 == 1] *= -1.0
+        flips = [ev.time for ev in self.events.get(i, ()) if ev.flip]
+        if flips:  # flipped once for each event before t
+            sigma[np.searchsorted(np.sort(flips), t) % 2 == 1] *= -1.0
         return sigma
 
 
