@@ -36,6 +36,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -48,7 +49,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_speed import rounds_of_each, worst_relative  # noqa: E402
+from bench_speed import worst_relative  # noqa: E402
 
 import vloop  # noqa: E402
 from validators import analytic  # noqa: E402
@@ -105,6 +106,20 @@ class Case:
     mech: vloop.Mechanism
     system: object
     times: np.ndarray
+
+
+def rounds_of_each(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, list[float]]:
+    """As bench_speed.rounds_of_each (each function called twice a turn, the second call timed; the functions
+    take turns within a round), every other round in the reverse order: neither tree always runs first."""
+    times: dict[str, list[float]] = {label: [] for label in fns}
+    labels = list(fns)
+    for r in range(repeat):
+        for label in labels if r % 2 == 0 else labels[::-1]:
+            fns[label]()
+            t0 = time.perf_counter()
+            fns[label]()
+            times[label].append(time.perf_counter() - t0)
+    return times
 
 
 def load_tree(ref: str) -> object:
@@ -179,6 +194,8 @@ def bench(name: str, turns: tuple[int, ...], n: int, repeat: int, other) -> list
         if theirs is not None:
             ratios = "".join(f"{best[f'{method} {k}'] / best[f'{method} {k} other']:>14.2f}× {'':9}" for k in turns)
             lines.append(f"  {method + ' this/other':<16}{ratios}")
+            ratios = "".join(f"{med[f'{method} {k}'] / med[f'{method} {k} other']:>14.2f}× {'':9}" for k in turns)
+            lines.append(f"  {'  medians':<16}{ratios}")
     lines.extend(checks)
     return lines
 
