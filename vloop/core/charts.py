@@ -129,33 +129,28 @@ class Travel:
     samples: int
 
 
-def input_travel(run: Run, times: np.ndarray, block: int = 1 << 16) -> Travel | None:
-    """The :class:`Travel` of the run's one input over ``times`` and from t = 0 (None with several inputs, or an
-    input that cannot be evaluated there), in blocks of ``block`` samples (a long run's times never evaluated at
-    once)."""
+def input_travel(run: Run, times: np.ndarray) -> Travel | None:
+    """The :class:`Travel` of the run's one input over ``times`` and at t = 0 (None with several inputs, or an
+    input that cannot be evaluated there). A driver's polynomial has at most one turning point; a profile is taken
+    at its own rows between the run's ends (its interpolant may overshoot them slightly: a chunk whose inputs the
+    chart does not cover is solved without it)."""
     mech = run.system.mechanism
     if len(mech.drivers) != 1:
         return None
     d = mech.drivers[0]
-    if d.profile is None:  # x = x0 + v0·t + a0·t²/2 is monotonic but for one turning point: no sample needed
-        t0, t1 = float(times[0]), float(times[-1])
+    t0, t1 = float(times[0]), float(times[-1])
+    if d.profile is None:
         ts = [0.0, t0, t1] + ([-d.v0 / d.a0] if d.a0 and t0 < -d.v0 / d.a0 < t1 else [])
         x = [d.x0 + d.v0 * t + 0.5 * d.a0 * t * t for t in ts]
         path = abs(x[1] - x[3]) + abs(x[3] - x[2]) if len(x) > 3 else abs(x[2] - x[1])
         return Travel(min(x), max(x), path, len(times))
+    rows = d.profile.t
+    ts = np.concatenate([[t0], rows[(rows > t0) & (rows < t1)], [t1]])
     try:
-        x0 = float(Inputs(mech)(np.zeros(1))[0][0, 0])
-        lo = hi = x0
-        travel, last = 0.0, None
-        for start in range(0, len(times), block):
-            x = Inputs(mech)(times[start : start + block])[0][:, 0]
-            if last is not None:
-                travel += abs(float(x[0]) - last)
-            travel += float(np.sum(np.abs(np.diff(x))))
-            lo, hi, last = min(lo, float(np.min(x))), max(hi, float(np.max(x))), float(x[-1])
+        x = Inputs(mech)(np.concatenate([[0.0], ts]))[0][:, 0]
     except MechanismError:
         return None
-    return Travel(lo, hi, travel, len(times))
+    return Travel(float(np.min(x)), float(np.max(x)), float(np.sum(np.abs(np.diff(x[1:])))), len(times))
 
 
 def worth_drawing(run: Run, trip: Travel | None, min_step: float) -> bool:
