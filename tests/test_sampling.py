@@ -25,7 +25,7 @@ import pytest
 
 import vloop
 from tests.conftest import MECHANISMS
-from tests.test_change_points import PARALLELOGRAM, _kite_B
+from tests.test_change_points import PARALLELOGRAM, _kite_B, kite
 from validators import analytic
 from vloop.core import charts, solver
 
@@ -135,30 +135,8 @@ def test_a_parallelogram_over_forty_turns_passes_every_folding(per_turn):
 def test_a_kite_over_twenty_turns_sampled_coarsely():
     """Crank = coupler = 1, rocker = ground = 2.5: B is O2 mirrored in the line A–O4, the branches cross at θ2 = kπ."""
     a, d, th0, w = 1.0, 2.5, 0.7, 1.5
-    A0 = complex(a * np.exp(1j * th0))
-    B0 = complex(_kite_B(A0, d))
     turns, step = 20, 2 * math.pi / 1.5 / 23.0  # 23 samples a turn (15.7°)
-    text = f"""
-name = "kite"
-[joints]
-O2 = [0.0, 0.0]
-O4 = [{d}, 0.0]
-A = [{A0.real!r}, {A0.imag!r}]
-B = [{B0.real!r}, {B0.imag!r}]
-[links]
-ground = {{ joints = ["O2", "O4"], ground = true }}
-crank = {{ joints = ["O2", "A"] }}
-coupler = {{ joints = ["A", "B"] }}
-rocker = {{ joints = ["O4", "B"] }}
-[[drivers]]
-link = "crank"
-omega = {w}
-[time]
-start = 0.0
-stop = {turns * 2 * math.pi / w!r}
-step = {step!r}
-"""
-    res = vloop.solve(vloop.loads(text))
+    res = vloop.solve(kite(a, d, th0, w, turns * 2 * math.pi / w, step))
     th2 = th0 + w * res.t
     B = _kite_B(a * np.exp(1j * th2), d)
     assert np.max(np.abs(res["B.x"] + 1j * res["B.y"] - B)) < 1e-9 * d
