@@ -128,4 +128,3 @@ class Probe(State):
 
     def set_angle(self, k: slice, a: int, cis: np.ndarray) -> None:
         self.e[k, a] = cis / np.abs(cis)
-

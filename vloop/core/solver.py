@@ -34,7 +34,6 @@ from .changepoints import (
 from .context import Failure, Inputs, Run, impose_drivers, initial_state, input_units
 from .data import TWO_PI, State
 from .grid import Grid, check_inputs, internal_grid
-from .grid import input_travel as grid_travel
 from .plans import block_plans
 from .results import chunk_result, first_non_finite, motion_error
 
@@ -326,20 +325,19 @@ def solve_chunks(run: Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Re
     i0, n_total, size, at_least = 0, len(times), chunk, 1
     while i0 < n_total:
         i1 = min(i0 + size, n_total)
-        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
-        run.tail = grid.offset + len(grid.out) == n_total
         events = {i: list(evs) for i, evs in run.events.items()}
-        charted = _on_chart(run, chart, lead, carry, times, grid)
+        charted = _on_chart(run, chart, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
         solved = None if charted is None else _solve_on_chart(run, chart, charted, carry, turns)
+        failure = None
         if solved is not None:
-            grid, state, res = charted, *solved
-            failure = None
-        else:
+            grid, (state, res) = charted, solved
+        else:  # (no chart, or one the chunk misses: solved as if none had been drawn)
             run.events = {i: list(evs) for i, evs in events.items()}
+            grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
+            run.tail = grid.offset + len(grid.out) == n_total
             state = _start_state(system, grid, carry)
             try:
                 res = _solve_grid(run, grid, state, turns if carry is None else None)
-                failure = None
             except MotionError as exc:
                 res, failure = exc.partial, exc
         reach = math.inf if run.tail else _border_reach(run, grid)
@@ -370,7 +368,7 @@ def _start_state(system: LoopSystem, grid: Grid, carry: tuple | None) -> State:
     return state
 
 
-CHART_MIN_STEP = math.radians(1.0)  # closed forms alone: a chart is drawn where samples are this far apart on average
+CHART_MIN_STEP = math.radians(2.0)  # closed forms alone: a chart is drawn where samples are this far apart on average
 
 
 def _chart(run: Run, times: np.ndarray) -> charts.Chart | None:
@@ -385,20 +383,30 @@ def _chart(run: Run, times: np.ndarray) -> charts.Chart | None:
 
 
 def _on_chart(
-    run: Run, chart: charts.Chart | None, lead: np.ndarray, carry: tuple | None, times: np.ndarray, grid: Grid
+    run: Run,
+    chart: charts.Chart | None,
+    lead: np.ndarray,
+    carry: tuple | None,
+    times: np.ndarray,
+    i0: int,
+    i1: int,
+    n_total: int,
+    at_least: int,
+    max_rows: int,
 ) -> Grid | None:
-    """The chunk's grid without inserted rows, where the chart covers every input value of ``grid`` (the chunk's
-    grid with its rows inserted: the input between samples too) and no change point has been passed."""
+    """The chunk's grid without inserted rows, where no change point has been passed and the chart covers the
+    chunk's inputs (a crank's one-turn chart covers every input; another is checked on the chunk's grid with its
+    rows inserted: the input between samples too). Sets ``run.tail``."""
     if chart is None or any(run.events.values()):
         return None
-    if not chart.turn and not chart.covers(run.inputs(grid.t)[0][:, 0]):
-        return None
-    i0, i1 = grid.offset + (carry is not None), grid.offset + len(grid.out)
-    if carry is None:
-        charted = internal_grid(run, lead, times[i0:i1], insert=False)
-    else:
-        charted = internal_grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]), insert=False)
-    return dataclasses.replace(charted, skip=grid.skip, offset=grid.offset, total=grid.total)
+    if not chart.turn:
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, max_rows)
+        if not chart.covers(run.inputs(grid.t)[0][:, 0]):
+            return None
+        i1 = grid.offset + len(grid.out)
+    grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, max_rows, insert=False)
+    run.tail = grid.offset + len(grid.out) == n_total
+    return grid
 
 
 def _solve_on_chart(
@@ -426,14 +434,15 @@ def _chunk_grid(
     n_total: int,
     at_least: int,
     max_rows: int = CHUNK_ROWS,
+    insert: bool = True,
 ) -> Grid:
     """The internal grid of requested samples i0..i1-1 (after the carried rows), halved until it fits ``max_rows``
     or holds ``at_least`` requested samples."""
     while True:
         if carry is None:
-            grid = internal_grid(run, lead, times[i0:i1])
+            grid = internal_grid(run, lead, times[i0:i1], insert)
         else:
-            grid = internal_grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
+            grid = internal_grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]), insert)
         if len(grid.t) <= max_rows or i1 - i0 <= at_least:
             break
         i1 = max(i0 + (i1 - i0) // 2, i0 + at_least)
@@ -468,14 +477,16 @@ def _count_turns(run: Run, state: State, grid: Grid, X: np.ndarray, XD: np.ndarr
         return
     if every:
         cols = np.arange(system.n_angles)
-    else:
-        units = input_units(system.mechanism, system.mechanism.scale / TWO_PI)
-        travel = grid_travel(X[first:], XD[first:], np.diff(grid.t[first:])[:, None], units)
-        cols = chart.steep(float(np.max(travel, initial=0.0)))
-    cols = np.setdiff1d(cols, system.drivers)
-    if len(cols):
-        rows = slice(first, n)
-        state.theta[rows, cols] += chart.turns(state.theta[rows][:, cols], X[rows, 0], cols)
+    else:  # the input's move between two rows, at most: |Δx|, or its largest rate over the longest step
+        x, t = X[first:, 0], grid.t[first:]
+        if len(t) < 2:
+            return
+        step = max(float(np.max(np.abs(np.diff(x)))), float(np.max(np.abs(XD[first:, 0]))) * float(np.max(np.diff(t))))
+        cols = chart.steep(step / float(input_units(system.mechanism, system.mechanism.scale / TWO_PI)[0]))
+    driven = set(system.drivers)
+    for col in (c for c in cols.tolist() if c not in driven):
+        theta = state.theta[first:n, col]
+        theta += chart.turns(theta, X[first:n, 0], col)
 
 
 def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) -> Result:
