@@ -200,19 +200,19 @@ def bench(name: str, turns: tuple[int, ...], n: int, repeat: int, other) -> list
     return lines
 
 
-BIG_MECHANISM = "fourbar_crank_rocker_open"
+BIG = ["fourbar_crank_rocker_open"]  # the mechanism of the long runs (--big-mechanism)
 
 
 def big_file(folder: Path, samples: int, turns: int) -> Path:
-    """The four-bar's file with [time] over ``turns`` turns of its crank in ``samples`` samples, evenly in time
+    """The mechanism's file with [time] over ``turns`` turns of its crank in ``samples`` samples, evenly in time
     (θ2 − θ2(0) = ω0·t + α·t²/2 solved for the stop time)."""
-    text = (ROOT / "mechanisms" / f"{BIG_MECHANISM}.toml").read_text(encoding="utf-8")
-    mech = vloop.load(ROOT / "mechanisms" / f"{BIG_MECHANISM}.toml")
+    text = (ROOT / "mechanisms" / f"{BIG[0]}.toml").read_text(encoding="utf-8")
+    mech = vloop.load(ROOT / "mechanisms" / f"{BIG[0]}.toml")
     d = mech.drivers[0]
     angle = turns * 2 * math.pi
-    stop = (-d.v0 + math.sqrt(d.v0 * d.v0 + 2 * d.a0 * angle)) / d.a0
+    stop = (-d.v0 + math.sqrt(d.v0 * d.v0 + 2 * d.a0 * angle)) / d.a0 if d.a0 else angle / d.v0
     step = stop / (samples - 1)
-    path = folder / f"{BIG_MECHANISM}_{turns}.toml"
+    path = folder / f"{BIG[0]}_{turns}.toml"
     path.write_text(
         text.split("[time]")[0] + f"[time]\nstart = 0.0\nstop = {stop!r}\nstep = {step!r}\n", encoding="utf-8"
     )
@@ -247,7 +247,7 @@ def big_table(samples: int, repeat: int) -> list[str]:
     for _ in range(repeat):
         for turns in runs:
             runs[turns].append(big_run(samples, turns))
-    lines = [f"vloop run {BIG_MECHANISM} --format parquet, {samples:,} samples (median of {repeat}):"]
+    lines = [f"vloop run {BIG[0]} --format parquet, {samples:,} samples (median of {repeat}):"]
     base = statistics.median(r[0] for r in runs[1])
     for turns, rs in runs.items():
         t, peak = statistics.median(r[0] for r in rs), statistics.median(r[1] for r in rs)
@@ -269,6 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--even", choices=["angle", "time"], default="angle", help="samples evenly in input or in time")
     p.add_argument("--big", type=int, default=0, help="also N-sample `vloop run`s over 1 and 10,000 turns")
     p.add_argument("--big-repeat", type=int, default=3)
+    p.add_argument("--big-mechanism", default=BIG[0], choices=MECHANISMS[:3] + MECHANISMS[4:])
     args = p.parse_args(argv)
     try:
         from threadpoolctl import threadpool_limits
@@ -278,6 +279,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     keep_heap()
     EVEN[0] = args.even
+    BIG[0] = args.big_mechanism
     other = load_tree(args.compare) if args.compare else None
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     for name in args.only:

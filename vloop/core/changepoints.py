@@ -4,6 +4,11 @@ A sampled minimum of the dyad's discriminant h (the two solutions lie 2·√h ap
 zooming probes; where the branches come within CHANGE_GAP of the mechanism size it is a change
 point, continued on the branch whose rates stay continuous (or the other one, as the file asks).
 Rates at rows next to one, where the Jacobian is singular, come from a well-conditioned stencil.
+
+Every minimum of a run (or, in the batch, of every variant) is zoomed on at once (:func:`locate_minima`), and
+the probes of every change point's continuation and stencils are solved together: where the blocks before are
+closed forms each probe row is solved on its own (:func:`dyads_at`), so the work is a few batches however many
+dips the sampling shows; past a Newton block, probes continue bracket by bracket from the sample before.
 """
 
 from __future__ import annotations

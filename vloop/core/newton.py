@@ -15,13 +15,19 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
    the stack as the last axis, ~3× LAPACK's per-matrix calls at n ≤ 8), then chord steps with the
    same inverses until the steps fall below LOOSE; the loop sums are evaluated from the rows' known
    factors gathered once (:class:`_Rows`). A row must converge, close, keep the branch's determinant
-   sign and stay near its prediction; an interval with a row that does not is continued one by one.
+   sign and stay near its prediction; an interval with a row that does not is continued one by one, on
+   to the coarse row that ends it: where that continuation does not land on it (the coarse pass reached
+   another assembly that passed its checks), the run goes on from there.
 3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
    condition number, shared by the rates and the health columns: one more Newton step whose size is
    the convergence test. The condition number is an upper bound where that decides (Frobenius, then
    (Σσ⁸)^⅛), the exact 2-norm one wherever it reaches the flag level (σ_max of J and of J⁻¹ from their
    Gram matrices' powers, bracketed to 1e-12; eigenvalues or SVD where that fails), so flags and refusals
    follow the 2-norm rule exactly.
+
+Under a chart of the run (:mod:`vloop.core.charts`: its one input travels over its range many times) passes 1
+and 2 are one: every row starts from the chart's quintic Hermite interpolant at its input value and is
+checked as a dense row; a row that fails sends the chunk back to the passes above (ChartMiss).
 
 Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
 Gauss–Newton steps and least-squares rates; the residual of every equation is checked.

@@ -6,7 +6,9 @@ requested time is not 0) by the blocks in their solving order (:mod:`vloop.core.
 all samples at once, Newton blocks by continuation. Velocities and accelerations are the exact linear systems
 J·u̇ = −(known part of Σ ż), J·ü = −(known part of Σ z̈), solved for all samples at once. A long run is solved in
 chunks that carry two rows, the change points found and each Newton block's branch across their borders; a
-run that stops says where and why (:mod:`vloop.core.results`), with a limit located by bisection.
+run that stops says where and why (:mod:`vloop.core.results`), with a limit located by bisection. A run whose
+one input travels over its range many times is solved on a chart of that range (:mod:`vloop.core.charts`):
+no rows inserted, Newton rows predicted from it, turns counted from it.
 """
 
 from __future__ import annotations
