@@ -1,5 +1,5 @@
 """Every engine with its forces: for a mechanism with masses or loads, the Result an engine returns in
-``vloop validate`` also holds the force columns (README "Forces"), so the harness compares forces
+``vloop validate`` also holds the force columns (docs/forces.md), so the harness compares forces
 next to positions, velocities and accelerations with the same code and tolerances.
 
 * vloop: :func:`vloop.solve` then :func:`vloop.forces.solve_forces`;
