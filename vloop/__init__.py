@@ -1,10 +1,12 @@
 """vloop — kinematics of planar linkages by automatic vector loops.
 
-mech = vloop.load("mechanisms/eightbar.toml")
-res = vloop.solve(mech)            # times default to the file's [time]
-res.link("l3").theta, res.slider("l4").v, res.point("C").ay
-res.to_csv("results.csv")
-forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
+    mech = vloop.load("mechanisms/eightbar.toml")
+    res = vloop.solve(mech)            # times default to the file's [time]
+    res.link("l3").theta, res.slider("l4").v, res.point("C").ay
+    res.to_csv("results.csv")
+    forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
+
+The teaching quantities (vloop.instant_centres, ...) and vloop.study are imported on first use.
 """
 
 from __future__ import annotations

@@ -771,7 +771,7 @@ def _parser_info(sub: Any) -> None:
 
 def _parser_study(sub: Any) -> None:
     st = sub.add_parser("study", help="a design study: grids and tolerances over many variants, with sensitivities")
-    st.add_argument("file", type=_type("file"), help="study file (TOML; README: Design studies)")
+    st.add_argument("file", type=_type("file"), help="study file (TOML; docs/studies.md)")
     st.add_argument("--out", type=_type("out"), help="output folder (default: out/STUDY)")
     st.add_argument("--plot", action="store_true", help="also write the pictures (bands, histograms, maps)")
     st.add_argument(
