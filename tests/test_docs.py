@@ -22,6 +22,7 @@ import pytest
 
 from vloop.files import schema
 from vloop.studies import studyfile
+from vloop.synthesis import spec as synthspec
 
 ROOT = Path(__file__).parents[1]
 DOCS = ROOT / "docs"
@@ -141,14 +142,32 @@ def test_study_tables_are_the_study_schema():
     )
 
 
-@pytest.mark.parametrize("sections", [schema.SECTIONS, studyfile.SECTIONS], ids=["mechanism", "study"])
-def test_every_generated_row_has_its_five_cells(sections):
+def test_synthesis_tables_are_the_synthesis_schema():
+    assert _generated("synthesis.md", "synthesis-schema") == synthspec.markdown(), (
+        "docs/synthesis.md's key tables differ from vloop/synthesis/spec.py: regenerate them with "
+        'python -c "import vloop.synthesis.spec as s; print(s.markdown())"'
+    )
+
+
+SCHEMAS = {"mechanism": schema.SECTIONS, "study": studyfile.SECTIONS, "synthesis": synthspec.SECTIONS}
+
+
+@pytest.mark.parametrize("name", SCHEMAS)
+def test_every_generated_row_has_its_five_cells(name):
     """Rendered by Python-Markdown (the site's renderer), each row of the key tables has exactly its five
-    cells holding the key's own texts, whatever `|` they contain ("auto" | "newton", joints.J.x|y, max |x|)."""
+    cells holding the key's own texts, whatever `|` they contain ("auto" | "newton", joints.J.x|y, max |x|,
+    the sides |J0J1|)."""
     markdown = pytest.importorskip("markdown")
+    sections = SCHEMAS[name]
     html = markdown.markdown(schema.markdown(sections), extensions=["tables"])
     rows = [re.findall(r"<td>(.*?)</td>", row, re.S) for row in re.findall(r"<tr>(.*?)</tr>", html, re.S)]
     rows = [[unescape(re.sub(r"<[^>]+>", "", cell)) for cell in row] for row in rows if row]
     expected = [[k.name, k.type, k.default, k.unit or "—", k.doc] for s in sections for k in s.keys]
+    expected = [[re.sub(r"`([^`]*)`", r"\1", cell) for cell in row] for row in expected]  # `code` shows as code
     assert rows == expected
-    assert any("|" in cell for row in expected for cell in row)  # the case that needs the escape is here
+
+
+def test_the_escaped_case_is_tested():
+    """The five-cell test above meets a `|` inside a cell (else it would not test the escape)."""
+    keys = [k for sections in SCHEMAS.values() for s in sections for k in s.keys]
+    assert any("|" in text for k in keys for text in (k.name, k.type, k.default, k.unit, k.doc))

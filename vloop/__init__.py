@@ -75,7 +75,7 @@ def __getattr__(name: str) -> Any:
 
 def load(path: str | Path, *, allow_external_profiles: bool = False) -> Mechanism:
     """Read and validate a mechanism file (:class:`MechanismError` on any problem); a file written from dimensions
-    comes back assembled at t = 0 (README "Mechanisms from dimensions"). Profiles must lie in the file's folder
+    comes back assembled at t = 0 (docs/dimensions.md). Profiles must lie in the file's folder
     unless ``allow_external_profiles``."""
     return _assembled(_read_file(path, allow_external_profiles=allow_external_profiles))
 

@@ -785,7 +785,7 @@ def _parser_study(sub: Any) -> None:
 
 def _parser_synth(sub: Any) -> None:
     sy = sub.add_parser("synth", help="design from motion: function, motion or path generation (a synthesis file)")
-    sy.add_argument("file", help="synthesis file (TOML; README: Design from motion)")
+    sy.add_argument("file", help="synthesis file (TOML; docs/synthesis.md)")
     sy.add_argument("--out", help="output folder (default: out/NAME)")
     sy.add_argument("--plot", action="store_true", help="also write the picture (structural error, path or poses)")
     sy.add_argument("--html", action="store_true", help="also write a viewer page per written candidate, targets drawn")

@@ -227,7 +227,7 @@ class Mechanism:
     masses: dict[str, MassProperties] = field(default_factory=dict)
     gravity: tuple[float, float] | None = None  # m/s², world frame
     loads: tuple[Load, ...] = ()
-    # written from dimensions (README "Mechanisms from dimensions"): the coordinates of moving joints are hints,
+    # written from dimensions (docs/dimensions.md): the coordinates of moving joints are hints,
     # and ``unplaced`` joints have none (placed provisionally until vloop.authoring assembles the mechanism)
     from_dimensions: bool = False
     unplaced: tuple[str, ...] = ()
