@@ -14,7 +14,6 @@ from __future__ import annotations
 import importlib
 import math
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +27,6 @@ from vloop.cli import main
 from vloop.synthesis import spec as synth_spec
 from vloop.synthesis.linkages import FOURBAR
 
-README = Path(__file__).parents[1] / "README.md"
 FEW = settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 MANY = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 TOL = 1e-9
@@ -419,13 +417,6 @@ def test_written_files_state_their_instants(written):
 
 
 # ---------------------------------------------------------------- the synthesis file and bad input
-
-
-def test_readme_tables_are_the_synthesis_schema():
-    text = README.read_text(encoding="utf-8")
-    block = re.search(r"<!-- synthesis-schema:begin -->\n(.*?)<!-- synthesis-schema:end -->", text, re.S)
-    assert block is not None, "README lost its synthesis key tables"
-    assert block.group(1) == synth_spec.markdown(), "README's synthesis tables differ from vloop/synthesis/spec.py"
 
 
 def test_every_documented_key_is_read():
