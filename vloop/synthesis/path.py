@@ -44,10 +44,15 @@ COINCIDENT = 1e-9
 # beyond it mostly lets the polish wander off to large linkages), a six-bar's within three (moving off the four-bar
 # it was seeded with takes its extra dyad well outside the four-bar's span)
 POLISH_REACH = {"fourbar": 1.0, "stephenson3": 3.0}
+# the polish's methods, the next from the best point of the last while it misses the tolerance: the dogleg (a few
+# Gauss-Newton steps to the manifold of exact linkages), and with prescribed timing (as many residuals as unknowns:
+# isolated solutions, where the dogleg stalls more often) then the reflective trust region
+POLISH_METHODS = ("dogbox", "trf")
 MAX_NFEV = 60  # least-squares evaluations of one polish (each a batched solve of the member and its neighbours)
 WALL = 8  # evaluations on members that will not solve after which a polish stops (see _Wall)
 SCREEN = 4  # members drawn per member kept in DE's first population (see _initial)
 RETRY = 5  # generations after a failed polish before the next best member is polished (unless the score drops)
+STAGNANT = 30  # generations without a 5 % gain (and failed polishes) after which an evolution stops for a new one
 POLISH_AT = 0.2  # a member whose sampled score is within this (of the size) is worth polishing
 
 
@@ -224,28 +229,34 @@ def _problem(top: Topology, tg: Targets, samples: int, req: Requirements, region
 def _search(p: _Problem, tolerance, count, seed, population, generations, restarts, name, units, log) -> list[Draft]:
     """Differential evolutions, each stopping once a polished member is within the tolerance, one after another
     (new seeds) until ``count`` distinct candidates are found — at least ``restarts`` of them, and no more once
-    one finds nothing; then, if still short, the polish of the best members of the last populations."""
+    one finds nothing; one that stagnates (its population gathered in a basin whose polish fails) hands its
+    remaining generations to a new one; then, if still short, the polish of the best members of the last
+    populations."""
     bounds = [(-p.box, p.box)] * p.n_coords + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
     members, energies, polished = [], [], []
     for start in p.seeds:
         out = _polish(p, *start)
         if out is not None and out[3] <= tolerance and _acceptable(p, out[0], out[1]):
             polished += [] if any(_same(out[0], q[0]) for q in polished) else [out]
-    for r in range(max(restarts, count) if len(polished) < count else 0):
+    budget, r = generations * max(restarts, count), 0
+    while len(polished) < count and budget > 0:
         t0 = time.perf_counter()
         early = _Early(p, tolerance)
         rng = np.random.default_rng(seed + r)
         res = differential_evolution(
-            p.score, bounds, popsize=population, maxiter=generations, tol=0.0, mutation=(0.5, 1.0),
+            p.score, bounds, popsize=population, maxiter=min(generations, budget), tol=0.0, mutation=(0.5, 1.0),
             recombination=0.9, rng=rng, vectorized=True, updating="deferred", polish=False,
             init=_initial(p, bounds, population, rng), callback=early,
         )  # fmt: skip
+        budget -= max(res.nit, 1)
         members.append(res.population)
         energies.append(res.population_energies)
         polished += [f for f in early.found if not any(_same(f[0], q[0]) for q in polished)]
         log.append(f"{p.top.name} search {r + 1}: {res.nit} generations of {len(res.population)} in "
-                   f"{time.perf_counter() - t0:.2f} s, best sampled {res.fun:.3g} of the size")  # fmt: skip
-        if len(polished) >= count or (r + 1 >= restarts and not early.found):
+                   f"{time.perf_counter() - t0:.2f} s, best sampled {res.fun:.3g} of the size"
+                   + (" (stagnant: a new search)" if early.stagnant else ""))  # fmt: skip
+        r += 1
+        if not early.stagnant and (r >= max(restarts, count) or (r >= restarts and not early.found)):
             break
     X = np.concatenate(members) if members else np.zeros((0, len(bounds)))
     E = np.concatenate(energies) if energies else np.zeros(0)
@@ -315,7 +326,8 @@ class _Early:
     """DE's callback: once the best sampled score is within POLISH_AT, polish the best member not polished yet —
     again whenever the score has dropped by a fifth since the last try, or RETRY generations after it (a failed
     polish is a basin whose exact linkages cannot move through the targets: another member may sit in another);
-    stop the evolution when a polished member is within the tolerance."""
+    stop the evolution when a polished member is within the tolerance, or when it stagnates: no gain of 5 % in
+    STAGNANT generations, with polishes failing since the last gain."""
 
     def __init__(self, p: _Problem, tolerance: float) -> None:
         self.p, self.tolerance = p, tolerance
@@ -323,10 +335,17 @@ class _Early:
         self.generation = self.last = 0
         self.polished: list[np.ndarray] = []  # the genes of the members polished so far
         self.found: list[tuple] = []
+        self.record, self.improved = math.inf, 0  # the best score so far and the generation it was reached
+        self.stagnant = False
 
     def __call__(self, intermediate_result) -> bool:  # scipy passes the state by this name
         self.generation += 1
         best = float(intermediate_result.fun)
+        if best < 0.95 * self.record:
+            self.record, self.improved = best, self.generation
+        if self.generation - self.improved >= STAGNANT and self.last > self.improved:
+            self.stagnant = True
+            return True
         if best > POLISH_AT or (best > 0.8 * self.tried and self.generation - self.last < RETRY):
             return False
         pop, energies = intermediate_result.population, intermediate_result.population_energies
@@ -408,13 +427,17 @@ def _polish(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray):
     solved(x0)
     if met["x"] is None:
         return None
-    try:
-        least_squares(
-            residual, x0, jac=lambda x: solved(x)[1], bounds=(lo, hi), method="dogbox", x_scale="jac",
-            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=MAX_NFEV,
-        )  # fmt: skip
-    except _Wall:
-        pass
+    for method in POLISH_METHODS if p.tg.timing is not None else POLISH_METHODS[:1]:
+        if met["error"] <= (p.req.tolerance or 0.0):
+            break
+        met["walls"] = 0
+        try:
+            least_squares(
+                residual, met["x"], jac=lambda x: solved(x)[1], bounds=(lo, hi), method=method, x_scale="jac",
+                xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=MAX_NFEV,
+            )  # fmt: skip
+        except _Wall:
+            pass
     x = met["x"]
     return x[:nc], omega, _instants(p, x, nc), met["error"]
 
