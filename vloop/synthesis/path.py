@@ -327,7 +327,8 @@ class _Early:
     again whenever the score has dropped by a fifth since the last try, or RETRY generations after it (a failed
     polish is a basin whose exact linkages cannot move through the targets: another member may sit in another);
     stop the evolution when a polished member is within the tolerance, or when it stagnates: no gain of 5 % in
-    STAGNANT generations, with polishes failing since the last gain."""
+    STAGNANT generations, with polishes failing since the last gain (not a search seeded with linkages found
+    before: its best members are those seeds until it moves off them, and a new search would start there again)."""
 
     def __init__(self, p: _Problem, tolerance: float) -> None:
         self.p, self.tolerance = p, tolerance
@@ -343,7 +344,7 @@ class _Early:
         best = float(intermediate_result.fun)
         if best < 0.95 * self.record:
             self.record, self.improved = best, self.generation
-        if self.generation - self.improved >= STAGNANT and self.last > self.improved:
+        if not self.p.seeds and self.generation - self.improved >= STAGNANT and self.last > self.improved:
             self.stagnant = True
             return True
         if best > POLISH_AT or (best > 0.8 * self.tried and self.generation - self.last < RETRY):
