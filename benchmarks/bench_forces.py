@@ -6,7 +6,7 @@
 For each sample count: vloop.solve on the compiled LoopSystem (positions, velocities, accelerations)
 and vloop.forces.solve_forces on the compiled ForceModel (driver torque, 21 reactions, shaking
 force) over the same Result; best of ``--repeat`` interleaved runs each (the minimum is the least
-noisy estimate). Prints both times, their ratio (the issue's target: forces ≤ 2× kinematics at 4,800
+noisy estimate). Prints both times, their ratio (the target: forces ≤ 2× kinematics at 4,800
 samples), the one-off compile times, and the peak memory of one forces run (tracemalloc).
 """
 

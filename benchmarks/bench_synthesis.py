@@ -18,7 +18,8 @@
    … until one of its solutions is within 1 % by ``verify_path_generation`` (its own check, one turn of its
    own simulation), timing that call; pylinkage's search has no seed (it is deterministic). Paths: five points
    on the coupler curve of a crank-rocker (a solution exists), and pylinkage's docstring example with a fifth
-   point. The ratio is vloop's median time over the seeds against pylinkage's; target ≤ 0.5.
+   point. The ratios: vloop's median time over the seeds, and its slowest seed, against pylinkage's (the smaller
+   of a run before vloop's and one after); target ≤ 0.5 for both.
 
 The machine is shared: the load average is printed with the figures, and only ratios measured in this one
 process mean anything.
@@ -125,24 +126,30 @@ def pylinkage_time(points) -> tuple[float, float, int]:
     return dt, best, k
 
 
-def compare(seeds: list[int]) -> None:
+def compare(seeds: list[int]) -> bool:
+    """Each path: vloop's time per seed against pylinkage's (the smaller of a run before and one after vloop's, so
+    a change of load between them counts against vloop). Returns whether every ratio met the target."""
     import pylinkage
 
     print(f"against pylinkage {pylinkage.__version__}: time to a four-bar within 1 % of the points' size")
+    met = True
     for name, points in PATHS.items():
+        before = pylinkage_time(points)
         runs = [vloop_time(points, s) for s in seeds]
+        after = pylinkage_time(points)
+        t_p, e_p, k = min(before, after)
         t_v = float(np.median([r[0] for r in runs]))
-        t_p, e_p, k = pylinkage_time(points)
         ok = all(r[2] and r[1] <= 0.01 for r in runs)
         verdict = "all free of defects" if ok else "NOT all solutions"
         times = ", ".join(f"{r[0]:.2f}" for r in runs)
         print(f"  {name}: vloop {times} s (seeds {seeds}; median {t_v:.2f} s; "
               f"largest error {max(r[1] for r in runs):.1e}; {verdict})")  # fmt: skip
         status = f"error {e_p:.2%}" if math.isfinite(e_p) else "no solution"
-        ratio = t_v / t_p
-        print(
-            f"    pylinkage {t_p:.2f} s (max_solutions={k}, {status}); ratio vloop/pylinkage {ratio:.2f} (target ≤ 0.5)"
-        )
+        worst = max(r[0] for r in runs) / t_p
+        print(f"    pylinkage {t_p:.2f} s (before {before[0]:.2f} s, after {after[0]:.2f} s; max_solutions={k}, "
+              f"{status}); vloop/pylinkage: median {t_v / t_p:.2f}, slowest {worst:.2f} (target ≤ 0.5)")  # fmt: skip
+        met &= ok and worst <= 0.5
+    return met
 
 
 def main() -> None:
@@ -163,7 +170,7 @@ def main() -> None:
     print(f"load average {load} on {os.cpu_count()} cores; vloop {vloop.__version__}")
     throughput(args.population, args.samples, args.repeat)
     if not args.skip_pylinkage:
-        compare(args.seeds)
+        print("every ratio within the target" if compare(args.seeds) else "a ratio or a candidate MISSED the target")
     print(f"load average afterwards {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 

@@ -33,7 +33,7 @@ from vloop.mechanism import loads as read_only
 from .conftest import MECHANISMS, mechanism_files
 
 HINT = 0.2  # each hinted coordinate off by up to this fraction of itself
-TOL = 1e-12  # of each column's size: the figure
+TOL = 1e-12  # of each column's size: the claim for a mechanism assembled from its dimensions
 
 
 def dimensions_only(path: Path, rng: np.random.Generator, hints: bool = True) -> dict:

@@ -8,7 +8,7 @@ inclined slider with irregular samples, a Watt six-bar, a tabulated input).
 Tolerances are scale-relative (vloop.compare: |a − b| ≤ floor·group_peak + rtol·peak) and
 come from measurements on the catalog (14 files) and the inline mechanisms, exudyn 1.13.6:
 
-* kinematic mode vs vloop and vs the closed forms: RTOL_KINEMATIC = 1e-8 (the issue's figure).
+* kinematic mode vs vloop and vs the closed forms: RTOL_KINEMATIC = 1e-8 (the claim).
   Newton on Exudyn's constraint equations converges to round-off, velocities come from the
   exact velocity-level Jacobian and accelerations from a 6th-order difference of Exudyn's
   velocity-level residual (truncation ~1e-14). Measured: ~1e-13 of each quantity's peak; the
@@ -66,7 +66,7 @@ _FIELD_GROUP = {
     "a": "acceleration",
 }
 
-# Kinematic mode: the issue's 1e-8; measured ≤ 1.4e-11 (see the module docstring).
+# Kinematic mode: the claim 1e-8; measured ≤ 1.4e-11 (see the module docstring).
 RTOL_KINEMATIC = 1e-8
 
 # Dynamic mode at the default accuracy target (vexu.DEFAULT_ACCURACY = 1e-5), relative to each
@@ -112,7 +112,7 @@ FINE_TOL = {
     "acceleration": 1e-5,
     "angular acceleration": 1e-5,
 }
-# Nightly, the eight-bar at h = 1e-4, the step the issue quotes. Measured: velocity 2.0e-8,
+# Nightly, the eight-bar at h = 1e-4, the nightly's step. Measured: velocity 2.0e-8,
 # angular velocity 1.1e-8, acceleration 8.6e-7, angular acceleration 1.1e-6 (round-off bound).
 EIGHTBAR_STEP = 1e-4
 EIGHTBAR_TOL = {

@@ -1,5 +1,5 @@
 """Hostile inputs and hostile surroundings: never a wrong number with exit 0, never a traceback, never a
-half-written or misplaced file. One test (or a few) per class of the issue; the Ctrl-C, concurrent-run and
+half-written or misplaced file. One test (or a few) per class of hostile input; the Ctrl-C, concurrent-run and
 disk-limit tests run real `vloop` processes (subprocess, a signal, resource limits), not mocks."""
 
 from __future__ import annotations

@@ -308,7 +308,7 @@ def test_a_port_that_is_not_a_dask_scheduler_is_refused_quickly(tmp_path):
     ],
 )
 def test_a_validation_that_would_validate_nothing_is_refused(tmp_path, engines, what):
-    """--engines= used to end "all passed" with no engine run; every engine list must make a comparison."""
+    """An empty --engines never ends "all passed" with no engine run: every engine list must make a comparison."""
     code, out, err = cli("validate", TEXTBOOK, f"--engines={engines}", "--out", tmp_path / "o")
     assert code == 2 and what in one_line(err) and "passed" not in out
     assert not (tmp_path / "o" / "summary.json").exists()

@@ -425,15 +425,6 @@ def test_outputs_of_unfinished_variants_are_null_in_parquet(tmp_path, textbook):
     assert np.all(np.isfinite(np.asarray(swing.drop_null())))
 
 
-def test_readme_table_is_the_study_schema():
-    import re
-
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    block = re.search(r"<!-- study-schema:begin -->\n(.*?)<!-- study-schema:end -->", text, re.S)
-    assert block is not None, "README lost its generated study-file tables"
-    assert block.group(1) == studyfile.markdown(), "README's study tables differ from vloop/studies/studyfile.py: regenerate"
-
-
 HOSTILE = [0, -0.0, 1e308, 5e-324, float("nan"), float("inf"), 10**400, "1.0", [[1.0]], True]
 
 

@@ -1,4 +1,4 @@
-"""Sweeping a non-Grashof input between its limits (issue 7): limits against the law of cosines."""
+"""Sweeping a non-Grashof input between its limits: limits against the law of cosines."""
 
 from __future__ import annotations
 

@@ -559,8 +559,8 @@ def test_run_extras_info_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[
 
 
 def test_plain_import_reaches_the_teaching_subpackage_on_first_use() -> None:
-    """README: ``import vloop`` then ``vloop.teaching.cycle(mech)``, in a fresh interpreter; ``import vloop`` alone
-    does not import the teaching subpackage (it stays light)."""
+    """docs/teaching.md: ``import vloop`` then ``vloop.teaching.cycle(mech)``, in a fresh interpreter; ``import
+    vloop`` alone does not import the teaching subpackage (it stays light)."""
     import subprocess
     import sys
 

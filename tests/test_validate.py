@@ -160,8 +160,11 @@ def test_plugin_parametrizes_over_the_catalog(vloop_mechanism_file, assert_histo
     assert_histories_close(a.head(n), b.head(n), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_validate_all_on_the_catalog_passes(tmp_path, capsys):
-    """The whole catalog, every engine (Exudyn's dynamic mode included), summary and report."""
+    """The whole catalog, every engine (Exudyn's dynamic mode included), summary and report (slow: each engine
+    is compared with vloop on every catalog file in its own test, test_pinocchio.py, test_exudyn.py,
+    test_vs_closed_forms.py; this is the end-to-end run of them all together)."""
     pytest.importorskip("pinocchio")
     pytest.importorskip("exudyn")
     from tests.conftest import mechanism_files

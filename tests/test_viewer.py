@@ -11,7 +11,7 @@ References used here are independent of the page's own drawing code:
 * for the loop chains, the Result's joint columns (the chain is built from the θ and s columns only).
 
 Tolerances: the page writes every number with JavaScript's shortest round-trip form, so drawn
-positions equal the Result's to round-off (~1e-15 of the size); the issue asks 1e-6 of the
+positions equal the Result's to round-off (~1e-15 of the size); the claim is 1e-6 of the
 mechanism size, which also absorbs the 2e-16 s between t[20] = 20·0.05 and 1.0. Chains are built
 with a different summation order than the solver's positions: 1e-12 of the size.
 """
@@ -41,7 +41,7 @@ CHROMIUM_ARGS = [
 ]  # fmt: skip
 EIGHTBAR = MECHANISMS / "eightbar.toml"
 STOPPED = MECHANISMS / "fourbar_nongrashof_past_limit.toml"
-T_CHECK = 1.0  # s: the instant the issue names
+T_CHECK = 1.0  # s: the instant the checks read
 
 
 @pytest.fixture(scope="module")

@@ -1192,7 +1192,7 @@ def plan_rocking(draft: Draft, p: dict[str, float]) -> Motion:
         "omega": (amp * big * np.cos(big * tp + psi)).tolist(),
         "alpha": (-amp * big * big * np.sin(big * tp + psi)).tolist(),
     }
-    # the file's angles continue the link's t = 0 angle in [0, 2π) (README); asin's round-off at t = 0 removed
+    # the file's angles continue the link's t = 0 angle in [0, 2π) (docs/file-format.md); asin's t = 0 round-off removed
     shift = th0 % TWO_PI - th0
     prof["theta"] = [x + shift for x in prof["theta"]]
     prof["theta"][0] = th0 % TWO_PI

@@ -4,7 +4,7 @@ the output naming convention, and the shaking force from the reported reactions.
 Nothing here solves anything: the engines (:mod:`validators.pinocchio_forces`,
 :mod:`validators.exudyn_forces`, :mod:`validators.analytic_forces`) compute the reactions each
 their own way and only *report* them through :func:`force_result`, in vloop's column names
-(README, "Forces"):
+(docs/forces.md):
 
 * ``LINK.torque`` / ``SLIDER.force`` — a driver's torque (ground on link, CCW) / force (guide on
   block along the axis u);

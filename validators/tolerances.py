@@ -94,7 +94,7 @@ TOLERANCES: dict[tuple[str, str], Tolerance] = {
     ("pinocchio", "analytic"): Tolerance(1e-9, "As pinocchio vs vloop; measured ≤ 3e-13.", floor=_FLOOR),
     ("exudyn-kinematic", "vloop"): Tolerance(
         1e-8,
-        "Newton on Exudyn's own constraint residuals and Jacobians, stopped at ~1e-12; the issue asks 1e-8.",
+        "Newton on Exudyn's own constraint residuals and Jacobians, stopped at ~1e-12; the claim is 1e-8.",
         floor=_FLOOR,
     ),
     ("exudyn-kinematic", "analytic"): Tolerance(1e-8, "As exudyn-kinematic vs vloop.", floor=_FLOOR),

@@ -1,10 +1,12 @@
 """vloop — kinematics of planar linkages by automatic vector loops.
 
-mech = vloop.load("mechanisms/eightbar.toml")
-res = vloop.solve(mech)            # times default to the file's [time]
-res.link("l3").theta, res.slider("l4").v, res.point("C").ay
-res.to_csv("results.csv")
-forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
+    mech = vloop.load("mechanisms/eightbar.toml")
+    res = vloop.solve(mech)            # times default to the file's [time]
+    res.link("l3").theta, res.slider("l4").v, res.point("C").ay
+    res.to_csv("results.csv")
+    forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
+
+The teaching quantities (vloop.instant_centres, ...) and vloop.study are imported on first use.
 """
 
 from __future__ import annotations
@@ -73,7 +75,7 @@ def __getattr__(name: str) -> Any:
 
 def load(path: str | Path, *, allow_external_profiles: bool = False) -> Mechanism:
     """Read and validate a mechanism file (:class:`MechanismError` on any problem); a file written from dimensions
-    comes back assembled at t = 0 (README "Mechanisms from dimensions"). Profiles must lie in the file's folder
+    comes back assembled at t = 0 (docs/dimensions.md). Profiles must lie in the file's folder
     unless ``allow_external_profiles``."""
     return _assembled(_read_file(path, allow_external_profiles=allow_external_profiles))
 

@@ -771,7 +771,7 @@ def _parser_info(sub: Any) -> None:
 
 def _parser_study(sub: Any) -> None:
     st = sub.add_parser("study", help="a design study: grids and tolerances over many variants, with sensitivities")
-    st.add_argument("file", type=_type("file"), help="study file (TOML; README: Design studies)")
+    st.add_argument("file", type=_type("file"), help="study file (TOML; docs/studies.md)")
     st.add_argument("--out", type=_type("out"), help="output folder (default: out/STUDY)")
     st.add_argument("--plot", action="store_true", help="also write the pictures (bands, histograms, maps)")
     st.add_argument(
@@ -785,7 +785,7 @@ def _parser_study(sub: Any) -> None:
 
 def _parser_synth(sub: Any) -> None:
     sy = sub.add_parser("synth", help="design from motion: function, motion or path generation (a synthesis file)")
-    sy.add_argument("file", help="synthesis file (TOML; README: Design from motion)")
+    sy.add_argument("file", help="synthesis file (TOML; docs/synthesis.md)")
     sy.add_argument("--out", help="output folder (default: out/NAME)")
     sy.add_argument("--plot", action="store_true", help="also write the picture (structural error, path or poses)")
     sy.add_argument("--html", action="store_true", help="also write a viewer page per written candidate, targets drawn")

@@ -152,24 +152,7 @@ def compare(
     n = len(b.t)
     if not cols:
         return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, [])
-    # every column at once (rows = columns): the differences, angles modulo 2π, and each column's peak
-    A = np.array([np.asarray(a[c][:n], float) for c in cols]).reshape(len(cols), n)
-    B = np.array([np.asarray(b[c][:n], float) for c in cols]).reshape(len(cols), n)
-    D = A - B
-    angle = np.array([g == "angle" for g in groups])
-    D[angle] = (D[angle] + math.pi) % (2 * math.pi) - math.pi
-    E = np.abs(D)
-    peaks = np.maximum(np.max(np.abs(A), axis=1, initial=0.0), np.max(np.abs(B), axis=1, initial=0.0))
-    group_scale: dict[str, float] = {}
-    for g, pk in zip(groups, peaks.tolist(), strict=True):
-        group_scale[g] = max(group_scale.get(g, 0.0), pk)
-    # an angular acceleration is a difference of O(ω²) terms: its natural magnitude is the angular velocities'
-    # peak squared, the scale its error is measured against when its own peak is smaller (a parallelogram at
-    # constant ω has α ≡ 0: 1e-9 of that is not round-off)
-    natural = {"angular acceleration": group_scale.get("angular velocity", 0.0) ** 2}
-    E = np.where(np.isfinite(E), E, np.inf)
-    scale = np.array([max(pk, natural.get(g, 0.0)) for g, pk in zip(groups, peaks.tolist(), strict=True)])
-    gpeak = np.array([max(group_scale[g], natural.get(g, 0.0)) for g in groups])
+    E, peaks, scale, gpeak, group_scale = _differences(a, b, cols, groups, n)
     tol_t = _allowed(groups, scale, gpeak, rtol, floor, floor_t, atol_t, n)
     # per column, the sample whose error is the largest fraction of its allowance (one allowance: the largest error)
     k = np.argmax(E / np.maximum(tol_t, 1e-300), axis=1) if n else np.zeros(len(cols), int)
@@ -187,6 +170,31 @@ def compare(
         for c, g, m_, pk, re, rm, tt, tl in zip(cols, groups, mx, peaks, rel, rms, t_at, tol, strict=True)
     ]
     return Comparison(a.mechanism or b.mechanism, a.engine, b.engine, rtol, errors)
+
+
+def _differences(
+    a: Result, b: Result, cols: list[str], groups: list[str], n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, float]]:
+    """Every column at once (rows = columns): |a − b| (angles modulo 2π; inf where not finite), each column's
+    peak, the scale its error is measured against, its group's peak, and each group's peak by name."""
+    A = np.array([np.asarray(a[c][:n], float) for c in cols]).reshape(len(cols), n)
+    B = np.array([np.asarray(b[c][:n], float) for c in cols]).reshape(len(cols), n)
+    D = A - B
+    angle = np.array([g == "angle" for g in groups])
+    D[angle] = (D[angle] + math.pi) % (2 * math.pi) - math.pi
+    E = np.abs(D)
+    peaks = np.maximum(np.max(np.abs(A), axis=1, initial=0.0), np.max(np.abs(B), axis=1, initial=0.0))
+    group_scale: dict[str, float] = {}
+    for g, pk in zip(groups, peaks.tolist(), strict=True):
+        group_scale[g] = max(group_scale.get(g, 0.0), pk)
+    # an angular acceleration is a difference of O(ω²) terms: its natural magnitude is the angular velocities'
+    # peak squared, the scale its error is measured against when its own peak is smaller (a parallelogram at
+    # constant ω has α ≡ 0: 1e-9 of that is not round-off)
+    natural = {"angular acceleration": group_scale.get("angular velocity", 0.0) ** 2}
+    E = np.where(np.isfinite(E), E, np.inf)
+    scale = np.array([max(pk, natural.get(g, 0.0)) for g, pk in zip(groups, peaks.tolist(), strict=True)])
+    gpeak = np.array([max(group_scale[g], natural.get(g, 0.0)) for g in groups])
+    return E, peaks, scale, gpeak, group_scale
 
 
 def _allowed(

@@ -1,7 +1,7 @@
 """The mechanism description, as one import: the data (:mod:`vloop.model`) and its file format
 (:mod:`vloop.files.fileformat`, with the schema in :mod:`vloop.files.schema`).
 
-Conventions (README "The mechanism file"): lengths in the file's units, angles in radians, CCW
+Conventions (docs/file-format.md): lengths in the file's units, angles in radians, CCW
 positive from +x; joint coordinates describe t = 0; a link's θ runs from its first to its second
 joint; a slider's s is measured along its axis from its guide's origin.
 """

@@ -1,6 +1,6 @@
 """What a mechanism is: plain, immutable data (read from a file by :mod:`vloop.files.fileformat`).
 
-Conventions (see README "Mechanism file"):
+Conventions (see docs/file-format.md):
 
 * Lengths in the file's units (SI by default), angles in radians, CCW positive from +x.
 * Joint coordinates describe the assembly at t = 0.
@@ -223,11 +223,11 @@ class Mechanism:
     units: str = "m"
     source: str = ""
     options: dict[str, Any] = field(default_factory=dict)
-    # kinetostatics (README "Masses and loads"): bodies without an entry are massless
+    # kinetostatics (docs/forces.md): bodies without an entry are massless
     masses: dict[str, MassProperties] = field(default_factory=dict)
     gravity: tuple[float, float] | None = None  # m/s², world frame
     loads: tuple[Load, ...] = ()
-    # written from dimensions (README "Mechanisms from dimensions"): the coordinates of moving joints are hints,
+    # written from dimensions (docs/dimensions.md): the coordinates of moving joints are hints,
     # and ``unplaced`` joints have none (placed provisionally until vloop.authoring assembles the mechanism)
     from_dimensions: bool = False
     unplaced: tuple[str, ...] = ()

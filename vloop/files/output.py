@@ -1,6 +1,6 @@
 """Writing output safely: one module every command uses.
 
-Rules (README, "Output files"):
+Rules (docs/cli.md, "Output files"):
 
 * **Inside the output folder.** The default folder is ``out/<safe name>``; a mechanism's
   ``name`` is free text, so the folder name is derived from it (:func:`safe_folder_name`)

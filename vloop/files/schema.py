@@ -1,7 +1,7 @@
 """The mechanism file's schema, in one place: every section, key, type, default and unit.
 
-The readers (:mod:`vloop.files.fileformat`) accept exactly these keys, and the README's file-format
-table is generated from them (:func:`markdown`; a test keeps the two equal), so the
+The readers (:mod:`vloop.files.fileformat`) accept exactly these keys, and the file-format page's key
+tables (docs/file-format.md) are generated from them (:func:`markdown`; a test keeps the two equal), so the
 documentation cannot drift from what is accepted. The value checks every reader shares live
 here too: finite numbers (10**400, nan, inf, strings and booleans refused), coordinate pairs,
 directions normalised without overflow, and names safe in CSV headers, file names and HTML.
@@ -242,7 +242,7 @@ SECTIONS: tuple[Section, ...] = (
                 'bytes or "2G"',
                 "half the free memory",
                 "bytes",
-                "refuse a run estimated to need more (README: Big runs)",
+                "refuse a run estimated to need more (docs: Big runs)",
                 "4G",
             ),
         ),
@@ -266,15 +266,16 @@ TOP_LEVEL = SECTION["file"].allowed | {"joints", "links", "sliders", "points", "
 
 
 def markdown(sections: tuple[Section, ...] | None = None) -> str:
-    """A file format as Markdown tables, one per section (default: the mechanism file's; the README's copy
-    must equal this)."""
+    """A file format as Markdown tables, one per section (default: the mechanism file's; the copy in
+    docs/file-format.md must equal this). A ``|`` inside a cell is escaped, so each row keeps five cells."""
     out = []
     for s in SECTIONS if sections is None else sections:
         out.append(f"**{s.form}** — {s.doc}\n")
         out.append("| key | type | default | unit | meaning |")
         out.append("|---|---|---|---|---|")
         for k in s.keys:
-            out.append(f"| `{k.name}` | {k.type} | {k.default} | {k.unit or '—'} | {k.doc} |")
+            cells = (f"`{k.name}`", k.type, k.default, k.unit or "—", k.doc)
+            out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
         out.append("")
     return "\n".join(out).rstrip() + "\n"
 

@@ -201,6 +201,29 @@ def describe(sys: LoopSystem, latex: bool = False, exact: bool = False) -> str:
     return "\n".join([head, "", *lines, "", "where", *(f"  {x}" for x in notes)])
 
 
+GRASHOF_CLASSES = ("Grashof double-crank", "Grashof crank-rocker", "Grashof double-rocker", "Grashof rocker-crank")
+SPECIAL_GRASHOF = "special Grashof (change point)"
+NON_GRASHOF = "non-Grashof triple-rocker"
+
+
+def grashof_class(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Grashof class of four-bars from their lengths ``(..., 4)``: ground, input side, coupler, output side.
+
+    s + l < p + q: Grashof, named by its shortest link (ground: double-crank, input: crank-rocker, coupler:
+    double-rocker, output: rocker-crank); s + l = p + q within 1e-9·l: special Grashof (its change points);
+    otherwise a non-Grashof triple-rocker. Returns the class names (object array) and whether s + l ≤ p + q.
+    """
+    lengths = np.asarray(lengths, float)
+    srt = np.sort(lengths, axis=-1)
+    s, l_ = srt[..., 0], srt[..., -1]
+    pq = srt[..., 1] + srt[..., 2]
+    special = np.abs(s + l_ - pq) <= 1e-9 * l_
+    is_grashof = (s + l_ < pq) | special
+    names = np.array(GRASHOF_CLASSES, object)[np.argmin(lengths, axis=-1)]
+    cls = np.where(special, SPECIAL_GRASHOF, np.where(is_grashof, names, NON_GRASHOF))
+    return np.asarray(cls, object).reshape(np.shape(s)), is_grashof
+
+
 def grashof(sys: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, float]]]:
     """Grashof class of every four-bar loop (ground + three pinned links, no slider).
 
@@ -226,20 +249,6 @@ def grashof(sys: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, 
         k = order.index(-1)
         order = order[k:] + order[:k]
         g, p1, c, p2 = (abs(vec[a]) for a in order)
-        lengths = sorted([g, p1, c, p2])
-        s_, l_ = lengths[0], lengths[-1]
-        pq = sum(lengths) - s_ - l_
-        if abs(s_ + l_ - pq) <= 1e-9 * l_:
-            cls = "special Grashof (change point)"
-        elif s_ + l_ < pq:
-            shortest = int(np.argmin([g, p1, c, p2]))
-            cls = {
-                0: "Grashof double-crank",
-                1: "Grashof crank-rocker",
-                2: "Grashof double-rocker",
-                3: "Grashof rocker-crank",
-            }[shortest]
-        else:
-            cls = "non-Grashof triple-rocker"
+        cls = str(grashof_class(np.array([g, p1, c, p2]))[0])
         out.append((lp.index, cls, (g, p1, c, p2)))
     return out

@@ -55,6 +55,7 @@ from ..core.variants import ParamRef, VariantModel, resolve
 from ..errors import MechanismError, VloopError
 from ..files.schema import Problems
 from ..files.writers import finite_or_null
+from ..method.equations import grashof_class
 from ..model import Mechanism
 from ..result import Result, html_table
 from .studyfile import OutputSpec, StudySpec, from_dict, output_unit, quantity_kind
@@ -435,9 +436,6 @@ def _static(model: VariantModel, outputs: tuple[OutputSpec, ...], values: np.nda
     return out
 
 
-GRASHOF_CLASSES = ("Grashof double-crank", "Grashof crank-rocker", "Grashof double-rocker", "Grashof rocker-crank")
-
-
 def _fourbar_loop(model: VariantModel, quantity: str) -> tuple[int, list[int]] | None:
     """(loop, its four owners: ground, input side, coupler, output side) of the four-bar loop a grashof quantity
     names; the input side is the driven link where one is driven (else the loop's traversal decides)."""
@@ -470,15 +468,7 @@ def grashof(model: VariantModel, d: Any, loop: tuple[int, list[int]]) -> tuple[n
         for t in np.nonzero((coef != 0) & (sys.t_ang == a))[0]:
             vec = vec + coef[t] * d.r[:, t] * d.cd[:, t]  # the owner's vectors turn together: |Σ| is its length
         lengths.append(np.abs(vec) * np.ones(len(d)))
-    L = np.stack(lengths, axis=1)
-    srt = np.sort(L, axis=1)
-    s, l_ = srt[:, 0], srt[:, -1]
-    pq = srt[:, 1] + srt[:, 2]
-    special = np.abs(s + l_ - pq) <= 1e-9 * l_
-    is_g = (s + l_ < pq) | special
-    names = np.array(GRASHOF_CLASSES, object)[np.argmin(L, axis=1)]
-    cls = np.where(special, "special Grashof (change point)", np.where(is_g, names, "non-Grashof triple-rocker"))
-    return cls.astype(object), is_g
+    return grashof_class(np.stack(lengths, axis=1))
 
 
 # ---------------------------------------------------------------- the run

@@ -1,4 +1,4 @@
-"""The design-study file: its schema (every key, type, default, unit), its reader, and the README's table.
+"""The design-study file: its schema (every key, type, default, unit), its reader, and its documentation tables.
 
     mechanism = "../mechanisms/fourbar_textbook_example.toml"
     samples = 10000                      # Monte-Carlo draws (parameters with a tolerance)
@@ -10,7 +10,7 @@
     quantity = "l4.theta"
     stat = "range"
 
-The keys come from :data:`SECTIONS` (the README's table is generated from it: :func:`markdown`, and a
+The keys come from :data:`SECTIONS` (the tables in docs/studies.md are generated from it: :func:`markdown`, and a
 test keeps the two equal). Every problem is one :class:`~vloop.errors.MechanismError` naming the study
 file, the entry (``parameters[2]``, ``outputs[0]``) and what is wrong; numbers must be finite (nan, inf,
 10**400, strings, booleans and nested arrays are refused), counts are bounded integers.
@@ -145,7 +145,7 @@ SECTION = {s.name: s for s in SECTIONS}
 
 
 def markdown() -> str:
-    """The study file format as Markdown tables, one per section (the README's copy must equal this)."""
+    """The study file format as Markdown tables, one per section (docs/studies.md holds a copy a test keeps equal)."""
     return schema_markdown(SECTIONS)
 
 

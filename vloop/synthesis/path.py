@@ -44,8 +44,16 @@ COINCIDENT = 1e-9
 # beyond it mostly lets the polish wander off to large linkages), a six-bar's within three (moving off the four-bar
 # it was seeded with takes its extra dyad well outside the four-bar's span)
 POLISH_REACH = {"fourbar": 1.0, "stephenson3": 3.0}
-MAX_NFEV = 150  # least-squares evaluations of one polish (each a batched solve of the member and its neighbours)
-POLISH_AT = 0.1  # a member whose sampled score is within this (of the size) is worth polishing
+# the polish's methods, the next from the best point of the last while it misses the tolerance: the dogleg (a few
+# Gauss-Newton steps to the manifold of exact linkages), and with prescribed timing (as many residuals as unknowns:
+# isolated solutions, where the dogleg stalls more often) then the reflective trust region
+POLISH_METHODS = ("dogbox", "trf")
+MAX_NFEV = 60  # least-squares evaluations of one polish (each a batched solve of the member and its neighbours)
+WALL = 8  # evaluations on members that will not solve after which a polish stops (see _Wall)
+SCREEN = 4  # members drawn per member kept in DE's first population (see _initial)
+RETRY = 5  # generations after a failed polish before the next best member is polished (unless the score drops)
+STAGNANT = 30  # generations without a 5 % gain (and failed polishes) after which an evolution stops for a new one
+POLISH_AT = 0.2  # a member whose sampled score is within this (of the size) is worth polishing
 
 
 @dataclass(frozen=True)
@@ -221,28 +229,34 @@ def _problem(top: Topology, tg: Targets, samples: int, req: Requirements, region
 def _search(p: _Problem, tolerance, count, seed, population, generations, restarts, name, units, log) -> list[Draft]:
     """Differential evolutions, each stopping once a polished member is within the tolerance, one after another
     (new seeds) until ``count`` distinct candidates are found — at least ``restarts`` of them, and no more once
-    one finds nothing; then, if still short, the polish of the best members of the last populations."""
+    one finds nothing; one that stagnates (its population gathered in a basin whose polish fails) hands its
+    remaining generations to a new one; then, if still short, the polish of the best members of the last
+    populations."""
     bounds = [(-p.box, p.box)] * p.n_coords + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
     members, energies, polished = [], [], []
     for start in p.seeds:
         out = _polish(p, *start)
         if out is not None and out[3] <= tolerance and _acceptable(p, out[0], out[1]):
             polished += [] if any(_same(out[0], q[0]) for q in polished) else [out]
-    for r in range(max(restarts, count) if len(polished) < count else 0):
+    budget, r = generations * max(restarts, count), 0
+    while len(polished) < count and budget > 0:
         t0 = time.perf_counter()
         early = _Early(p, tolerance)
         rng = np.random.default_rng(seed + r)
         res = differential_evolution(
-            p.score, bounds, popsize=population, maxiter=generations, tol=0.0, mutation=(0.5, 1.0),
+            p.score, bounds, popsize=population, maxiter=min(generations, budget), tol=0.0, mutation=(0.5, 1.0),
             recombination=0.9, rng=rng, vectorized=True, updating="deferred", polish=False,
             init=_initial(p, bounds, population, rng), callback=early,
         )  # fmt: skip
+        budget -= max(res.nit, 1)
         members.append(res.population)
         energies.append(res.population_energies)
         polished += [f for f in early.found if not any(_same(f[0], q[0]) for q in polished)]
         log.append(f"{p.top.name} search {r + 1}: {res.nit} generations of {len(res.population)} in "
-                   f"{time.perf_counter() - t0:.2f} s, best sampled {res.fun:.3g} of the size")  # fmt: skip
-        if len(polished) >= count or (r + 1 >= restarts and not early.found):
+                   f"{time.perf_counter() - t0:.2f} s, best sampled {res.fun:.3g} of the size"
+                   + (" (stagnant: a new search)" if early.stagnant else ""))  # fmt: skip
+        r += 1
+        if not early.stagnant and (r >= max(restarts, count) or (r >= restarts and not early.found)):
             break
     X = np.concatenate(members) if members else np.zeros((0, len(bounds)))
     E = np.concatenate(energies) if energies else np.zeros(0)
@@ -263,14 +277,16 @@ def _search(p: _Problem, tolerance, count, seed, population, generations, restar
     return drafts
 
 
-def _initial(p: _Problem, bounds: list, population: int, rng: np.random.Generator) -> np.ndarray | str:
-    """DE's first population: Latin hypercube over the bounds, with the seeds (clipped to the bounds) first."""
-    if not p.seeds:
-        return "latinhypercube"
+def _initial(p: _Problem, bounds: list, population: int, rng: np.random.Generator) -> np.ndarray:
+    """DE's first population: the best-scoring of SCREEN × as many members drawn by Latin hypercube over the bounds
+    (scored in one batched evaluation: most random linkages cannot turn fully, and a population of those learns
+    nothing), with the seeds (clipped to the bounds) first."""
     n, S = len(bounds), population * len(bounds)
     lo, hi = np.array(bounds).T
-    cut = (np.arange(S)[:, None] + rng.uniform(size=(S, n))) / S
-    X = lo + (hi - lo) * np.take_along_axis(cut, np.argsort(rng.uniform(size=(S, n)), axis=0), axis=0)
+    M = SCREEN * S
+    cut = (np.arange(M)[:, None] + rng.uniform(size=(M, n))) / M
+    X = lo + (hi - lo) * np.take_along_axis(cut, np.argsort(rng.uniform(size=(M, n)), axis=0), axis=0)
+    X = X[np.argsort(p.score(X.T), kind="stable")[:S]]
     for i, (coords, omega, _) in enumerate(p.seeds[: S // 2]):
         gene = coords if p.tg.timing is not None else np.append(coords, 0.5 * omega)
         X[i] = np.clip(gene, lo, hi)
@@ -307,22 +323,40 @@ def _embedded(p: _Problem, drafts: list[Draft]) -> list[tuple[np.ndarray, float,
 
 
 class _Early:
-    """DE's callback: once the best sampled score is within POLISH_AT, polish the best member (again whenever the
-    score has dropped by a fifth since the last try); stop the evolution when a polished member is within the
-    tolerance."""
+    """DE's callback: once the best sampled score is within POLISH_AT, polish the best member not polished yet —
+    again whenever the score has dropped by a fifth since the last try, or RETRY generations after it (a failed
+    polish is a basin whose exact linkages cannot move through the targets: another member may sit in another);
+    stop the evolution when a polished member is within the tolerance, or when it stagnates: no gain of 5 % in
+    STAGNANT generations, with polishes failing since the last gain (not a search seeded with linkages found
+    before: its best members are those seeds until it moves off them, and a new search would start there again)."""
 
     def __init__(self, p: _Problem, tolerance: float) -> None:
         self.p, self.tolerance = p, tolerance
         self.tried = math.inf
+        self.generation = self.last = 0
+        self.polished: list[np.ndarray] = []  # the genes of the members polished so far
         self.found: list[tuple] = []
+        self.record, self.improved = math.inf, 0  # the best score so far and the generation it was reached
+        self.stagnant = False
 
     def __call__(self, intermediate_result) -> bool:  # scipy passes the state by this name
+        self.generation += 1
         best = float(intermediate_result.fun)
-        if best > POLISH_AT or best > 0.8 * self.tried:
+        if best < 0.95 * self.record:
+            self.record, self.improved = best, self.generation
+        if not self.p.seeds and self.generation - self.improved >= STAGNANT and self.last > self.improved:
+            self.stagnant = True
+            return True
+        if best > POLISH_AT or (best > 0.8 * self.tried and self.generation - self.last < RETRY):
             return False
-        self.tried = best
-        k = int(np.argmin(intermediate_result.population_energies))
-        starts = _anchored(self.p, intermediate_result.population[k : k + 1])
+        pop, energies = intermediate_result.population, intermediate_result.population_energies
+        fresh = [k for k in np.argsort(energies) if not any(_same(pop[k], g) for g in self.polished)]
+        if not fresh or energies[fresh[0]] > POLISH_AT:
+            return False
+        k = fresh[0]
+        self.tried, self.last = best, self.generation
+        self.polished.append(pop[k].copy())
+        starts = _anchored(self.p, pop[k : k + 1])
         out = _polish(self.p, *starts[0]) if starts else None
         if out is not None and out[3] <= self.tolerance and _acceptable(self.p, out[0], out[1]):
             self.found.append(out)
@@ -360,62 +394,88 @@ def _anchored(p: _Problem, X: np.ndarray) -> list[tuple[np.ndarray, float, np.nd
     return out
 
 
-def _positions(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray, rates: bool = False):
-    """The tracer at instants ``t`` (any order, t ≥ 0) of the members ``coords`` (V, 2·n): (V, N) complex
-    positions (and velocities), and which members completed."""
-    tu, back = np.unique(np.concatenate([[0.0], t]), return_inverse=True)
-    ev = evaluate(p.top, coords, np.full(len(coords), omega), tu, points=(p.top.tracer,), rates=rates)
-    k = back[1:]
-    P = ev.points[p.top.tracer][:, k]
-    V = ev.velocities[p.top.tracer][:, k] if rates else None
-    return P, V, ev.completed
+class _Wall(Exception):
+    """The polish kept stepping onto members that will not solve: it is heading for linkages that cannot move
+    through the targets (a limit before the last one), and stops there."""
 
 
 def _polish(p: _Problem, coords: np.ndarray, omega: float, t: np.ndarray):
-    """Least squares on the coordinates (and t_2..t_N without timing): (coordinates, ω, instants, max error
-    [size]) or None when the member will not solve."""
-    free_t = p.tg.timing is None
+    """Least squares on the coordinates (and t_2..t_N without timing), by the dogleg method in a box (Gauss-Newton
+    steps: a few iterations near the manifold of exact solutions): (coordinates, ω, instants, max error [size]) of
+    the best member it met, or None when the member will not solve."""
     nc = len(coords)
+    met = {"error": math.inf, "x": None, "walls": 0, "at": None}
 
-    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[:nc], (np.concatenate([[0.0], x[nc:]]) if free_t else t)
+    def solved(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The residual and its Jacobian at x, from one batched solve (least squares asks for the Jacobian at the
+        point whose residual it has just had)."""
+        if met["at"] is None or not np.array_equal(met["at"][0], x):
+            met["at"] = (x.copy(), *_residual_jacobian(p, omega, x, nc))
+            r = met["at"][1]
+            error = float(np.max(np.hypot(*np.split(r, 2))))
+            if r[0] == INFEASIBLE:
+                met["walls"] += 1
+            elif error < met["error"]:
+                met["error"], met["x"] = error, x.copy()
+        return met["at"][1], met["at"][2]
 
     def residual(x: np.ndarray) -> np.ndarray:
-        c, tt = unpack(x)
-        P, _, ok = _positions(p, c[None, :], omega, tt)
-        r = P[0] - p.tg.z
-        return np.concatenate([r.real, r.imag]) if ok[0] else np.full(2 * len(r), INFEASIBLE)
+        if met["walls"] > WALL:
+            raise _Wall
+        return solved(x)[0]
 
-    def jacobian(x: np.ndarray) -> np.ndarray:
-        c, tt = unpack(x)
-        V = np.vstack([c, c + FD_STEP * np.eye(nc)])
-        P, vel, _ = _positions(p, V, omega, tt, rates=True)
-        dP = (P[1:] - P[0]) / FD_STEP  # (nc, N)
-        cols = [dP[i] for i in range(nc)]
-        if free_t:
-            for k in range(1, len(tt)):
-                col = np.zeros(len(tt), complex)
-                col[k] = vel[0, k]
-                cols.append(col)
-        J = np.stack(cols, 1)
-        return np.nan_to_num(np.concatenate([J.real, J.imag], 0))
+    x0, lo, hi = _polish_start(p, coords, t)
+    solved(x0)
+    if met["x"] is None:
+        return None
+    for method in POLISH_METHODS if p.tg.timing is not None else POLISH_METHODS[:1]:
+        if met["error"] <= (p.req.tolerance or 0.0):
+            break
+        met["walls"] = 0
+        try:
+            least_squares(
+                residual, met["x"], jac=lambda x: solved(x)[1], bounds=(lo, hi), method=method, x_scale="jac",
+                xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=MAX_NFEV,
+            )  # fmt: skip
+        except _Wall:
+            pass
+    x = met["x"]
+    return x[:nc], omega, _instants(p, x, nc), met["error"]
 
-    x0 = np.concatenate([coords, t[1:]]) if free_t else coords.copy()
-    # joints stay within POLISH_REACH search regions (or as far out as the member's own, re-anchored, already are)
+
+def _polish_start(p: _Problem, coords: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The polish's unknowns at the start and their bounds: joints within POLISH_REACH search regions (or as far
+    out as the member's own, re-anchored, already are); instants within a turn."""
     reach = np.maximum(POLISH_REACH[p.top.name] * p.box, 1.05 * np.abs(coords))
-    lo = np.concatenate([-reach, np.zeros(len(t) - 1)]) if free_t else -reach
-    hi = np.concatenate([reach, np.full(len(t) - 1, TWO_PI)]) if free_t else reach
-    x0 = np.clip(x0, lo, hi)
-    if not np.all(np.isfinite(residual(x0))) or residual(x0)[0] == INFEASIBLE:
-        return None
-    sol = least_squares(
-        residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=MAX_NFEV
-    )
-    c, tt = unpack(sol.x)
-    P, _, ok = _positions(p, c[None, :], omega, tt)
-    if not ok[0]:
-        return None
-    return c, omega, tt, float(np.max(np.abs(P[0] - p.tg.z)))
+    if p.tg.timing is not None:
+        return np.clip(coords, -reach, reach), -reach, reach
+    lo = np.concatenate([-reach, np.zeros(len(t) - 1)])
+    hi = np.concatenate([reach, np.full(len(t) - 1, TWO_PI)])
+    return np.clip(np.concatenate([coords, t[1:]]), lo, hi), lo, hi
+
+
+def _instants(p: _Problem, x: np.ndarray, nc: int) -> np.ndarray:
+    """The instants (N,) [s] of the polish's unknowns x: t_1 = 0 and the rest, or the timing given."""
+    return p.tg.timing.copy() if p.tg.timing is not None else np.concatenate([[0.0], x[nc:]])
+
+
+def _residual_jacobian(p: _Problem, omega: float, x: np.ndarray, nc: int) -> tuple[np.ndarray, np.ndarray]:
+    """The polish's residual (tracer minus target at the instants, real parts then imaginary; INFEASIBLE where
+    the member will not solve) and its Jacobian, from one batched solve of the member and its forward-difference
+    neighbours in the coordinates; without timing ∂P(t_k)/∂t_k is the tracer's velocity."""
+    c, t = x[:nc], _instants(p, x, nc)
+    N = len(t)
+    tu, at = np.unique(np.concatenate([[0.0], t]), return_inverse=True)
+    rows = np.vstack([c, c + FD_STEP * np.eye(nc)])
+    ev = evaluate(p.top, rows, np.full(nc + 1, omega), tu, points=(p.top.tracer,), rates=True)
+    if not ev.completed[0]:
+        return np.full(2 * N, INFEASIBLE), np.zeros((2 * N, len(x)))
+    P = ev.points[p.top.tracer][:, at[1:]]
+    r = P[0] - p.tg.z
+    cols = (P[1:] - P[0]).T / FD_STEP  # (N, nc)
+    if p.tg.timing is None:
+        cols = np.concatenate([cols, ev.velocities[p.top.tracer][0, at[1:], None] * np.eye(N)[:, 1:]], 1)
+    return np.concatenate([r.real, r.imag]), np.nan_to_num(np.concatenate([cols.real, cols.imag], 0))
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:

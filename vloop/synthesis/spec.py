@@ -1,4 +1,4 @@
-"""The synthesis file: its schema (every key, type, default, unit), its reader, and the README's table.
+"""The synthesis file: its schema (every key, type, default, unit), its reader, and its key tables.
 
     name = "lever"
     units = "mm"
@@ -7,10 +7,10 @@
     [path]
     points = [[0, 100], [100, 200], [200, 150], [300, 0], [150, -50]]
 
-The keys come from :data:`SECTIONS` (the README's tables are generated from it: :func:`markdown`; a test keeps
-the two equal). Every problem is one :class:`~vloop.errors.VloopError` naming the file, the entry and what is
-wrong, found before any work starts: numbers must be finite (nan, inf, 10**400, strings, booleans and nested
-arrays refused), counts are bounded integers, point lists have the right shape.
+The keys come from :data:`SECTIONS` (docs/synthesis.md's key tables are generated from it: :func:`markdown`; a
+test keeps the two equal). Every problem is one :class:`~vloop.errors.VloopError` naming the file, the entry and
+what is wrong, found before any work starts: numbers must be finite (nan, inf, 10**400, strings, booleans and
+nested arrays refused), counts are bounded integers, point lists have the right shape.
 """
 
 from __future__ import annotations
@@ -171,7 +171,8 @@ SECTION = {s.name: s for s in SECTIONS}
 
 
 def markdown() -> str:
-    """The synthesis file format as Markdown tables, one per section (the README's copy must equal this)."""
+    """The synthesis file format as Markdown tables, one per section (docs/synthesis.md holds a copy a test keeps
+    equal)."""
     return schema_markdown(SECTIONS)
 
 

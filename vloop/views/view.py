@@ -1,7 +1,7 @@
 """The interactive viewer: one self-contained, offline HTML page per run.
 
-The page is a pure function of (Mechanism, Result[, forces][, error message]). The geometry is
-serialized once — bodies in their local frames (plates, bars, slots), pins, ground pivots,
+The page is a pure function of the Mechanism, its Result and, optionally, its forces and an error
+message. The geometry is serialized once — bodies in their local frames (plates, bars, slots), pins, ground pivots,
 slider blocks and guides, the vector loops as (link, slider, r, δ) terms with their equations —
 and per sample only the Result's own columns (body poses are read from them: a link's frame is
 its first joint and its θ), so the numbers panel shows every sample's exact values. The columns
