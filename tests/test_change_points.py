@@ -162,12 +162,11 @@ def test_isosceles_slider_crank_passes_its_change_point_with_a_sample_on_it():
     assert res.health["change_point"][10] == 1
 
 
-def test_kite_passes_both_foldings_per_turn():
-    a, d = 1.0, 2.5
-    th0 = 0.7
+def kite(a: float, d: float, th0: float, omega: float, stop: float, step: float) -> vloop.Mechanism:
+    """Crank = coupler = a, rocker = ground = d, the crank at θ0 at t = 0 turning at ω; B from :func:`_kite_B`."""
     A0 = complex(a * np.exp(1j * th0))
     B0 = complex(_kite_B(A0, d))
-    text = f"""
+    return vloop.loads(f"""
 name = "kite"
 [joints]
 O2 = [0.0, 0.0]
@@ -181,13 +180,18 @@ coupler = {{ joints = ["A", "B"] }}
 rocker = {{ joints = ["O4", "B"] }}
 [[drivers]]
 link = "crank"
-omega = 1.5
+omega = {omega!r}
 [time]
 start = 0.0
-stop = 8.0
-step = 0.004
-"""
-    res = vloop.solve(vloop.loads(text))
+stop = {stop!r}
+step = {step!r}
+""")
+
+
+def test_kite_passes_both_foldings_per_turn():
+    a, d = 1.0, 2.5
+    th0 = 0.7
+    res = vloop.solve(kite(a, d, th0, 1.5, 8.0, 0.004))
     th2 = th0 + 1.5 * res.t
     B = _kite_B(a * np.exp(1j * th2), d)
     assert np.max(np.abs(res["B.x"] + 1j * res["B.y"] - B)) < 1e-9 * d

@@ -17,15 +17,16 @@ single run calls:
 * Newton blocks by the single run's continuation (:func:`vloop.core.newton.solve_block`), variant by variant on
   its own constants; each variant's t = 0 assembly continued from the nominal design (term vectors and driver
   numbers blended in ASSEMBLY_STEPS steps, Newton on the nominal branch: the sign of its Jacobian's determinant);
-* change points screened as the single run screens them: the dips of each variant's discriminants
-  (:func:`vloop.core.changepoints.candidate_minima`) and a first look at each (:func:`~.changepoints.first_look`).
+* change points searched as the single run searches them: the dips of each variant's discriminants
+  (:func:`vloop.core.changepoints.candidate_minima`), every dip of every variant zoomed on at once
+  (:func:`~.changepoints.locate_minima`); a variant with a change point is left to the single run.
 
 A variant's numbers come from its own rows only (elementwise over rows: no matrix product across them, every
 complex temporary below numpy's in-place threshold, see ROWS), so how many variants are solved together never
 changes a number.
 
 A variant the batch is not sure of is *doubtful*: its motion passes a limit (the loop stops closing), a dip of a
-dyad's discriminant that the first look does not dismiss (a possible change point, or a limit between samples),
+dyad's discriminant where the branches meet (a change point) or a block cannot close (a limit between samples),
 a sample whose velocity error bound cond²·ε exceeds SURE·rtol (the single run refuses at rtol), a branch sign
 change, a Newton continuation that fails, inputs too large to resolve or moving too far per sample, a
 non-finite number. ``doubtful="single"`` (the default) solves it again on its own with the single-run solver
@@ -52,7 +53,7 @@ from ..model import Mechanism
 from . import newton
 from .accuracy import DEFAULT_MAX_ITER, DEFAULT_RTOL, DEFAULT_TOL, velocity_bound
 from .blocks import run_blocks
-from .changepoints import CLEAR, candidate_minima, eta_of_rates, first_look, look_times
+from .changepoints import CHANGE_GAP, candidate_minima, eta_of_rates, locate_minima
 from .context import Inputs, Run, impose_drivers, input_units
 from .data import TWO_PI, State
 from .dyads import closed_form, dyad_health, dyad_rates, jacobian_columns
@@ -298,9 +299,9 @@ def _dyad_block(
 
 
 def _change_points_possible(batch: _Batch, d: Designs, grid: Grid, i: int, h: np.ndarray, flags: _Flags) -> np.ndarray:
-    """The variants where block ``i``'s discriminants h (variants, samples) dip somewhere the single run's first
-    look would not dismiss (a possible change point, or a limit between samples), or where blocks before it are
-    solved by Newton (probing through them is the single run's)."""
+    """The variants where block ``i``'s discriminants h (variants, samples) dip to a change point (located as the
+    single run locates it, every dip of every variant at once), or where a block cannot close in a dip (a limit
+    between samples), or where blocks before it are solved by Newton (probing through them is the single run's)."""
     found = candidate_minima(h, tail=True)
     found = found[flags.regular[found[:, 0]]]
     out = np.zeros(len(d), bool)
@@ -314,8 +315,17 @@ def _change_points_possible(batch: _Batch, d: Designs, grid: Grid, i: int, h: np
     mech = batch.model.mechanism
     _, XD, _ = _inputs(batch.model, d.take(v), (0.5 * (a + b))[:, None])
     eta = eta_of_rates(XD[:, 0, :], input_units(mech, batch.scale), b - a)
-    h_look, solvable = _probe_dyads(batch, d.take(v), look_times(a, b, eta), i)
-    out[v[~(solvable & (first_look(h_look, batch.scale) == CLEAR))]] = True
+    cannot = np.zeros(len(v), bool)  # a bracket where a block cannot close at some probe: a limit between samples
+
+    def probe_h(which: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        h, solvable = _probe_dyads(batch, d.take(v[which]), times, i)
+        cannot[which[~solvable]] = True
+        return h, solvable
+
+    _, h_min = locate_minima(probe_h, a, b, eta, batch.scale)  # every bracket of every variant zoomed at once
+    with np.errstate(invalid="ignore"):
+        meets = ~(2.0 * np.sqrt(h_min) > CHANGE_GAP * batch.scale)  # a change point (or a limit): the single run's
+    out[v[meets | cannot]] = True
     return out
 
 

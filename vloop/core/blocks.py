@@ -20,12 +20,20 @@ from .dyads import closed_form, dyad_health, dyad_rates, jacobian_columns
 from .plans import Plan, block_plans, store_rates
 
 
-def run_blocks(run: Run, state: State, t_grid: np.ndarray, n: int, upto: int | None = None) -> Solved:
-    """Solve blocks 0..upto (default: all) in order on rows 0..n-1 (row 0 must be assembled)."""
+def run_blocks(
+    run: Run, state: State, t_grid: np.ndarray, n: int, upto: int | None = None, rated: np.ndarray | None = None
+) -> Solved:
+    """Solve blocks 0..upto (default: all) in order on rows 0..n-1 (row 0 must be assembled).
+
+    ``rated``: the rows (ascending) whose rates and health are wanted (default: every row). A closed-form
+    dyad's other rows get positions and the discriminant only (cond 1 and no branch sign there): for a dyad
+    det J vanishes only where h does, which the change-point search watches on every row; Newton blocks and
+    the dyads a Newton block follows (its predictor reads their rates) are rated on every row.
+    """
     system = run.system
-    na = system.n_angles
+    plans = block_plans(system)
     out = Solved(n, None, [], [], [], np.zeros(n, bool))
-    for i, plan in enumerate(block_plans(system)):
+    for i, plan in enumerate(plans):
         if upto is not None and i > upto:
             break
         factor = None
@@ -39,38 +47,74 @@ def run_blocks(run: Run, state: State, t_grid: np.ndarray, n: int, upto: int | N
             sigma = dyad_positions(run, state, t_grid, i, plan, out)
         if out.n_ok == 0:
             break
-        k = slice(0, out.n_ok)
-        cols = None
-        if factor is None:
-            cols = jacobian_columns(plan, state, k)  # shared by health and rates
-            cond, branch_sign = dyad_health(plan, state, k, run.scale, cols)
-        else:
-            cond, branch_sign = factor.cond[k], factor.sign[k]
-            if plan.C.shape[0] * 2 > len(plan.block.unknowns):  # redundant: one branch, singular points passed
-                find_singular_points(run, state, t_grid, i, cond)
-        near = near_change_point(run, i, t_grid[k], cond)
-        if run.check:
-            signed = branch_sign * sigma[: out.n_ok]
-            bad = np.nonzero(((velocity_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
-            if len(bad):
-                fail(out, Failure(int(bad[0]), plan.block.loops[0], _toggle_reason(cond[bad[0]], run.rtol)))
-                k = slice(0, out.n_ok)
-                cond, branch_sign, near = cond[k], branch_sign[k], near[k]
-                cols = None if cols is None else cols.head(out.n_ok)
-        out.conds.append(cond)
-        out.signs.append(branch_sign)
-        if out.n_ok == 0 or not run.rates:
-            continue
-        if factor is None:
-            store_rates(plan, state, k, dyad_rates(plan, state, k, "v", cols), "v", na)
-            store_rates(plan, state, k, dyad_rates(plan, state, k, "a", cols), "a", na)
-        else:
-            store_rates(plan, state, k, newton.factor_rates(plan, state, k, factor.inv[k], "v"), "v", na)
-            store_rates(plan, state, k, newton.factor_rates(plan, state, k, factor.inv[k], "a"), "a", na)
-        if near.any():
-            rates_across(run, state, t_grid, i, plan, np.nonzero(near)[0], out, cond)
+        some = rated is not None and factor is None and all(p.block.kind != "newton" for p in plans[i + 1 :])
+        rows = _rated(rated if some else None, 0, out.n_ok)
+        _health_and_rates(run, state, t_grid, i, plan, out, factor, sigma, rows)
     out.at_change = out.at_change[: out.n_ok]
     return out
+
+
+def _rated(rated: np.ndarray | None, first: int, n: int) -> np.ndarray | slice:
+    """Row 0 and the ``rated`` rows before n (a slice of every row when ``rated`` is None)."""
+    if rated is None:
+        return slice(first, n)
+    rows = rated[: np.searchsorted(rated, n)]
+    return rows if len(rows) and rows[0] == 0 else np.concatenate([[0], rows]).astype(rows.dtype)
+
+
+def _health_and_rates(
+    run: Run,
+    state: State,
+    t_grid: np.ndarray,
+    i: int,
+    plan: Plan,
+    out: Solved,
+    factor: newton.Factor | None,
+    sigma: np.ndarray,
+    rows: np.ndarray | slice,
+) -> None:
+    """Block ``i``'s condition number and branch sign on ``rows`` (a toggle or a branch flip there stops the
+    run), then its rates there (across a change point where the Jacobian is singular)."""
+    na = run.system.n_angles
+    n = out.n_ok
+    every = isinstance(rows, slice)
+    cols = None
+    if factor is None:
+        cols = jacobian_columns(plan, state, rows)  # shared by health and rates
+        cond, branch_sign = dyad_health(plan, state, rows, run.scale, cols)
+    else:
+        cond, branch_sign = factor.cond[rows], factor.sign[rows]
+        if plan.C.shape[0] * 2 > len(plan.block.unknowns):  # redundant: one branch, singular points passed
+            find_singular_points(run, state, t_grid, i, cond)
+    near = near_change_point(run, i, t_grid[rows], cond)  # (rows: a slice of every row, or the rated rows)
+    if run.check:
+        signed = branch_sign * sigma[rows]
+        bad = np.nonzero(((velocity_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
+        if len(bad):
+            m = int(bad[0])
+            row = m if every else int(rows[m])
+            fail(out, Failure(row, plan.block.loops[0], _toggle_reason(cond[m], run.rtol)))
+            n, rows = out.n_ok, (slice(0, out.n_ok) if every else rows[:m])
+            cond, branch_sign, near = cond[:m], branch_sign[:m], near[:m]
+            cols = None if cols is None else cols.head(m)
+    if every:
+        out.conds.append(cond)
+        out.signs.append(branch_sign)
+    else:  # (cond 1 where not rated: nothing refused there, nothing flagged)
+        full_cond, full_sign = np.ones(n), np.full(n, np.nan)
+        full_cond[rows], full_sign[rows] = cond, branch_sign
+        out.conds.append(full_cond)
+        out.signs.append(full_sign)
+    if n == 0 or not run.rates:
+        return
+    for what in ("v", "a"):
+        if factor is None:
+            vals = dyad_rates(plan, state, rows, what, cols)
+        else:
+            vals = newton.factor_rates(plan, state, rows, factor.inv[rows], what)
+        store_rates(plan, state, rows, vals, what, na)
+    if near.any():
+        rates_across(run, state, t_grid, i, plan, (np.flatnonzero(near) if every else rows[near]), out, out.conds[-1])
 
 
 def _toggle_reason(cond: float, rtol: float) -> str:
@@ -86,13 +130,11 @@ def dyad_positions(run: Run, state: State, t_grid: np.ndarray, i: int, plan: Pla
     k = slice(0, out.n_ok)
     sigma = run.sigma(i, t_grid[k])
     ok, h = closed_form(plan, state, k, sigma)
-    if run.detect and plan.block.kind != "PP":
+    if run.detect and run.chart is None and plan.block.kind != "PP":  # (a chart has seen none on the way)
         n_lim = int(np.argmin(ok)) if not ok.all() else out.n_ok
-        try:
-            found = find_change_points(run, state, t_grid, i, h[:n_lim])
-        except Failure as f:
-            found = []
-            fail(out, f)
+        found, failure = find_change_points(run, state, t_grid, i, h[:n_lim])
+        if failure is not None:
+            fail(out, failure)
         if found:
             sigma = run.sigma(i, t_grid[k])
             ok, h = closed_form(plan, state, k, sigma)

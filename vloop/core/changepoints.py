@@ -4,19 +4,29 @@ A sampled minimum of the dyad's discriminant h (the two solutions lie 2·√h ap
 zooming probes; where the branches come within CHANGE_GAP of the mechanism size it is a change
 point, continued on the branch whose rates stay continuous (or the other one, as the file asks).
 Rates at rows next to one, where the Jacobian is singular, come from a well-conditioned stencil.
+
+Every minimum of a run (or, in the batch, of every variant) is zoomed on at once (:func:`locate_minima`), and
+the probes of every change point's continuation and stencils are solved together: where the blocks before are
+closed forms each probe row is solved on its own (:func:`dyads_at`), so the work is a few batches however many
+dips the sampling shows; past a Newton block, probes continue bracket by bracket from the sample before.
 """
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import MechanismError
+from ..method.loops import LoopSystem
 from .accuracy import EPS, error_bound
 from .context import ChangePoint, Failure, Run, Solved, change_point_choices, impose_drivers, input_units
-from .data import State
+from .data import Probe, State
+from .dyads import closed_form, dyad_health, dyad_rates, jacobian_columns
 from .plans import Plan, block_plans, store_rates
 
 CHANGE_GAP = 1e-6  # two assembly branches closer than this fraction of the mechanism size meet: a change point
@@ -116,69 +126,244 @@ def probe(run: Run, state: State, t_grid: np.ndarray, base: int, times: np.ndarr
     return sub.blocks(sub, trial, grid, len(grid), upto=upto), trial
 
 
-def find_change_points(run: Run, state: State, t_grid: np.ndarray, i: int, h: np.ndarray) -> list[ChangePoint]:
+def find_change_points(
+    run: Run, state: State, t_grid: np.ndarray, i: int, h: np.ndarray
+) -> tuple[list[ChangePoint], Failure | None]:
     """Locate where block ``i``'s two assembly branches meet between samples, and pick the continuation.
 
-    A sampled minimum of the discriminant h is refined by zooming probes; where the branches come
-    within CHANGE_GAP of the mechanism size of each other it is a change point. The continuation
+    Every sampled minimum of the discriminant h that dips is refined at once (:func:`locate_minima`); where the
+    branches come within CHANGE_GAP of the mechanism size of each other it is a change point. The continuation
     is the one whose rates stay continuous across it (or the other one where the file asks so in
-    ``[solver] change_points``). h < 0 between samples means the motion passes a limit there.
+    ``[solver] change_points``). h < 0 between samples means the motion passes a limit there: returned as the
+    failure, with the change points found before it.
     """
-    found = []
     loop = run.system.loops[block_plans(run.system)[i].block.loops[0]]
     choices = change_point_choices(run.system, loop.index + 1)
-    for _, lo, hi in candidate_minima(h[None, :], run.tail).tolist():
-        if any(t_grid[lo] <= ev.time <= t_grid[hi] for ev in run.events.get(i, ())):
-            continue  # found already (by the chunk before, whose last rows this chunk starts from)
-        t_star, h_min = _zoom(run, state, t_grid, i, lo, hi)
-        if h_min < 0:
-            raise Failure(hi, loop.index, "the loop cannot close between samples: the input passes a limit position")
-        if 2.0 * math.sqrt(h_min) > CHANGE_GAP * run.scale:
+    found_minima = candidate_minima(h[None, :], run.tail)
+    if not len(found_minima):
+        return [], None
+    lo, hi = found_minima[:, 1:].T
+    known = sorted(ev.time for ev in run.events.get(i, ()))
+    fresh = ~_passed(known, t_grid[lo], t_grid[hi])  # (found already: by the chunk before, whose last rows this
+    lo, hi = lo[fresh], hi[fresh]  # chunk starts from)
+    if not len(lo):
+        return [], None
+    a, b = t_grid[lo], t_grid[hi]
+    eta = times_to_move(run, 0.5 * (a + b), b - a)
+    t_star, h_min = locate_minima(_Discriminants(run, state, t_grid, i, lo), a, b, eta, run.scale)
+    with np.errstate(invalid="ignore"):
+        meets = 2.0 * np.sqrt(h_min) <= CHANGE_GAP * run.scale
+    continuations = _Continuations(run, state, t_grid, i, lo[meets], t_star[meets])
+    found: list[ChangePoint] = []
+    for k in np.nonzero(meets | (h_min < 0))[0].tolist():  # (the others: no change point, no limit)
+        if found and _passed(known, t_grid[lo[k : k + 1]], t_grid[hi[k : k + 1]])[0]:
+            continue  # (brackets around neighbouring minima can overlap: the change point is found already)
+        if h_min[k] < 0:
+            why = "the loop cannot close between samples: the input passes a limit position"
+            return found, Failure(int(hi[k]), loop.index, why)
+        if not meets[k]:
             continue
-        smooth_flip = _smooth_continuation(run, state, t_grid, i, lo, t_star)
+        smooth_flip = continuations.smooth_flip(int(np.count_nonzero(meets[:k])))
         choice = choices[min(len(found), len(choices) - 1)]
         flip = smooth_flip if choice == "smooth" else not smooth_flip
-        ev = ChangePoint(i, t_star, flip, choice == "smooth")
+        ev = ChangePoint(i, float(t_star[k]), flip, choice == "smooth")
         run.events.setdefault(i, []).append(ev)
+        bisect.insort(known, ev.time)
         found.append(ev)
-    return found
+    return found, None
 
 
-def _zoom(run: Run, state: State, t_grid: np.ndarray, i: int, lo: int, hi: int) -> tuple[float, float]:
-    """(t*, h(t*)): where block ``i``'s discriminant h is least between samples lo and hi.
+def _passed(known: list[float], a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether a change point is known (at a time of the sorted ``known``) in each bracket [a, b]."""
+    if not known:
+        return np.zeros(len(a), bool)
+    times = np.array(known)
+    j = np.searchsorted(times, a)
+    return (j < len(times)) & (times[np.minimum(j, len(times) - 1)] <= b)
 
-    Zooms on the sign change of g(t) = h(t + η) − h(t − η), which crosses zero linearly at the
-    minimum (h itself is flat there), so t* is found to ~1e-12 of the bracket, not to √ε.
+
+def locate_minima(
+    probe_h: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    a: np.ndarray,
+    b: np.ndarray,
+    eta: np.ndarray,
+    scale: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(t*, h(t*)) of every bracket [a, b] (one per entry): where a discriminant h is least, every bracket zoomed
+    at once. ``probe_h(which, times)`` gives h at ``times`` (len(which), p) for the brackets ``which`` (indices)
+    and whether every block it depends on closes at all of them; η: the offset of g below, per bracket.
+
+    Zooms on the sign change of g(t) = h(t + η) − h(t − η), which crosses zero linearly at the minimum (h
+    itself is flat there), so t* is found to ~1e-12 of the bracket, not to √ε. A bracket where no change point
+    can hide (the first look) or where an earlier block cannot close gets h(t*) = ∞; one where h < 0 (a limit)
+    its least sampled h.
     """
-    a, b = float(t_grid[lo]), float(t_grid[hi])
-    eta = time_to_move(run, 0.5 * (a + b), b - a)
-    first = True
-    for _ in range(ZOOM_STEPS):
-        times = look_times(np.array(a), np.array(b), np.array(eta))
-        h = _discriminant(run, state, t_grid, lo, i, times)
-        if h is None:  # an earlier block cannot be solved in the bracket: leave it to the main run
-            return a, math.inf
-        ts, mid, g = times[:ZOOM_POINTS], h[:ZOOM_POINTS], h[2 * ZOOM_POINTS :] - h[ZOOM_POINTS : 2 * ZOOM_POINTS]
-        look = first_look(h[None], run.scale)[0]
-        if look == LIMIT:
-            j = int(np.argmin(mid))
-            return float(ts[j]), float(mid[j])
-        if first and look == CLEAR:  # no change point in the bracket
-            return a, math.inf
-        first = False
-        j = int(np.argmax(g >= 0)) if np.any(g >= 0) else len(ts) - 1
-        a, b = float(ts[max(j - 1, 0)]), float(ts[j])
-        if b - a <= 1e-9 * (t_grid[hi] - t_grid[lo]):
+    n = len(a)
+    t_star, h_min = np.asarray(a, float).copy(), np.full(n, np.inf)
+    lo, hi, width = t_star.copy(), np.asarray(b, float).copy(), np.asarray(b, float) - a
+    final = np.zeros(n, bool)  # zoomed to the end: h at the middle of the last bracket
+    act = np.arange(n)
+    for step in range(ZOOM_STEPS):
+        times = look_times(lo[act], hi[act], eta[act])
+        h, solvable = _first_look_h(probe_h, act, times, scale) if step == 0 else probe_h(act, times)
+        look = first_look(h, scale)
+        ts, mid = times[:, :ZOOM_POINTS], h[:, :ZOOM_POINTS]
+        limit = solvable & (look == LIMIT)
+        j = np.argmin(np.where(limit[:, None], mid, np.inf), axis=1)[limit]
+        t_star[act[limit]], h_min[act[limit]] = ts[limit, j], mid[limit, j]
+        out = ~solvable | (look == CLEAR) if step == 0 else ~solvable
+        t_star[act[out]] = lo[act[out]]
+        go = np.nonzero(~out & ~limit)[0]
+        up = h[go, 2 * ZOOM_POINTS :] >= h[go, ZOOM_POINTS : 2 * ZOOM_POINTS]  # g ≥ 0
+        j = np.where(up.any(axis=1), np.argmax(up, axis=1), ZOOM_POINTS - 1)
+        act = act[go]
+        lo[act], hi[act] = ts[go, np.maximum(j - 1, 0)], ts[go, j]
+        narrow = hi[act] - lo[act] <= 1e-9 * width[act]
+        final[act[narrow]] = True
+        act = act[~narrow]
+        if not len(act):
             break
-    t_star = 0.5 * (a + b)
-    h = _discriminant(run, state, t_grid, lo, i, np.array([t_star]))
-    return t_star, (math.inf if h is None else float(h[0]))
+    final[act] = True
+    which = np.nonzero(final)[0]
+    if len(which):
+        t_star[which] = 0.5 * (lo[which] + hi[which])
+        h, solvable = probe_h(which, t_star[which][:, None])
+        h_min[which] = np.where(solvable, h[:, 0], np.inf)
+    return t_star, h_min
+
+
+FIRST = np.r_[0 : ZOOM_POINTS + 1, 2 * ZOOM_POINTS - 1, 2 * ZOOM_POINTS, 3 * ZOOM_POINTS - 1]  # what a first look reads
+REST = np.setdiff1d(np.arange(3 * ZOOM_POINTS), FIRST)  # ... and what the zoom reads besides: g inside the bracket
+
+
+def _first_look_h(
+    probe_h: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    which: np.ndarray,
+    times: np.ndarray,
+    scale: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """h at :func:`look_times` and whether every block closes there, as ``probe_h`` gives them, probed in two
+    steps: what :func:`first_look` reads (h between the samples and g at the bracket's ends) for every bracket,
+    the rest only for brackets it does not find CLEAR (most are: a broad minimum that dips between coarse
+    samples). Entries not probed are NaN."""
+    h = np.full(times.shape, np.nan)
+    h[:, FIRST], solvable = probe_h(which, times[:, FIRST])
+    rest = np.nonzero(solvable & (first_look(h, scale) != CLEAR))[0]
+    if len(rest):
+        h[np.ix_(rest, REST)], more = probe_h(which[rest], times[np.ix_(rest, REST)])
+        solvable[rest] &= more
+    return h, solvable
+
+
+class _Discriminants:
+    """Block ``i``'s discriminant at probe times of brackets that start at samples ``base``: for
+    :func:`locate_minima`. Where the blocks before it are closed forms, every row is solved on its own, all at
+    once (each on its branch at its time); past a Newton block, bracket by bracket, continued from its base."""
+
+    def __init__(self, run: Run, state: State, t_grid: np.ndarray, i: int, base: np.ndarray) -> None:
+        self.run, self.state, self.t_grid, self.i, self.base = run, state, t_grid, i, base
+
+    def __call__(self, which: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        run, i = self.run, self.i
+        if closed_forms_upto(run.system, i):
+            try:
+                solved = dyads_at(run, times.reshape(-1), i)
+            except MechanismError:  # a probe past the end of a tabulated input: bracket by bracket below
+                solved = None
+            if solved is not None:
+                _, h, ok = solved
+                return h.reshape(times.shape), ok.reshape(times.shape).all(axis=1)
+        h = np.full(times.shape, np.inf)
+        solvable = np.zeros(len(which), bool)
+        for r, (w, ts) in enumerate(zip(which.tolist(), times, strict=True)):
+            got = _discriminant(run, self.state, self.t_grid, int(self.base[w]), i, ts)
+            if got is not None:
+                h[r], solvable[r] = got, True
+        return h, solvable
+
+
+def closed_forms_upto(system: LoopSystem, i: int) -> bool:
+    """Whether blocks 0..i are all closed-form dyads (rows are then solved each on its own)."""
+    return all(plan.block.kind != "newton" for plan in block_plans(system)[: i + 1])
+
+
+def dyads_at(
+    run: Run, times: np.ndarray, upto: int, sigma: np.ndarray | None = None, rates: bool = False, health: bool = False
+) -> tuple:
+    """Closed-form blocks 0..upto at ``times`` (any order: each row solved on its own, on each block's branch at
+    its time; block ``upto`` on ``sigma`` if given), in chunks of ROWS rows. Returns the probe's state, block
+    upto's discriminant h and whether every block closes, per row (and with ``health`` block upto's condition
+    number); with ``rates``, velocities and accelerations. Raises MechanismError where a time is outside a
+    tabulated input."""
+    system = run.system
+    n, na = len(times), system.n_angles
+    trial = Probe(n, na, len(system.slider_names))
+    order = np.argsort(times, kind="stable")  # (ascending: a lead-in path is told by the first time)
+    inputs = np.empty((3, n, len(system.drivers)))
+    inputs[:, order] = run.inputs(times[order])
+    impose_drivers(system, trial, *inputs)
+    h, ok, cond = np.empty(n), np.ones(n, bool), np.empty(n)
+    plans = block_plans(system)
+    for start in range(0, n, ROWS):
+        k = slice(start, min(start + ROWS, n))
+        for b in range(upto + 1):
+            plan = plans[b]
+            s = sigma[k] if sigma is not None and b == upto else run.sigma(b, times[k])
+            closes, h[k] = closed_form(plan, trial, k, s)
+            ok[k] &= closes
+            cols = jacobian_columns(plan, trial, k) if rates or (health and b == upto) else None
+            if health and b == upto:
+                cond[k] = dyad_health(plan, trial, k, run.scale, cols)[0]
+            if rates:
+                for what in ("v", "a"):
+                    store_rates(plan, trial, k, dyad_rates(plan, trial, k, what, cols), what, na)
+    return (trial, h, ok, cond) if health else (trial, h, ok)
+
+
+ROWS = 16_000  # probe rows solved together (complex temporaries below numpy's in-place threshold, as a run's)
+
+
+class _Continuations:
+    """Which continuation keeps block ``i``'s rates continuous across each change point t* (after samples
+    ``lo``): its rates at t* − η and t* + η on either branch, all at once where the blocks before it are closed
+    forms (by probes from sample lo otherwise, as each is met)."""
+
+    def __init__(self, run: Run, state: State, t_grid: np.ndarray, i: int, lo: np.ndarray, t_star: np.ndarray) -> None:
+        self.run, self.state, self.t_grid, self.i, self.lo, self.t_star = run, state, t_grid, i, lo, t_star
+        self.eta = times_to_move(run, t_star, t_grid[lo + 1] - t_grid[lo])
+        self.rates: np.ndarray | None = None
+        if len(lo) and closed_forms_upto(run.system, i):
+            # per change point: t* − η and t* + η, each on σ = +1 and −1
+            times = (t_star[:, None] + self.eta[:, None] * np.array([-1.0, -1.0, 1.0, 1.0])).reshape(-1)
+            sigma = np.tile(np.array([1.0, -1.0, 1.0, -1.0]), len(lo))
+            try:
+                trial, _, ok = dyads_at(run, times, i, sigma, rates=True)
+            except MechanismError:
+                return
+            r = _block_rates(run, trial, i, slice(0, len(times)))
+            r[~ok] = np.nan
+            self.rates = r.reshape(len(lo), 2, 2, -1)  # (change point, before/after, σ = +1/−1, unknown)
+
+    def smooth_flip(self, k: int) -> bool:
+        """Whether flipping σ at change point k keeps the rates continuous (else keeping it does), given the
+        change points recorded before it."""
+        run, i, t_star = self.run, self.i, float(self.t_star[k])
+        if self.rates is None:
+            return _smooth_continuation(run, self.state, self.t_grid, i, int(self.lo[k]), t_star)
+        eta = float(self.eta[k])
+        before, after = run.sigma(i, np.array([t_star - eta, t_star + eta]))
+        side = {1.0: 0, -1.0: 1}
+        r0 = self.rates[k, 0, side[before]]
+        jumps = [float(np.max(np.abs(self.rates[k, 1, side[s]] - r0))) for s in (-after, after)]
+        jumps = [math.inf if math.isnan(j) else j for j in jumps]
+        return jumps[0] <= jumps[1]
 
 
 def _discriminant(
     run: Run, state: State, t_grid: np.ndarray, base: int, i: int, times: np.ndarray
 ) -> np.ndarray | None:
-    """Block ``i``'s discriminant h at ``times`` (None if an earlier block fails there)."""
+    """Block ``i``'s discriminant h at ``times`` by a probe continued from sample ``base`` (None if a block
+    fails there)."""
     order = np.argsort(times, kind="stable")
     solved, _ = probe(run, state, t_grid, base, times[order], i, check=False, rates=False)
     if solved.n_ok < len(times) + 1 or len(solved.discs) <= i:
@@ -190,8 +375,15 @@ def _discriminant(
 
 def time_to_move(run: Run, t_star: float, width: float, move: float = ETA_INPUT) -> float:
     """A time offset over which the inputs move ``move`` (radians, or mechanism sizes for sliders)."""
-    _, XD, _ = run.inputs(np.array([t_star]))
-    return float(eta_of_rates(XD[0], input_units(run.system.mechanism, run.scale), np.array(width), move))
+    return float(times_to_move(run, np.array([t_star]), np.array([width]), move)[0])
+
+
+def times_to_move(run: Run, t: np.ndarray, width: np.ndarray, move: float = ETA_INPUT) -> np.ndarray:
+    """:func:`time_to_move` at each of the times ``t`` (at most a quarter of each ``width``)."""
+    order = np.argsort(t, kind="stable")  # (ascending: a lead-in path is told by the first time)
+    XD = np.empty((len(t), len(run.system.mechanism.drivers)))
+    XD[order] = run.inputs(t[order])[1]
+    return eta_of_rates(XD, input_units(run.system.mechanism, run.scale), width, move)
 
 
 def _block_rates(run: Run, trial: State, i: int, rows: slice) -> np.ndarray:
@@ -254,18 +446,30 @@ def rates_across(
     falls to STENCIL_COND (the stencil's own points then carry ~STENCIL_COND³·ε), and again at 2η: their
     difference bounds the narrower one's truncation error (conservatively: where the branch bends fast the
     error does not yet fall like η⁸). Each row keeps whichever is better: the interpolated rates (that
-    estimate) or its direct ones (their bound cond³·ε).
+    estimate) or its direct ones (their bound cond³·ε). The stencils of every change point are probed at once.
     """
-    for ev in run.events[i]:
-        eta = _stencil_eta(run, state, t_grid, i, ev.time)
-        near = np.abs(t_grid[rows] - ev.time) < 8.0 * eta
-        mine = rows[near]
-        if not len(mine):
-            continue
-        narrow = _stencil_rates(run, state, t_grid, i, plan, ev.time, eta, t_grid[mine])
-        wide = _stencil_rates(run, state, t_grid, i, plan, ev.time, 2.0 * eta, t_grid[mine])
+    events = run.events[i]
+    t_star = np.array([ev.time for ev in events])
+    widest = times_to_move(run, t_star, np.full(len(t_star), math.inf), STENCIL_INPUT)  # (η is at most this)
+    t_rows = t_grid[rows]
+    reach = np.abs(t_rows[None, :] - t_star[:, None]) < 8.0 * widest[:, None]
+    k = np.nonzero(reach.any(axis=1))[0]
+    if not len(k):
+        return
+    t_star, widest = t_star[k], widest[k]
+    eta = _stencil_eta(run, state, t_grid, i, t_star, widest)
+    near = np.abs(t_rows[None, :] - t_star[:, None]) < 8.0 * eta[:, None]
+    k = np.nonzero(near.any(axis=1))[0]
+    stencils = [t_star[j] + f * eta[j] * STENCIL for j in k for f in (1.0, 2.0)]  # narrow, then wide
+    probed = _probe_groups(run, state, t_grid, i, stencils, rates=True)
+    na = run.system.n_angles
+    for n, j in enumerate(k.tolist()):
+        narrow, wide = probed[2 * n], probed[2 * n + 1]
         if narrow is None or wide is None:
             continue  # a stencil leaves the feasible range: keep the direct rates (flagged)
+        mine = rows[near[j]]
+        u = (t_grid[mine] - t_star[j]) / eta[j]
+        narrow, wide = _interpolated(narrow, u), _interpolated(wide, 0.5 * u)
         use = np.zeros(len(mine), bool)
         for what in ("v", "a"):
             scale = _rate_scale(run, plan, narrow["scale_" + what], narrow["scale_v"], what)
@@ -274,23 +478,65 @@ def rates_across(
             use |= np.all(err_stencil < err_direct, axis=1)
         if use.any():
             for what in ("v", "a"):
-                store_rates(plan, state, mine[use], narrow[what][use], what, run.system.n_angles)
+                store_rates(plan, state, mine[use], narrow[what][use], what, na)
             out.at_change[mine[use]] = True
 
 
-def _stencil_rates(
-    run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, t_star: float, eta: float, at: np.ndarray
-) -> dict[str, np.ndarray] | None:
-    """Block ``i``'s rates interpolated at times ``at`` from the stencil t* ± k·η, and their magnitudes."""
+@dataclass
+class _Probed:
+    """Block ``i``'s condition number (rows,) and the rates of its unknowns (rows, unknowns: ω [rad/s], ṡ
+    [length/s]; α, s̈) at a group of probe times."""
+
+    cond: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+def _probe_groups(
+    run: Run, state: State, t_grid: np.ndarray, i: int, groups: list[np.ndarray], rates: bool
+) -> list[_Probed | None]:
+    """Blocks 0..i solved at each group of times (ascending), on the run's branches: block i's condition number and
+    (with ``rates``) its rates there, or None for a group where a block cannot be solved. Every row at once where
+    blocks 0..i are closed forms; else a probe per group, continued from the sample before its first time."""
+    plan = block_plans(run.system)[i]
+    if closed_forms_upto(run.system, i) and groups:
+        try:
+            trial, _, ok, cond = dyads_at(run, np.concatenate(groups), i, rates=rates, health=True)
+        except MechanismError:  # a probe past the end of a tabulated input: group by group below
+            trial = None
+        if trial is not None:
+            v, a = _unknown_rates(run, trial, plan, slice(None))
+            ends = np.cumsum([0] + [len(g) for g in groups])
+            return [
+                _Probed(cond[p:q], v[p:q], a[p:q]) if ok[p:q].all() else None
+                for p, q in zip(ends[:-1].tolist(), ends[1:].tolist(), strict=True)
+            ]
+    out: list[_Probed | None] = []
+    for g in groups:
+        base = max(int(np.searchsorted(t_grid, g[0])) - 1, 0)
+        solved, trial = probe(run, state, t_grid, base, g, i, check=False, rates=rates)
+        if solved.n_ok < len(g) + 1 or len(solved.conds) <= i:
+            out.append(None)
+            continue
+        v, a = _unknown_rates(run, trial, plan, slice(1, None))
+        out.append(_Probed(solved.conds[i][1:], v, a))
+    return out
+
+
+def _unknown_rates(run: Run, trial: State, plan: Plan, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """The rates and accelerations of a block's unknowns on ``rows`` of a probe, (rows, unknowns) each."""
     na = run.system.n_angles
-    base = max(int(np.searchsorted(t_grid, t_star - 4.0 * eta)) - 1, 0)
-    solved, trial = probe(run, state, t_grid, base, t_star + eta * STENCIL, i, check=False)
-    if solved.n_ok < len(STENCIL) + 1:
-        return None
-    u = (at - t_star) / eta
+    return tuple(
+        np.stack([ang[rows, v] if v < na else sl[rows, v - na] for v in plan.block.unknowns], 1)
+        for ang, sl in ((trial.omega, trial.s_dot), (trial.alpha, trial.s_ddot))
+    )
+
+
+def _interpolated(probed: _Probed, u: np.ndarray) -> dict[str, np.ndarray]:
+    """The rates at stencil coordinates ``u`` (multiples of its step from t*) by the degree-7 polynomial through the
+    stencil's, and their magnitudes."""
     out = {}
-    for what, ang, sl in (("v", trial.omega, trial.s_dot), ("a", trial.alpha, trial.s_ddot)):
-        vals = np.stack([ang[1:, v] if v < na else sl[1:, v - na] for v in plan.block.unknowns], 1)
+    for what, vals in (("v", probed.v), ("a", probed.a)):
         fit = np.polynomial.polynomial.polyfit(STENCIL, vals, len(STENCIL) - 1)
         out[what] = np.polynomial.polynomial.polyval(u, fit).T
         out["scale_" + what] = np.max(np.abs(vals), axis=0)
@@ -311,17 +557,22 @@ def _rate_scale(run: Run, plan: Plan, scale: np.ndarray, scale_v: np.ndarray, wh
     return out
 
 
-def _stencil_eta(run: Run, state: State, t_grid: np.ndarray, i: int, t_star: float) -> float | None:
-    """The stencil's step [s]: where block ``i``'s condition number falls to STENCIL_COND (it grows like
-    1/|t − t*| next to a change point), at most the time the inputs take to move STENCIL_INPUT."""
-    widest = time_to_move(run, t_star, math.inf, STENCIL_INPUT)
+def _stencil_eta(
+    run: Run, state: State, t_grid: np.ndarray, i: int, t_star: np.ndarray, widest: np.ndarray
+) -> np.ndarray:
+    """The stencil's step [s] at each change point t*: where block ``i``'s condition number falls to STENCIL_COND
+    (it grows like 1/|t − t*| next to a change point), at most ``widest`` (the time the inputs take to move
+    STENCIL_INPUT)."""
     d = 0.02 * widest
-    base = max(int(np.searchsorted(t_grid, t_star - d)) - 1, 0)
-    solved, _ = probe(run, state, t_grid, base, np.array([t_star - d, t_star + d]), i, check=False, rates=False)
-    if solved.n_ok < 3 or len(solved.conds) <= i:
-        return widest
-    k = float(np.min(solved.conds[i][1:])) * d  # cond·|t − t*|, about constant near the change point
-    return float(np.clip(k / STENCIL_COND, 0.02 * widest, widest))
+    looks = _probe_groups(
+        run, state, t_grid, i, [np.array([t - e, t + e]) for t, e in zip(t_star, d, strict=True)], False
+    )
+    eta = widest.copy()
+    for j, look in enumerate(looks):
+        if look is not None:
+            k = float(np.min(look.cond)) * d[j]  # cond·|t − t*|, about constant near the change point
+            eta[j] = float(np.clip(k / STENCIL_COND, 0.02 * widest[j], widest[j]))
+    return eta
 
 
 def find_singular_points(run: Run, state: State, t_grid: np.ndarray, i: int, cond: np.ndarray) -> None:

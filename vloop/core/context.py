@@ -95,13 +95,14 @@ class Run:
     memory_budget: Any = None  # as given to solve() (bytes or text), else from the environment or the file
     sink: Any = None  # solve()'s whole-run output columns, filled chunk by chunk (vloop.core.solver)
     blocks: Callable[..., Any] | None = None  # the solver's block runner, for probes (set by vloop.core.solver)
+    chart: Any = None  # the run's chart over its one input, where one is drawn (vloop.core.charts)
 
     def sigma(self, i: int, t: np.ndarray) -> np.ndarray:
         """Assembly branch (±1) of closed-form block ``i`` at times ``t``: σ at t = 0, flipped after each event."""
         sigma = np.full(len(t), block_plans(self.system)[i].block.sigma)
-        for ev in self.events.get(i, ()):
-            if ev.flip:
-                sigma[t > ev.time] *= -1.0
+        flips = [ev.time for ev in self.events.get(i, ()) if ev.flip]
+        if flips:  # flipped once for each event before t
+            sigma[np.searchsorted(np.sort(flips), t) % 2 == 1] *= -1.0
         return sigma
 
 

@@ -120,3 +120,11 @@ class State:
         np.rint(turns, out=turns)
         th = phi + TWO_PI * -np.cumsum(turns, axis=1)
         return np.where(np.any(turns != 0, axis=1)[:, None], th, phi).reshape(-1)
+
+
+class Probe(State):
+    """A state whose rows are independent instants (probes at scattered times, in any order): e^{jθ} only, no
+    unwrapped θ (turns are counted along a run, not between unrelated rows)."""
+
+    def set_angle(self, k: slice, a: int, cis: np.ndarray) -> None:
+        self.e[k, a] = cis / np.abs(cis)

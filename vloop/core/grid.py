@@ -64,10 +64,13 @@ def _as_requested(lead: np.ndarray, times: np.ndarray, inputs: tuple) -> Grid:
     return Grid(np.concatenate([lead, times]), len(lead) + np.arange(len(times)))
 
 
-def internal_grid(run: Run, lead: np.ndarray, times: np.ndarray) -> Grid:
-    """Lead-in + requested times, with rows inserted where an input moves more than MAX_INPUT_STEP."""
+def internal_grid(run: Run, lead: np.ndarray, times: np.ndarray, insert: bool = True) -> Grid:
+    """Lead-in + requested times, with rows inserted where an input moves more than MAX_INPUT_STEP (unless not
+    ``insert``: a run on a chart, :mod:`vloop.core.charts`)."""
     mech = run.system.mechanism
     n = len(times)
+    if not insert:
+        return _as_requested(lead, times, None)
     steps = np.ones(max(n - 1, 0), np.int64)
     if mech.drivers and n > 1:
         X, XD, XDD = run.inputs(times)

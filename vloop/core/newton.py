@@ -15,13 +15,19 @@ loops, a whole system under ``method="newton"``) is solved for every sample of a
    the stack as the last axis, ~3× LAPACK's per-matrix calls at n ≤ 8), then chord steps with the
    same inverses until the steps fall below LOOSE; the loop sums are evaluated from the rows' known
    factors gathered once (:class:`_Rows`). A row must converge, close, keep the branch's determinant
-   sign and stay near its prediction; an interval with a row that does not is continued one by one.
+   sign and stay near its prediction; an interval with a row that does not is continued one by one, on
+   to the coarse row that ends it: where that continuation does not land on it (the coarse pass reached
+   another assembly that passed its checks), the run goes on from there.
 3. **Factor.** The Jacobian at every solved row, its (pseudo-)inverse, determinant sign and
    condition number, shared by the rates and the health columns: one more Newton step whose size is
    the convergence test. The condition number is an upper bound where that decides (Frobenius, then
    (Σσ⁸)^⅛), the exact 2-norm one wherever it reaches the flag level (σ_max of J and of J⁻¹ from their
    Gram matrices' powers, bracketed to 1e-12; eigenvalues or SVD where that fails), so flags and refusals
    follow the 2-norm rule exactly.
+
+Under a chart of the run (:mod:`vloop.core.charts`: its one input travels over its range many times) passes 1
+and 2 are one: every row starts from the chart's quintic Hermite interpolant at its input value and is
+checked as a dense row; a row that fails sends the chunk back to the passes above (ChartMiss).
 
 Rectangular blocks (more equations than unknowns: consistent redundant constraints) take
 Gauss–Newton steps and least-squares rates; the residual of every equation is checked.
@@ -41,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accuracy import EPS
+from .charts import ChartMiss, hermite
 from .context import ChangePoint, Failure, Run, change_point_choices, impose_drivers
 from .data import TWO_PI, State
 from .linalg import (
@@ -381,12 +388,18 @@ class _Ctx:
         """:meth:`rates_rows` at row k alone."""
         self.rates_rows(np.array([k]), J[None])
 
+    def inputs(self) -> np.ndarray:
+        """The value of the run's one input (a crank's θ [rad], a slider's s) on rows 0..n-1."""
+        v = self.run.system.drivers[0]
+        return self.state.theta[: self.n, v] if v < self.na else self.state.s[: self.n, v - self.na]
+
 
 def solve_block(
     run: Run, state: State, t_grid: np.ndarray, i: int, plan: Plan, n: int
 ) -> tuple[Failure | None, Factor]:
     """Solve Newton block ``i`` on rows 0..n-1; returns (the first failure or None, the Factor of the rows
-    before it). Rows from the failure on are left unsolved."""
+    before it). Rows from the failure on are left unsolved. Under a chart of the run (:mod:`vloop.core.charts`)
+    every row is predicted from it at once (:func:`_from_chart`), else continued from row 0."""
     ctx = _Ctx(run, state, t_grid, i, plan, n)
     blk = ctx.blk
     _, J0 = blk.residual_jacobian(state, np.array([0]))
@@ -394,33 +407,94 @@ def solve_block(
         run.newton_sign[i] = float(det_sign(J0)[0] or 1.0) * float(run.sigma(i, t_grid[:1])[0])
     if n > 1:
         ctx.rates_at(0, J0[0])
-    coarse, n_ok, failure = _coarse_pass(ctx)
-    coarse = coarse[coarse < n_ok]
-    if blk.square and n_ok:
-        rows, j, far, factor, res, conv = _dense_square(ctx, coarse, n_ok)
+    if run.chart is not None and n > 1:
+        return None, _from_chart(ctx)
+    start = 0
+    while True:  # (again from a coarse row found on another branch than the rows before it lead to)
+        coarse, n_ok, failure = _coarse_pass(ctx, start)
+        coarse = np.concatenate([np.arange(start), coarse[coarse < n_ok]])
+        rows = _between(coarse, n_ok)
+        j, pred, move = _predict(ctx, coarse, rows)
+        factor, res, conv, far = _settle(ctx, rows, pred, move, n_ok)
+        bad = _bad_rows(ctx, rows, factor, res, conv, far) if len(rows) else np.zeros(0, bool)
+        if not bad.any():
+            return failure, factor
+        start = 0
+        for jj in np.unique(j[bad]):  # continue those intervals one row at a time
+            lo, hi = int(coarse[jj]), int(coarse[jj + 1])
+            for k in range(lo + 1, hi + 1):  # ... and on to the coarse row after them: do they lead to it?
+                f = _step(ctx, k - 1, k, strict=False) if k < hi else _joins(ctx, k)
+                if f is not None:
+                    n_ok, failure = (k, f) if isinstance(f, Failure) else (n_ok, failure)
+                    start = k if f is True else 0
+                    break
+            if start or (failure is not None and failure.sample <= hi):
+                break
+        if not start:
+            factor, _, _ = _refactor(blk, state, n_ok, run)
+            return failure, factor
+
+
+def _joins(ctx: _Ctx, k: int) -> Failure | bool | None:
+    """Continue from row k − 1 to coarse row k: None where it lands where the coarse pass put row k (that row kept
+    as it was), True where it does not (the coarse pass jumped to another solution there: row k now holds the
+    continued one), or the step's failure."""
+    state, blk = ctx.state, ctx.blk
+    kept = [getattr(state, name)[k].copy() for name in State.FIELDS]
+    carried = (ctx.xd[k].copy(), ctx.xdd[k].copy(), ctx.weak[k], ctx.prev[k])
+    x = blk.read(state, np.array([k]))[0]
+    f = _step(ctx, k - 1, k, strict=False)
+    if f is not None:
+        return f
+    stepped = blk.read(state, np.array([k]))[0]
+    if np.max(np.abs(stepped - x)) > 1e-8 * (1.0 + np.max(np.abs(x))):
+        return True
+    for name, values in zip(State.FIELDS, kept, strict=True):
+        getattr(state, name)[k] = values
+    ctx.xd[k], ctx.xdd[k], ctx.weak[k], ctx.prev[k] = carried
+    return None
+
+
+def _from_chart(ctx: _Ctx) -> Factor:
+    """Rows 1..n-1 solved at once from the run's chart (its quintic Hermite interpolant at each row's input), each
+    checked as a row between coarse rows is (converged, closed, near its prediction, on the run's branch): the
+    Factor of rows 0..n-1. Raises ChartMiss if a row fails a check (the chunk is then solved without the chart)."""
+    blk, na = ctx.blk, ctx.na
+    cols = np.empty(blk.nu, int)  # the block's unknowns among the chart's variables (angles, then sliders)
+    cols[blk.ia], cols[blk.isl] = blk.acol, na + blk.scol
+    rows = np.arange(1, ctx.n)
+    pred, move = ctx.run.chart.predict(ctx.inputs()[rows], cols)
+    factor, res, conv, far = _settle(ctx, rows, pred, move, ctx.n)
+    if _bad_rows(ctx, rows, factor, res, conv, far).any():
+        raise ChartMiss(f"block {ctx.i}: a row predicted from the chart fails a check")
+    return factor
+
+
+def _settle(
+    ctx: _Ctx, rows: np.ndarray, pred: np.ndarray | None, move: np.ndarray | None, n: int
+) -> tuple[Factor, np.ndarray, np.ndarray, np.ndarray]:
+    """Newton on ``rows`` from their predictions (batch-last), then the Factor of rows 0..n-1 (one more step
+    where the last one was above tol, its Jacobian refreshed): (Factor, closure, converged, far per row)."""
+    run, state, blk = ctx.run, ctx.state, ctx.blk
+    if blk.square and n:
+        far, factor, res, conv = _dense_square(ctx, rows, pred, move, n)
     else:
-        rows, j, far = _dense_newton(ctx, coarse, n_ok)
-        factor, res, conv = blk.factor(state, np.arange(n_ok), run.rtol, run.tol)
+        far = _dense_newton(ctx, rows, pred, move)
+        factor, res, conv = blk.factor(state, np.arange(n), run.rtol, run.tol)
     again = np.nonzero(~conv)[0]
     if len(again):  # one more step where the last one was above tol: its Jacobian is refreshed too
         fac2, res2, conv2 = blk.factor(state, again, run.rtol, run.tol)
         for name in ("J", "inv", "cond", "sign"):
             getattr(factor, name)[again] = getattr(fac2, name)
         res[again], conv[again] = np.maximum(res[again], res2), conv2
-    if len(rows):  # every dense row must converge, close, stay near its prediction, on the branch
-        bad = ~conv[rows] | far | ~(res[rows] <= CLOSURE) | (factor.sign[rows] != ctx.expected_sign(rows))
-        for jj in np.unique(j[bad]):  # continue those intervals one row at a time
-            lo, hi = int(coarse[jj]), int(coarse[jj + 1])
-            for k in range(lo + 1, hi):
-                f = _step(ctx, k - 1, k, strict=False)
-                if f is not None:
-                    n_ok, failure = k, f
-                    break
-            if failure is not None and failure.sample <= hi:
-                break
-        if np.any(bad):
-            factor, _, _ = _refactor(blk, state, n_ok, run)
-    return failure, factor
+    return factor, res, conv, far
+
+
+def _bad_rows(
+    ctx: _Ctx, rows: np.ndarray, factor: Factor, res: np.ndarray, conv: np.ndarray, far: np.ndarray
+) -> np.ndarray:
+    """Rows solved from a prediction that do not converge, close, stay near it, on the run's branch."""
+    return ~conv[rows] | far | ~(res[rows] <= CLOSURE) | (factor.sign[rows] != ctx.expected_sign(rows))
 
 
 def _refactor(blk: NewtonBlock, state: State, n: int, run: Run) -> tuple[Factor, np.ndarray, np.ndarray]:
@@ -463,13 +537,13 @@ def _next_row(ctx: _Ctx, a: int, cum: np.ndarray) -> int:
     return max(b, a + 1)
 
 
-def _coarse_pass(ctx: _Ctx) -> tuple[np.ndarray, int, Failure | None]:
-    """Adaptive continuation: from each solved row, the furthest row the predictor is trusted to reach;
-    an untrusted step is halved, down to single rows where the sample-by-sample rules decide.
-    Returns (the rows solved on the way, rows solved, failure)."""
+def _coarse_pass(ctx: _Ctx, start: int = 0) -> tuple[np.ndarray, int, Failure | None]:
+    """Adaptive continuation from row ``start`` (solved, its rates known): from each solved row, the furthest row
+    the predictor is trusted to reach; an untrusted step is halved, down to single rows where the sample-by-sample
+    rules decide. Returns (the rows solved on the way, from ``start``; rows solved; failure)."""
     cum = _input_travel(ctx)
-    coarse = [0]
-    a = 0
+    coarse = [start]
+    a = start
     while a < ctx.n - 1:
         b = _next_row(ctx, a, cum)
         ahead = _window(ctx, a, b, cum)
@@ -668,84 +742,63 @@ def _far(blk: NewtonBlock, correction: np.ndarray, move: np.ndarray, x: np.ndarr
         return ~(c <= JUMP * m)
 
 
-def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray, xc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]) and its prediction by
-    the quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶):
-    batch-last (nu, rows), from the coarse rows' positions xc (nu, coarse rows). The quintic's coefficients
-    in u (0..1 across an interval) are taken once per interval; each row gathers them and runs Horner."""
-    t_grid = ctx.t_grid
+def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The interval of each row between coarse rows (coarse[j] < row < coarse[j + 1]), its prediction by the
+    quintic Hermite interpolant of its neighbours' positions, rates and accelerations (error ~ step⁶), batch-last
+    (nu, rows), and the move a correction is measured against (:func:`_far_dense`)."""
+    if not len(rows):
+        return rows, None, None
+    xc = ctx.blk.read(ctx.state, coarse).T
     j = np.searchsorted(coarse, rows) - 1  # interval of each row: coarse[j] < row < coarse[j + 1]
-    tc = t_grid[coarse]
-    H = tc[1:] - tc[:-1]
-    v, acc = ctx.xd[coarse].T, ctx.xdd[coarse].T
-    xa, xb = xc[:, :-1], xc[:, 1:]
-    va, vb = v[:, :-1] * H, v[:, 1:] * H  # rates and accelerations in units of the interval
-    aa, ab = acc[:, :-1] * (H * H), acc[:, 1:] * (H * H)
-    d = xb - xa
-    C = np.stack(
-        [
-            xa,
-            va,
-            0.5 * aa,
-            10 * d - 6 * va - 4 * vb - 1.5 * aa + 0.5 * ab,
-            -15 * d + 8 * va + 7 * vb + 1.5 * aa - ab,
-            6 * d - 3 * va - 3 * vb - 0.5 * aa + 0.5 * ab,
-        ]
-    )
-    # rows sorted: each interval's coefficients repeated over its rows (contiguous, unlike C[:, :, j]: ~5× faster
-    # arithmetic after)
-    C = np.repeat(C, np.bincount(j, minlength=len(H)), axis=2)
-    u = (t_grid[rows] - tc[j]) / H[j]
-    pred = C[5] * u
-    for power in range(4, 0, -1):
-        pred += C[power]
-        pred *= u
-    pred += C[0]
-    return j, pred
+    tc = ctx.t_grid[coarse]
+    pred = hermite(tc, xc, ctx.xd[coarse].T, ctx.xdd[coarse].T, ctx.t_grid[rows], j, ordered=True)
+    return j, pred, _moves(ctx.blk, xc)[j]
 
 
-def _far_dense(blk: NewtonBlock, correction: np.ndarray, xc: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """:func:`_far` for rows between coarse rows (batch-last: correction (nu, rows), the coarse rows' x (nu, ·),
-    each row's interval j): the move and the scale of each interval taken once, not per row."""
+def _moves(blk: NewtonBlock, xc: np.ndarray) -> np.ndarray:
+    """The move across each interval between nodes whose positions are xc (nu, nodes): the largest component,
+    angles in rad, sliders in 2π per mechanism size, plus a floor at round-off of the positions."""
     unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
     with np.errstate(invalid="ignore"):
         move = np.max(np.abs(np.diff(xc, axis=1)) * unit, axis=0)
         move += 1e-9 * (1.0 + np.max(np.abs(xc[:, :-1]) * unit, axis=0))
-        return ~(np.max(np.abs(correction) * unit, axis=0) <= JUMP * move[j])
+    return move
 
 
-def _dense_newton(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Newton on every row between coarse rows at once, from the quintic Hermite interpolant of its
-    neighbours, until the steps fall below LOOSE: the step the Factor then takes is the convergence test.
-    Returns (rows, interval of each, far from its prediction)."""
-    rows = _between(coarse, n_ok)
+def _far_dense(blk: NewtonBlock, correction: np.ndarray, move: np.ndarray) -> np.ndarray:
+    """:func:`_far` for rows solved from an interpolant (batch-last: correction (nu, rows)), each against the
+    move of its interval (:func:`_moves`)."""
+    unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
+    with np.errstate(invalid="ignore"):
+        return ~(np.max(np.abs(correction) * unit, axis=0) <= JUMP * move)
+
+
+def _dense_newton(ctx: _Ctx, rows: np.ndarray, pred: np.ndarray | None, move: np.ndarray | None) -> np.ndarray:
+    """Newton on ``rows`` at once from their predictions (nu, rows), until the steps fall below LOOSE: the step
+    the Factor then takes is the convergence test. Returns whether each is far from its prediction."""
     if not len(rows):
-        return rows, rows, np.zeros(0, bool)
-    xc = ctx.blk.read(ctx.state, coarse).T
-    j, pred = _predict(ctx, coarse, rows, xc)
+        return np.zeros(0, bool)
     x, _ = newton(ctx.blk, ctx.state, rows, pred.T, LOOSE, ctx.run.max_iter)
-    return rows, j, _far_dense(ctx.blk, x.T - pred, xc, j)
+    return _far_dense(ctx.blk, x.T - pred, move)
 
 
 CHORD = 3  # chord steps (the inverse at the prediction reused) before a dense row is left to plain Newton
 
 
-def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray, ...]:
+def _dense_square(
+    ctx: _Ctx, rows: np.ndarray, pred: np.ndarray | None, move: np.ndarray | None, n_ok: int
+) -> tuple[np.ndarray, Factor, np.ndarray, np.ndarray]:
     """:func:`_dense_newton` and the Factor of rows 0..n_ok-1 for a square block, batch-last: one Newton step
     from the predictions, then chord steps with the same inverses (a prediction off by δ converges by a
     factor ~cond·δ per step), plain Newton for the few rows still above LOOSE after CHORD of them; then the
-    factor. Returns (rows, interval of each, far, Factor, closure, converged and fresh)."""
+    factor. Returns (far, Factor, closure, converged and fresh)."""
     run, state, blk = ctx.run, ctx.state, ctx.blk
-    rows = _between(coarse, n_ok)
     ev = _Rows(blk, state, n_ok)
     x = blk.read_last(state, n_ok)
     far = np.zeros(0, bool)
-    j = rows
     J = np.zeros((blk.m2, blk.nu, n_ok))  # J and J⁻¹ buffers, shared with the factor (fresh pages cost faults)
     X = np.empty((blk.nu, blk.m2, n_ok))
     if len(rows):
-        xc = x[:, coarse]
-        j, pred = _predict(ctx, coarse, rows, xc)
         x[:, rows] = pred
         F, _ = ev.eval(x, True, J)
         invert_last(J, out=X)
@@ -760,10 +813,10 @@ def _dense_square(ctx: _Ctx, coarse: np.ndarray, n_ok: int) -> tuple[np.ndarray,
         else:
             sub = np.nonzero(act)[0]
             x[:, sub] = newton(blk, state, sub, x[:, sub].T, LOOSE, run.max_iter)[0].T
-        far = _far_dense(blk, x[:, rows] - pred, xc, j)
-        del pred, F  # not kept through the factor
+        far = _far_dense(blk, x[:, rows] - pred, move)
+        del F  # not kept through the factor
     factor, res, conv = _factor_square(ev, state, x, run.rtol, run.tol, J, X)
-    return rows, j, far, factor, res, conv
+    return far, factor, res, conv
 
 
 def _between(coarse: np.ndarray, n: int) -> np.ndarray:

@@ -6,7 +6,9 @@ requested time is not 0) by the blocks in their solving order (:mod:`vloop.core.
 all samples at once, Newton blocks by continuation. Velocities and accelerations are the exact linear systems
 J·u̇ = −(known part of Σ ż), J·ü = −(known part of Σ z̈), solved for all samples at once. A long run is solved in
 chunks that carry two rows, the change points found and each Newton block's branch across their borders; a
-run that stops says where and why (:mod:`vloop.core.results`), with a limit located by bisection.
+run that stops says where and why (:mod:`vloop.core.results`), with a limit located by bisection. A run whose
+one input travels over its range many times is solved on a chart of that range (:mod:`vloop.core.charts`):
+no rows inserted, Newton rows predicted from it, turns counted from it.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from ..errors import MechanismError, MotionError
 from ..files import budget
 from ..method.loops import LoopSystem
 from ..result import Result
+from . import charts
 from .accuracy import DEFAULT_MAX_ITER, DEFAULT_RTOL, DEFAULT_TOL, ILL_FRACTION, error_bound
 from .blocks import run_blocks
 from .changepoints import (
@@ -30,7 +33,7 @@ from .changepoints import (
     probe,
     time_to_move,
 )
-from .context import Failure, Inputs, Run, impose_drivers, initial_state
+from .context import Failure, Inputs, Run, impose_drivers, initial_state, input_units
 from .data import TWO_PI, State
 from .grid import Grid, check_inputs, internal_grid
 from .plans import block_plans
@@ -188,7 +191,7 @@ def solve(
     """
     run, times = _prepare(system, times, tol, max_iter, rtol, memory_budget)
     chunk = _in_memory_chunk(len(times))
-    budget.check(run.system, len(times), False, 2 * chunk, run.memory_budget)
+    budget.check(run.system, len(times), False, chunk_rows(chunk), run.memory_budget)
     run.sink = _Sink(len(times)) if len(times) > chunk else None  # several chunks: written in place, not joined
     with np.errstate(all="ignore"):  # overflow and singular rows are found and reported below
         return _solve(run, times, chunk)
@@ -234,6 +237,12 @@ CHUNK = 16_384  # requested samples solved together: the state stays in cache, m
 
 
 CHUNK_ROWS = 2 * CHUNK  # internal rows allowed in one chunk (inserted rows included) before it is split
+
+
+def chunk_rows(chunk: int) -> int:
+    """Internal rows a chunk of ``chunk`` requested samples may hold before it is split: twice as many, and at least
+    CHUNK_ROWS (a short chunk sampled coarsely, several rows inserted per sample, stays one chunk)."""
+    return max(2 * chunk, CHUNK_ROWS)
 
 
 IN_MEMORY = 4  # solve() takes chunks up to this many times longer than streamed runs
@@ -313,22 +322,26 @@ def solve_chunks(run: Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Re
     system = run.system
     lead, run.inputs, turns = _lead_in(system, run, float(times[0]))
     run.t_start = float(times[0])
+    chart = _chart(run, times)
     carry: tuple[np.ndarray, State] | None = None
     i0, n_total, size, at_least = 0, len(times), chunk, 1
     while i0 < n_total:
         i1 = min(i0 + size, n_total)
-        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, 2 * chunk)
-        run.tail = grid.offset + len(grid.out) == n_total
-        state = initial_state(system, len(grid.t))
-        if carry is not None:
-            for name in ("e", "theta", "s"):
-                getattr(state, name)[:2] = getattr(carry[1], name)
         events = {i: list(evs) for i, evs in run.events.items()}
-        try:
-            res = _solve_grid(run, grid, state, turns if carry is None else None)
-            failure = None
-        except MotionError as exc:
-            res, failure = exc.partial, exc
+        charted = _on_chart(run, chart, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
+        solved = None if charted is None else _solve_on_chart(run, chart, charted, carry, turns)
+        failure = None
+        if solved is not None:
+            grid, (state, res) = charted, solved
+        else:  # (no chart, or one the chunk misses: solved as if none had been drawn)
+            run.events = {i: list(evs) for i, evs in events.items()}
+            grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, chunk_rows(chunk))
+            run.tail = grid.offset + len(grid.out) == n_total
+            state = _start_state(system, grid, carry)
+            try:
+                res = _solve_grid(run, grid, state, turns if carry is None else None)
+            except MotionError as exc:
+                res, failure = exc.partial, exc
         reach = math.inf if run.tail else _border_reach(run, grid)
         cut = len(grid.out) - 1 if run.tail else _cut(run, grid, res, reach)
         if failure is not None and (run.tail or failure.time is None or failure.time <= reach):
@@ -348,6 +361,71 @@ def solve_chunks(run: Run, times: np.ndarray, chunk: int = CHUNK) -> Iterator[Re
         i0, size, at_least = grid.offset + cut + 1, chunk, 1
 
 
+def _start_state(system: LoopSystem, grid: Grid, carry: tuple | None) -> State:
+    """A chunk's state: row 0 the t = 0 assembly, or rows 0–1 carried from the chunk before."""
+    state = initial_state(system, len(grid.t))
+    if carry is not None:
+        for name in State.POSITIONS:
+            getattr(state, name)[:2] = getattr(carry[1], name)
+    return state
+
+
+CHART_MIN_STEP = math.radians(2.0)  # closed forms alone: a chart is drawn where samples are this far apart on average
+
+
+def _chart(run: Run, times: np.ndarray) -> charts.Chart | None:
+    """The run's chart over its one input (:mod:`vloop.core.charts`), where it saves work: Newton blocks whose
+    input travels its range many times, closed forms only where, besides, the samples lie far apart (rows would be
+    inserted between them, dips of the discriminants searched: finely sampled, closed forms cost less)."""
+    newton = any(b.kind == "newton" for b in run.system.blocks)
+    trip = charts.input_travel(run, times)
+    if not charts.worth_drawing(run, trip, 0.0 if newton else CHART_MIN_STEP):
+        return None
+    return charts.draw(run, trip)
+
+
+def _on_chart(
+    run: Run,
+    chart: charts.Chart | None,
+    lead: np.ndarray,
+    carry: tuple | None,
+    times: np.ndarray,
+    i0: int,
+    i1: int,
+    n_total: int,
+    at_least: int,
+    max_rows: int,
+) -> Grid | None:
+    """The chunk's grid without inserted rows, where no change point has been passed and the chart covers the
+    chunk's inputs (a crank's one-turn chart covers every input; another is checked on the chunk's grid with its
+    rows inserted: the input between samples too). Sets ``run.tail``."""
+    if chart is None or any(run.events.values()):
+        return None
+    if not chart.turn:
+        grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, max_rows)
+        if not chart.covers(run.inputs(grid.t)[0][:, 0]):
+            return None
+        i1 = grid.offset + len(grid.out)
+    grid = _chunk_grid(run, lead, carry, times, i0, i1, n_total, at_least, max_rows, insert=False)
+    run.tail = grid.offset + len(grid.out) == n_total
+    return grid
+
+
+def _solve_on_chart(
+    run: Run, chart: charts.Chart, grid: Grid, carry: tuple | None, turns: np.ndarray
+) -> tuple[State, Result] | None:
+    """The chunk solved on the chart (its state and Result), or None where a row misses it or the motion stops
+    (the chunk is then solved without it, as if none had been drawn, and says so)."""
+    state = _start_state(run.system, grid, carry)
+    run.chart = chart
+    try:
+        return state, _solve_grid(run, grid, state, turns if carry is None else None)
+    except (charts.ChartMiss, MotionError):
+        return None
+    finally:
+        run.chart = None
+
+
 def _chunk_grid(
     run: Run,
     lead: np.ndarray,
@@ -358,14 +436,15 @@ def _chunk_grid(
     n_total: int,
     at_least: int,
     max_rows: int = CHUNK_ROWS,
+    insert: bool = True,
 ) -> Grid:
     """The internal grid of requested samples i0..i1-1 (after the carried rows), halved until it fits ``max_rows``
     or holds ``at_least`` requested samples."""
     while True:
         if carry is None:
-            grid = internal_grid(run, lead, times[i0:i1])
+            grid = internal_grid(run, lead, times[i0:i1], insert)
         else:
-            grid = internal_grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]))
+            grid = internal_grid(run, carry[0][:1], np.concatenate([carry[0][1:], times[i0:i1]]), insert)
         if len(grid.t) <= max_rows or i1 - i0 <= at_least:
             break
         i1 = max(i0 + (i1 - i0) // 2, i0 + at_least)
@@ -390,6 +469,28 @@ def _cut(run: Run, grid: Grid, res: Result, reach: float) -> int:
     return grid.skip + len(res) - 1 if not len(unsafe) else grid.skip + int(unsafe[0]) - 1
 
 
+def _count_turns(run: Run, state: State, grid: Grid, X: np.ndarray, XD: np.ndarray, every: bool) -> None:
+    """The whole turns of the angles on a chunk's rows from the run's chart (they lie too far apart to count them
+    from row to row): of each angle that could turn π/4 or more between two rows (:meth:`charts.Chart.steep`), or
+    of ``every`` angle (a late start: the turns before the lead-in's are counted from t = 0)."""
+    system, chart = run.system, run.chart
+    first, n = grid.first, len(grid.t)
+    if n - first < 1:
+        return
+    if every:
+        cols = np.arange(system.n_angles)
+    else:  # the input's move between two rows, at most: |Δx|, or its largest rate over the longest step
+        x, t = X[first:, 0], grid.t[first:]
+        if len(t) < 2:
+            return
+        step = max(float(np.max(np.abs(np.diff(x)))), float(np.max(np.abs(XD[first:, 0]))) * float(np.max(np.diff(t))))
+        cols = chart.steep(step / float(input_units(system.mechanism, system.mechanism.scale / TWO_PI)[0]))
+    driven = set(system.drivers)
+    for col in (c for c in cols.tolist() if c not in driven):
+        theta = state.theta[first:n, col]
+        theta += chart.turns(theta, X[first:n, 0], col)
+
+
 def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) -> Result:
     """Solve one chunk's grid (row 0 assembled; rows 0–1 carried from the chunk before, if any)."""
     system = run.system
@@ -397,7 +498,13 @@ def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) ->
     X, XD, XDD = grid.inputs if grid.inputs is not None else run.inputs(t_grid)
     impose_drivers(system, state, X, XD, XDD)
     early = check_inputs(system, X, XD, XDD, first, run.rtol)
-    solved = run_blocks(run, state, t_grid, early.sample if early else n)
+    rated = None if len(grid.out) == n else grid.out  # rows inserted (or a lead-in): rates at the requested ones
+    solved = run_blocks(run, state, t_grid, early.sample if early else n, rated=rated)
+    if run.chart is not None:
+        if early is not None or solved.failure is not None:
+            raise charts.ChartMiss("the motion stops")
+        _count_turns(run, state, grid, X, XD, every=turns is not None and bool(np.any(turns)))
+        turns = None
     failure = solved.failure if early is None or (solved.failure and solved.failure.sample < early.sample) else early
     n_ok = min(solved.n_ok, failure.sample if failure else n)
     free = [v for v in range(system.n_angles) if v not in system.drivers and turns[v]] if turns is not None else []
