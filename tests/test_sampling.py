@@ -242,3 +242,138 @@ def test_rocked_stephenson_six_bars_stay_on_their_branch(index, chart, monkeypat
         monkeypatch.setattr(solver, "_chart", lambda run, times: None)
     res = vloop.solve(vloop.compile(mech, method="newton"))
     vloop.compare.assert_histories_close(res, analytic.solve(mech), rtol=1e-9, floor=1e-9, min_columns=15)
+
+
+def gap_slider_crank(delta: float, turns: int = 40) -> vloop.Mechanism:
+    """Offset slider-crank: crank 1 about O2 = (0, 0) at ω = 2 rad/s from θ2 = 0.3 rad, block on the line y = e = 0.2,
+    rod b = e + cos δ. The rod reaches the line while the crank pin's distance from it, sin θ2 − e, stays within ±b:
+    not where sin θ2 < e − b = −cos δ, the gap 3π/2 ± δ (nothing on the other side: sin θ2 − e ≤ 0.8 < b).
+    Samples 30° apart over ``turns`` turns: samples 8 and 9 lie at 257.2° and 287.2°, rows inserted every 10°
+    (267.2°, 277.2°) or a chart's every 3.75° (264.7°, 268.4°) land in the gap only for δ ≳ 1.6°."""
+    e, th0, w = 0.2, 0.3, 2.0
+    b = e + math.cos(delta)
+    ax, ay = math.cos(th0), math.sin(th0)
+    bx = ax + math.sqrt(b * b - (ay - e) ** 2)
+    text = f"""name = "gap"
+units = "m"
+drivers = [{{ link = "crank", pivot = "O2", omega = {w!r} }}]
+[joints]
+O2 = [0.0, 0.0]
+A = [{ax!r}, {ay!r}]
+B = [{bx!r}, {e!r}]
+[links.ground]
+joints = ["O2"]
+ground = true
+[links.crank]
+joints = ["O2", "A"]
+[links.rod]
+joints = ["A", "B"]
+[sliders.block]
+joint = "B"
+guide = "ground"
+axis = [1.0, 0.0]
+[time]
+start = 0.0
+stop = {turns * 2 * math.pi / w!r}
+step = {math.radians(30) / w!r}
+"""
+    return vloop.loads(text)
+
+
+@pytest.mark.parametrize("delta_deg", [3.0, 0.25, 1e-3])
+@pytest.mark.parametrize("chart", [True, False])
+def test_a_limit_gap_between_rows_stops_the_run_at_its_edge(delta_deg, chart, monkeypatch):
+    """A limit gap narrower than the rows' spacing (no row lands in it) is found by the dips of the discriminant
+    and stops the run, on a chart or without: samples 0–8 kept, the limit located at the gap's edge 3π/2 − δ (to
+    LIMIT_RTOL of the input's range over the run, 2.5e-10 rad: the bisection's stop), the failure named at an
+    input inside the gap. The closed form (validators.analytic_slider_crank, which asks its own reach at the
+    crank angles where the pin's distance from the line is extreme) stops at the same sample."""
+    delta = math.radians(delta_deg)
+    mech = gap_slider_crank(delta)
+    if not chart:
+        monkeypatch.setattr(solver, "_chart", lambda run, times: None)
+    with pytest.raises(vloop.MotionError) as stop:
+        vloop.solve(vloop.compile(mech))
+    err, edge = stop.value, 1.5 * math.pi - delta
+    assert err.sample == 9 and len(err.partial.t) == 9
+    assert abs(err.limit_value[0] - edge) <= solver.LIMIT_RTOL * 40 * 2 * math.pi + 1e-12
+    assert edge < err.driver_value[0] < 1.5 * math.pi + delta
+    assert np.max(np.abs(err.partial["crank.theta"] - (0.3 + 2.0 * err.partial.t))) <= 1e-12 * 2 * math.pi
+    with pytest.raises(analytic.LimitPositionError) as ref:
+        analytic.solve(mech)
+    assert ref.value.sample == 9
+
+
+def test_a_limit_run_is_planned_from_the_crank_angle_the_file_writes():
+    """The generator's limit runs: a crank drawn at θ0 in (π, 2π) is at θ0 − 2π by the joints' atan2, and the time
+    the input reaches the recorded limit must count from the file's θ0 (the file writes angles in [0, 2π)), else
+    the run crosses a limit a turn earlier than recorded. The check: θ0 + ω·t_lim = θ_lim."""
+    from validators import corpus
+
+    planned = 0
+    for seed in range(40):
+        p = corpus.draw_slider_crank(np.random.default_rng(seed), "rocking")
+        p["theta0"] = 5.0
+        try:
+            draft = corpus.slider_crank_draft(p, "rocking")
+            motion = corpus.plan_limit(
+                draft, {"dir": 1.0, "omega": 3.0, "alpha": 0.0, "k_stop": 40, "u_stop": 0.5, "n_after": 10}
+            )
+        except corpus.Infeasible:
+            continue
+        planned += 1
+        assert abs(5.0 + 3.0 * motion.limit["time"] - motion.limit["angle"]) < 1e-12
+        assert 0 < motion.limit["angle"] - 5.0 < 2 * math.pi
+    assert planned >= 5
+
+
+def gap_fourbar(delta: float) -> vloop.Mechanism:
+    """Four-bar: crank 1 about O2 = (0, 0) at ω = 2 rad/s from 0.3 rad, ground 3 to O4 = (3, 0), coupler 2, rocker
+    2 − κ with κ = 4 − √(10 + 6 cos δ). |A − O4|² = 10 − 6 cos θ2 exceeds (b + c)² only within δ of θ2 = π: a gap
+    π ± δ. Samples 30° apart over 40 turns: samples 5 and 6 at 167.2° and 197.2°."""
+    a, d, b, w, th0 = 1.0, 3.0, 2.0, 2.0, 0.3
+    c = math.sqrt(10.0 + 6.0 * math.cos(delta)) - b
+    A = complex(a * math.cos(th0), a * math.sin(th0))
+    f = abs(d - A)
+    p = (b * b - c * c + f * f) / (2 * f)
+    B = A + (d - A) / f * complex(p, math.sqrt(b * b - p * p))
+    text = f"""name = "gap4"
+units = "m"
+drivers = [{{ link = "crank", pivot = "O2", omega = {w!r} }}]
+[joints]
+O2 = [0.0, 0.0]
+O4 = [{d!r}, 0.0]
+A = [{A.real!r}, {A.imag!r}]
+B = [{B.real!r}, {B.imag!r}]
+[links.ground]
+joints = ["O2", "O4"]
+ground = true
+[links.crank]
+joints = ["O2", "A"]
+[links.coupler]
+joints = ["A", "B"]
+[links.rocker]
+joints = ["O4", "B"]
+[time]
+start = 0.0
+stop = {40 * 2 * math.pi / w!r}
+step = {math.radians(30) / w!r}
+"""
+    return vloop.loads(text)
+
+
+@pytest.mark.parametrize("delta_deg", [0.25, 0.02])
+def test_a_four_bar_limit_gap_between_rows_stops_the_run_and_the_closed_form(delta_deg):
+    """The same for a non-Grashof four-bar whose coupler and rocker just fail to reach when the crank points away
+    from O4: vloop stops with samples 0–5 kept, the limit at π − δ; analytic_fourbar stops at sample 6. (Narrower
+    gaps are found too, but their edge only to round-off of the reach over its slope there, |d|A − O4|/dθ2| = 3δ/4:
+    2.6e-9 rad at δ = 0.001°.)"""
+    delta = math.radians(delta_deg)
+    mech = gap_fourbar(delta)
+    with pytest.raises(vloop.MotionError) as stop:
+        vloop.solve(mech)
+    assert stop.value.sample == 6
+    assert abs(stop.value.limit_value[0] - (math.pi - delta)) <= solver.LIMIT_RTOL * 40 * 2 * math.pi + 1e-12
+    with pytest.raises(analytic.LimitPositionError) as ref:
+        analytic.solve(mech)
+    assert ref.value.sample == 6

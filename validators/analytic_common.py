@@ -152,6 +152,32 @@ def requested_index(k: int, inserted: int | None) -> int:
     return k if inserted is None or k < inserted else k - 1
 
 
+def passes_between(
+    theta: np.ndarray, extremes: Sequence[float], closes: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Whether the input reaches each sample from the one before without passing a limit (True at sample 0).
+
+    A dyad driven by a crank closes while the distance it must bridge stays within its reach; that distance is
+    extreme where the input angle is one of ``extremes`` (mod 2π), and a limit gap narrower than the samples'
+    spacing lies around one of them, where the samples on either side still close. So ``closes(θ)`` (the
+    closed form's own test, at input angles θ) is asked at every such angle the input passes between two
+    samples. The input is taken to move monotonically from one sample to the next.
+    """
+    ok = np.ones(len(theta), bool)
+    lo, hi = np.minimum(theta[:-1], theta[1:]), np.maximum(theta[:-1], theta[1:])
+    for c in extremes:
+        x = c + TWO_PI * np.ceil((lo - c) / TWO_PI)  # the first angle ≡ c at or above lo
+        k = np.flatnonzero((lo < x) & (x < hi))
+        if len(k):
+            ok[k + 1] &= closes(x[k])
+    return ok
+
+
+def gap_text(between: np.ndarray, k: int) -> str:
+    """What to add to the message of a failure at sample k that :func:`passes_between` found."""
+    return "" if between[k] else " between the sample before and this one (the input passes a limit position there)"
+
+
 def check_dyads(
     fails: Sequence[tuple[np.ndarray, str]],
     *,

@@ -57,8 +57,10 @@ from .analytic_common import (
     cross,
     driver_input,
     evaluation_times,
+    gap_text,
     member_vector,
     other_body,
+    passes_between,
     pins,
     pins_of,
 )
@@ -209,7 +211,15 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     f = np.abs(delta)
     p = (m.b * m.b - m.c * m.c + f * f) / (2.0 * f)
     q2 = (m.b - p) * (m.b + p)
-    ok = q2 > 0.0
+    # |A − O4| is extreme where A lies on the line O2O4: θ2 + β2 = arg(O4 − O2) (+ π)
+    extremes = [np.angle(zO4 - zO2) - m.beta2 + k * np.pi for k in (0, 1)]
+
+    def reach(th: np.ndarray) -> np.ndarray:
+        ff = np.abs(zO4 - zO2 - m.a * np.exp(1j * (th + m.beta2)))
+        return (m.b + m.c - ff) * (ff - abs(m.b - m.c)) > 0.0
+
+    between = passes_between(th_in, extremes, reach)
+    ok = (q2 > 0.0) & between
     tog = toggles(mech)
 
     def what(k: int) -> str:
@@ -217,7 +227,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         lims = ", ".join(f"{th:.10g}" for th, _ in tog) or "none"
         return (
             f"coupler {r.coupler} and rocker {r.rocker} cannot close, {kind}: |{r.A}{r.O4}| = {f[k]:.10g} "
-            f"(b = {m.b:g}, c = {m.c:g}); limit angles of {r.crank}: {lims} rad"
+            f"(b = {m.b:g}, c = {m.c:g}); limit angles of {r.crank}: {lims} rad{gap_text(between, k)}"
         )
 
     limit = None  # the toggle angle nearest the first failing input, in that input's turn

@@ -55,8 +55,10 @@ from .analytic_common import (
     cross,
     driver_input,
     evaluation_times,
+    gap_text,
     member_vector,
     other_body,
+    passes_between,
     pins,
     pins_of,
 )
@@ -139,13 +141,23 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     asm = GuidedAssembly(mech, t, inserted, anchor)
     zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
     ok, phi, _ = rpr(zA, fixed_kin(zO4, len(t)), e, sigma)
+    # the slot reaches the crank pin while |A − O4| ≥ |e|; |A − O4| is least where A lies on the line O2O4
+    zO2 = complex(asm.fixed(r.O2))
+    extremes = [np.angle(zO4 - zO2) - beta2 + k * np.pi for k in (0, 1)]
+
+    def reach(th: np.ndarray) -> np.ndarray:
+        return np.abs(zO2 + a * np.exp(1j * (th + beta2)) - zO4) > abs(e)
+
+    between = passes_between(th2, extremes, reach)
     check_assembly(
-        ok,
+        ok & between,
         mech=mech,
         t=t,
         inserted=inserted,
         theta_in=th2,
-        what=lambda k: f"the slot of {r.rocker} (offset {e:g} from {r.O4}) cannot reach the crank pin {r.A}",
+        what=lambda k: (
+            f"the slot of {r.rocker} (offset {e:g} from {r.O4}) cannot reach the crank pin {r.A}" + gap_text(between, k)
+        ),
         limit=None,
         resolve=lambda tt: solve(mech, tt),
     )

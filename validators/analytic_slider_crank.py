@@ -52,8 +52,10 @@ from .analytic_common import (
     crank_driver,
     driver_input,
     evaluation_times,
+    gap_text,
     member_vector,
     other_body,
+    passes_between,
     pins,
     pins_of,
 )
@@ -155,13 +157,20 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     rA = a * np.exp(1j * (th2 + beta2))  # O2→A
     zA = (zO2 + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
     ok, (th3, om3, al3), _ = rrp_dyad(zA, b, L0, u, sigma)
+    # the crank pin's distance from the line, a·cos(θ2 + β2 − arg n) + const, is extreme at θ2 = arg n − β2 (+ π)
+    extremes = [np.angle(1j * u) - beta2 + k * np.pi for k in (0, 1)]
+
+    def reach(th: np.ndarray) -> np.ndarray:
+        return rrp_dyad((zO2 + a * np.exp(1j * (th + beta2)), 0.0, 0.0), b, L0, u, sigma)[0]
+
+    between = passes_between(th2, extremes, reach)
     check_assembly(
-        ok,
+        ok & between,
         mech=mech,
         t=t,
         inserted=inserted,
         theta_in=th2,
-        what=lambda k: f"rod {r.rod} (b = {b:g}) cannot reach the line of slider {r.block}",
+        what=lambda k: f"rod {r.rod} (b = {b:g}) cannot reach the line of slider {r.block}{gap_text(between, k)}",
         limit=None,
         resolve=lambda tt: solve(mech, tt),
     )

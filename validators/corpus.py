@@ -1220,7 +1220,7 @@ def plan_limit(draft: Draft, p: dict[str, float]) -> Motion:
     if not draft.limit_capable:
         raise Infeasible("no closed-form limit")
     lo, hi = _range(draft)
-    th0 = draft.theta0(0)
+    th0 = lo + (draft.theta0(0) - lo) % TWO_PI  # the t = 0 angle within the range: the limit one turn away or less
     lim = hi if p["dir"] > 0 else lo
     delta = abs(lim - th0)
     w, a = abs(p["omega"]), abs(p["alpha"])

@@ -158,9 +158,10 @@ def find_change_points(
     for k in np.nonzero(meets | (h_min < 0))[0].tolist():  # (the others: no change point, no limit)
         if found and _passed(known, t_grid[lo[k : k + 1]], t_grid[hi[k : k + 1]])[0]:
             continue  # (brackets around neighbouring minima can overlap: the change point is found already)
-        if h_min[k] < 0:
+        if h_min[k] < 0:  # the loop cannot close at t*: the rows up to it are kept, the limit sought before it
             why = "the loop cannot close between samples: the input passes a limit position"
-            return found, Failure(int(hi[k]), loop.index, why)
+            row = int(np.searchsorted(t_grid, t_star[k], side="right"))
+            return found, Failure(row, loop.index, why, (float(t_star[k]), run.inputs(t_star[k : k + 1])[0][0]))
         if not meets[k]:
             continue
         smooth_flip = continuations.smooth_flip(int(np.count_nonzero(meets[:k])))
@@ -266,8 +267,8 @@ class _Discriminants:
     def __call__(self, which: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         run, i = self.run, self.i
         if closed_forms_upto(run.system, i):
-            try:
-                solved = dyads_at(run, times.reshape(-1), i)
+            try:  # (block i's own h < 0 is a limit between the samples, not a probe that failed)
+                solved = dyads_at(run, times.reshape(-1), i, own=False)
             except MechanismError:  # a probe past the end of a tabulated input: bracket by bracket below
                 solved = None
             if solved is not None:
@@ -288,13 +289,19 @@ def closed_forms_upto(system: LoopSystem, i: int) -> bool:
 
 
 def dyads_at(
-    run: Run, times: np.ndarray, upto: int, sigma: np.ndarray | None = None, rates: bool = False, health: bool = False
+    run: Run,
+    times: np.ndarray,
+    upto: int,
+    sigma: np.ndarray | None = None,
+    rates: bool = False,
+    health: bool = False,
+    own: bool = True,
 ) -> tuple:
     """Closed-form blocks 0..upto at ``times`` (any order: each row solved on its own, on each block's branch at
     its time; block ``upto`` on ``sigma`` if given), in chunks of ROWS rows. Returns the probe's state, block
-    upto's discriminant h and whether every block closes, per row (and with ``health`` block upto's condition
-    number); with ``rates``, velocities and accelerations. Raises MechanismError where a time is outside a
-    tabulated input."""
+    upto's discriminant h and whether every block closes, per row (block upto itself only if ``own``: else its
+    h < 0 tells), and with ``health`` block upto's condition number; with ``rates``, velocities and
+    accelerations. Raises MechanismError where a time is outside a tabulated input."""
     system = run.system
     n, na = len(times), system.n_angles
     trial = Probe(n, na, len(system.slider_names))
@@ -310,7 +317,8 @@ def dyads_at(
             plan = plans[b]
             s = sigma[k] if sigma is not None and b == upto else run.sigma(b, times[k])
             closes, h[k] = closed_form(plan, trial, k, s)
-            ok[k] &= closes
+            if own or b < upto:
+                ok[k] &= closes
             cols = jacobian_columns(plan, trial, k) if rates or (health and b == upto) else None
             if health and b == upto:
                 cond[k] = dyad_health(plan, trial, k, run.scale, cols)[0]

@@ -22,10 +22,12 @@ from .plans import block_plans
 
 
 class Failure(Exception):
-    """Why sample ``sample`` cannot be solved; ``loop`` (index) where a loop is to blame."""
+    """Why sample ``sample`` cannot be solved; ``loop`` (index) where a loop is to blame. ``at``: where the failure
+    was found between rows ``sample`` − 1 and ``sample`` (a time where the loop cannot close, with the drivers'
+    values there), when row ``sample`` itself may well close: the input passes a narrow limit gap between them."""
 
-    def __init__(self, sample: int, loop: int | None, why: str) -> None:
-        self.sample, self.loop, self.why = sample, loop, why
+    def __init__(self, sample: int, loop: int | None, why: str, at: tuple[float, np.ndarray] | None = None) -> None:
+        self.sample, self.loop, self.why, self.at = sample, loop, why, at
 
 
 @dataclass

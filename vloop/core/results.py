@@ -153,14 +153,14 @@ def motion_error(
 ) -> MotionError:
     """The MotionError for failure ``f`` at internal row f.sample; ``sample`` is the first requested one lost."""
     mech = system.mechanism
-    t = float(grid.t[f.sample])
+    t, x = (float(grid.t[f.sample]), X[f.sample]) if f.at is None else f.at
     n_req = grid.total or len(grid.out)
     j = grid.requested_before(f.sample)
     jg = j + grid.offset  # in the whole run
-    drv = ", ".join(d.value_text(X[f.sample, i], mech.units, 6) for i, d in enumerate(mech.drivers))
+    drv = ", ".join(d.value_text(x[i], mech.units, 6) for i, d in enumerate(mech.drivers))
     if f.sample < grid.first:
         where = "before the first requested time (on the way from the t = 0 assembly)"
-    elif j < len(grid.out) and grid.out[j] == f.sample:
+    elif j < len(grid.out) and grid.out[j] == f.sample and f.at is None:
         where = f"at t = {t:.6g} s (sample {jg} of {n_req})"
     else:
         where = f"at t = {t:.6g} s (between samples {jg - 1} and {jg} of {n_req})"
@@ -175,7 +175,7 @@ def motion_error(
         entry=f"loop {f.loop + 1}" if f.loop is not None else "drivers",
         time=t if f.sample >= grid.first else None,
         sample=jg if f.sample >= grid.first else None,
-        driver_value=X[f.sample].tolist() if len(X) else None,
+        driver_value=x.tolist() if len(X) else None,
         partial=partial,
     )
     err.limit_time = limit[0] if limit is not None else None

@@ -42,9 +42,11 @@ from .results import chunk_result, first_non_finite, motion_error
 LIMIT_RTOL = 1e-12  # the limit is located to this fraction of the drivers' range over the run
 
 
-def _locate_failure(run: Run, state: State, t_grid: np.ndarray, k: int, X: np.ndarray) -> tuple[float, np.ndarray]:
-    """Bisect between the last solved sample k−1 and the failing sample k for the last assemblable
-    time (a limit position or toggle). Returns (time, driver values there)."""
+def _locate_failure(run: Run, state: State, t_grid: np.ndarray, f: Failure, X: np.ndarray) -> tuple[float, np.ndarray]:
+    """Bisect between the last solved sample k−1 and the failing sample k (or the time between them where the
+    failure was found: ``f.at``) for the last assemblable time (a limit position or toggle). Returns (time,
+    driver values there)."""
+    k = f.sample
     span = np.ptp(X, axis=0) if X.size else np.zeros(0)
     span = np.where(span > 0, span, 1.0)
     base = State(1, run.system.n_angles, len(run.system.slider_names))
@@ -52,6 +54,8 @@ def _locate_failure(run: Run, state: State, t_grid: np.ndarray, k: int, X: np.nd
         getattr(base, name)[0] = getattr(state, name)[k - 1]
     lo, hi = float(t_grid[k - 1]), float(t_grid[k])
     x_lo, x_hi = X[k - 1], X[k]
+    if f.at is not None:
+        hi, x_hi = f.at
     for _ in range(200):
         if X.size and np.all(np.abs(x_hi - x_lo) <= LIMIT_RTOL * span):
             break
@@ -513,7 +517,7 @@ def _solve_grid(run: Run, grid: Grid, state: State, turns: np.ndarray | None) ->
         state.theta[first:, free] = phi + TWO_PI * np.round((state.theta[first:, free] + turns[free] - phi) / TWO_PI)
     limit = None
     if failure is not None and failure.sample > first and failure.loop is not None and failure is not early:
-        limit = _locate_failure(run, state, t_grid, failure.sample, X)
+        limit = _locate_failure(run, state, t_grid, failure, X)
     result, sources = chunk_result(run, state, grid, n_ok, solved)
     bad = None if all(np.isfinite(np.sum(a)) for a in sources) else first_non_finite(result)
     if bad is not None:
