@@ -31,6 +31,7 @@ from vloop.result import Result
 
 ENGINE = "analytic"
 TWO_PI = 2.0 * math.pi
+ROUNDOFF = 64 * 2.220446049250313e-16  # a reach computed from lengths of size L is exact to about ROUNDOFF·L
 AXIS_TOL = 1e-12  # |component| below which a unit slider axis counts as exactly horizontal/vertical
 
 Kin = tuple[np.ndarray, np.ndarray, np.ndarray]  # z, ż, z̈ (complex) or θ, ω, α (real)

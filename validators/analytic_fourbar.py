@@ -48,6 +48,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from .analytic_common import (
+    ROUNDOFF,
     TWO_PI,
     Assembly,
     LimitPositionError,
@@ -214,9 +215,11 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     # |A − O4| is extreme where A lies on the line O2O4: θ2 + β2 = arg(O4 − O2) (+ π)
     extremes = [np.angle(zO4 - zO2) - m.beta2 + k * np.pi for k in (0, 1)]
 
+    slack = ROUNDOFF * (m.a + m.b + m.c + m.d)  # a reach just touched there (a change point) is reached
+
     def reach(th: np.ndarray) -> np.ndarray:
         ff = np.abs(zO4 - zO2 - m.a * np.exp(1j * (th + m.beta2)))
-        return (m.b + m.c - ff) * (ff - abs(m.b - m.c)) > 0.0
+        return (ff < m.b + m.c + slack) & (ff > abs(m.b - m.c) - slack)
 
     between = passes_between(th_in, extremes, reach)
     ok = (q2 > 0.0) & between

@@ -49,6 +49,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from .analytic_common import (
+    ROUNDOFF,
     branch_sign,
     check_assembly,
     crank_driver,
@@ -145,8 +146,10 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     zO2 = complex(asm.fixed(r.O2))
     extremes = [np.angle(zO4 - zO2) - beta2 + k * np.pi for k in (0, 1)]
 
+    slack = ROUNDOFF * (a + abs(zO4 - zO2) + abs(e))  # a slot just touched there (a change point) is reached
+
     def reach(th: np.ndarray) -> np.ndarray:
-        return np.abs(zO2 + a * np.exp(1j * (th + beta2)) - zO4) > abs(e)
+        return np.abs(zO2 + a * np.exp(1j * (th + beta2)) - zO4) > abs(e) - slack
 
     between = passes_between(th2, extremes, reach)
     check_assembly(

@@ -46,6 +46,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from .analytic_common import (
+    ROUNDOFF,
     Assembly,
     branch_sign,
     check_assembly,
@@ -160,8 +161,10 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     # the crank pin's distance from the line, a·cos(θ2 + β2 − arg n) + const, is extreme at θ2 = arg n − β2 (+ π)
     extremes = [np.angle(1j * u) - beta2 + k * np.pi for k in (0, 1)]
 
+    slack = ROUNDOFF * (a + b + abs(L0 - zO2))  # a line the rod just touches there (a change point) is reached
+
     def reach(th: np.ndarray) -> np.ndarray:
-        return rrp_dyad((zO2 + a * np.exp(1j * (th + beta2)), 0.0, 0.0), b, L0, u, sigma)[0]
+        return np.abs((np.conj(1j * u) * (zO2 + a * np.exp(1j * (th + beta2)) - L0)).real) < b + slack
 
     between = passes_between(th2, extremes, reach)
     check_assembly(
