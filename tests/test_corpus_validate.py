@@ -313,6 +313,7 @@ def test_a_planted_wrong_engine_is_the_one_blamed(wrong, plant_files, monkeypatc
     three blames exactly that engine, on every mechanism, in summary.json and on the corpus page; nothing else
     is marked failing. A wrong vloop is the loudest line of the page."""
     from reports.corpus import write_corpus_page
+    from validators.validate import _worst_text
 
     plant(monkeypatch, wrong, _perturbed)
     summary = harness.to_summary(harness.run(plant_files, ENGINES))
@@ -328,6 +329,12 @@ def test_a_planted_wrong_engine_is_the_one_blamed(wrong, plant_files, monkeypatc
     assert tally[wrong]["blamed"] == len(mechs) and tally[wrong]["pass"] == 0
     assert all(t["blamed"] == 0 and t["undecided"] == 0 for e, t in tally.items() if e != wrong)
     assert summary["verdicts"]["vloop_blamed"] == ([m["name"] for m in mechs] if wrong == "vloop" else [])
+    for m in mechs:  # the printed table: the others are shown against each other, not at the planted error
+        for e in (e for e in ENGINES if e not in ("vloop", wrong)):
+            text = _worst_text(m, e)
+            assert text == "-" or (float(text.split()[0]) < 1.0 and "FAIL" not in text), (m["name"], e, text)
+        if wrong != "vloop":
+            assert _worst_text(m, wrong).endswith(" FAIL") and float(_worst_text(m, wrong).split()[0]) > 100
     html = write_corpus_page(summary, tmp_path).read_text()
     row = html[html.index(f'<td class="mono">{wrong}</td>') :].split("</tr>")[0]
     assert f'<td class="cell fail">{len(mechs)}</td>' in row  # its blamed failures

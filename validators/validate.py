@@ -293,9 +293,13 @@ def _report_lines(summary: dict, written: list[str], engines_seconds: float, sec
 
 
 def _worst_text(m: dict, engine: str) -> str:
-    """An engine's cell of the table: its worst error as a fraction of what is allowed, or what happened."""
+    """An engine's cell of the table: its worst error as a fraction of what is allowed, or what happened. An engine
+    not blamed is shown against the engines not blamed (its disagreement with a blamed one is that one's)."""
     run = m.get("runs", {}).get(engine)
-    comps = [c for c in m.get("comparisons", []) if c["engine"] == engine]
+    verdict = m.get("verdict") or {}
+    own = verdict.get("engines", {}).get(engine)
+    blamed = set() if own == "blamed" else set(verdict.get("blamed") or ())
+    comps = [c for c in m.get("comparisons", []) if c["engine"] == engine and c.get("reference") not in blamed]
     if run is None or run["status"] == "skipped":
         return "-"
     if run["status"] == "error":
@@ -307,7 +311,6 @@ def _worst_text(m: dict, engine: str) -> str:
         if c["worst"]
     ]
     worst = max(ratios, default=0.0)
-    own = (m.get("verdict") or {}).get("engines", {}).get(engine)
     mark = {"blamed": " FAIL", "undecided": " ?"}.get(own or "", "")
     if own is None and not all(c["passed"] for c in comps):
         mark = " FAIL"
