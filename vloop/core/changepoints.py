@@ -160,7 +160,7 @@ def find_change_points(
             continue  # (brackets around neighbouring minima can overlap: the change point is found already)
         if h_min[k] < 0:  # the loop cannot close at t*: the rows up to it are kept, the limit sought before it
             why = "the loop cannot close between samples: the input passes a limit position"
-            row = int(np.searchsorted(t_grid, t_star[k], side="right"))
+            row = int(np.searchsorted(t_grid, t_star[k]))  # the first row at or past t*
             return found, Failure(row, loop.index, why, (float(t_star[k]), run.inputs(t_star[k : k + 1])[0][0]))
         if not meets[k]:
             continue
