@@ -31,7 +31,7 @@ from .errors import MechanismError
 from .method.assembly import DEFAULT_ASSEMBLY_TOL, close_group, inputs_at_start
 from .method.loops import Block, Loop, LoopSystem, branch_name, term_values
 from .method.structure import Structure, block_structure
-from .model import MassProperties, Mechanism, Slider, to_world
+from .model import MassProperties, Mechanism, Slider, joint_mean, to_world
 
 DYADS = ("RRR", "RRP", "RPR")
 TIE = 1e-12  # two assemblies whose squared distances to the hints differ by less than this·size² are a tie
@@ -337,7 +337,7 @@ def _closed_mechanism(mech: Mechanism, system: LoopSystem, q: np.ndarray, report
     bodies = closed.bodies()
     masses = {}
     for n, mp in mech.masses.items():
-        com = to_world(bodies[n], mp.local) if mp.local is not None else closed.mean_of_joints(n)
+        com = to_world(bodies[n], mp.local) if mp.local is not None else joint_mean(bodies[n], closed.body_joints(n))
         masses[n] = MassProperties(mp.mass, mp.inertia, com, mp.local)
     return dataclasses.replace(closed, masses=masses)
 

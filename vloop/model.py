@@ -323,11 +323,9 @@ class Mechanism:
             rows.append([d.target, f"driver ({d.kind})", d.pivot or "", motion])
         return rows
 
-    def mean_of_joints(self, body: str) -> tuple[float, float]:
-        """The mean of a body's joints at t = 0 (the default centre of mass)."""
-        joints = self.links[body].joints if body in self.links else (self.sliders[body].joint,)
-        xs, ys = zip(*(self.joints[j] for j in joints), strict=True)
-        return sum(xs) / len(xs), sum(ys) / len(ys)
+    def body_joints(self, body: str) -> tuple[str, ...]:
+        """A link's joints, or a slider's one joint."""
+        return self.links[body].joints if body in self.links else (self.sliders[body].joint,)
 
     @cached_property
     def largest_dimension(self) -> float:
@@ -363,6 +361,14 @@ def to_world(body: Body, local: tuple[float, float]) -> tuple[float, float]:
     """World coordinates at t = 0 of a point given in a body's frame."""
     c, s = math.cos(body.theta0), math.sin(body.theta0)
     return body.origin[0] + c * local[0] - s * local[1], body.origin[1] + s * local[0] + c * local[1]
+
+
+def joint_mean(body: Body, joints: tuple[str, ...]) -> tuple[float, float]:
+    """The mean of ``joints`` in the body's frame (as assembled: rigid, its stated length applied), in world
+    coordinates through the frame at t = 0: the default centre of mass."""
+    lx = sum(body.local[j][0] for j in joints) / len(joints)
+    ly = sum(body.local[j][1] for j in joints) / len(joints)
+    return to_world(body, (lx, ly))
 
 
 def third_corner(lk: Link, p: list[tuple[float, float]]) -> tuple[float, float]:

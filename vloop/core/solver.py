@@ -419,7 +419,7 @@ def _solve_on_chart(
     run: Run, chart: charts.Chart, grid: Grid, carry: tuple | None, turns: np.ndarray
 ) -> tuple[State, Result] | None:
     """The chunk solved on the chart (its state and Result), or None where a row misses it or the motion stops
-    (the chunk is then solved without it, as if none had been drawn, and says so)."""
+    (the chunk is then solved without it, as if none had been drawn)."""
     state = _start_state(run.system, grid, carry)
     run.chart = chart
     try:
@@ -475,7 +475,7 @@ def _cut(run: Run, grid: Grid, res: Result, reach: float) -> int:
 
 def _count_turns(run: Run, state: State, grid: Grid, X: np.ndarray, XD: np.ndarray, every: bool) -> None:
     """The whole turns of the angles on a chunk's rows from the run's chart (they lie too far apart to count them
-    from row to row): of each angle that could turn π/4 or more between two rows (:meth:`charts.Chart.steep`), or
+    from row to row): of each angle that could turn π/2 or more between two rows (:meth:`charts.Chart.steep`), or
     of ``every`` angle (a late start: the turns before the lead-in's are counted from t = 0)."""
     system, chart = run.system, run.chart
     first, n = grid.first, len(grid.t)

@@ -22,7 +22,6 @@ import numpy as np
 from ..errors import MechanismError
 from ..model import (
     LENGTH_UNITS,
-    Body,
     Driver,
     Link,
     Load,
@@ -32,6 +31,7 @@ from ..model import (
     Point,
     Profile,
     Slider,
+    joint_mean,
     mobility_message,
     to_world,
 )
@@ -929,7 +929,7 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
             probs.add(entry, "give 'com' (world, t = 0) or 'com_local' (in the body's frame), one of them")
             continue
         local = pair(val["com_local"], "com_local", entry, probs) if "com_local" in val else None
-        com = pair(val["com"], "com", entry, probs) if "com" in val else _joint_mean(bodies[name], joints)
+        com = pair(val["com"], "com", entry, probs) if "com" in val else joint_mean(bodies[name], joints)
         com = to_world(bodies[name], local) if local is not None else com
         far = far_problem(m, "com", com) if com is not None else ""
         if far:
@@ -941,15 +941,6 @@ def read_masses(data: dict, m: Mechanism, probs: Problems) -> dict[str, MassProp
         if mass is not None and inertia is not None and com is not None and mass >= 0 and inertia >= 0:
             out[name] = MassProperties(mass, inertia, com, local)
     return out
-
-
-def _joint_mean(body: Body, joints: tuple[str, ...]) -> tuple[float, float]:
-    """The mean of ``joints`` in the body's frame (as assembled: rigid, its stated length applied), in world
-    coordinates through the frame at t = 0."""
-    lx = sum(body.local[j][0] for j in joints) / len(joints)
-    ly = sum(body.local[j][1] for j in joints) / len(joints)
-    c, s = math.cos(body.theta0), math.sin(body.theta0)
-    return (body.origin[0] + c * lx - s * ly, body.origin[1] + s * lx + c * ly)
 
 
 def read_loads(raw: Any, m: Mechanism, ctx: _Context, probs: Problems) -> list[Load]:
