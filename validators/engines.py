@@ -4,7 +4,6 @@
     if engine.applies(mech):
         res = engine.solve(mech)                 # kinematics over the file's times (the Result contract)
         res = engine.run(mech)                   # what `vloop validate` compares: + the engine's own forces
-    engine.tolerance("vloop")                    # its Tolerance against a reference (validators/tolerances.py)
 
 Like SciPy's ``OdeSolver`` subclasses (``solve_ivp``'s ``METHODS`` table), an engine is a subclass of
 :class:`Engine` that sets ``name`` and implements ``solve``; registering it in :data:`ENGINES` is all the
@@ -30,7 +29,7 @@ from vloop.forces import ForceResult, has_forces, solve_forces
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .tolerances import DYNAMIC_STEPS, TOLERANCES, Tolerance
+from .tolerances import DYNAMIC_STEPS
 
 
 class Engine:
@@ -53,10 +52,6 @@ class Engine:
     def run(self, mech: Mechanism) -> Result:
         """What the harness compares: the kinematics, with the forces when the mechanism has masses or loads."""
         return self.with_forces(mech) if has_forces(mech) else self.solve(mech)
-
-    def tolerance(self, reference: str) -> Tolerance | None:
-        """The stated tolerance of this engine against ``reference`` (None: the pair is not compared)."""
-        return TOLERANCES.get((self.name, reference))
 
     def __repr__(self) -> str:
         return f"<engine {self.name}>"

@@ -107,13 +107,6 @@ def real(value: Any, where: str, lo: float, hi: float, *, open_low: bool = False
     return x + 0.0
 
 
-def choice(value: Any, where: str, choices: Sequence[str]) -> str:
-    """One of ``choices`` (exactly as written)."""
-    if not isinstance(value, str) or value not in choices:
-        raise _refuse(where, "one of " + ", ".join(choices), value)
-    return value
-
-
 def choice_list(value: Any, where: str, choices: Sequence[str]) -> tuple[str, ...]:
     """A comma-separated, non-empty list of distinct names from ``choices``."""
     what = "a comma-separated list of " + ", ".join(choices)
@@ -191,11 +184,6 @@ OPTIONS: dict[str, Option] = {
         Option("file", file_path, "a file"),
     )
 }
-
-
-def option(name: str, value: Any) -> Any:
-    """``value`` parsed by option ``name``'s parser (OptionError if it does not parse)."""
-    return OPTIONS[name].parse(value)
 
 
 # ---------------------------------------------------------------- the environment

@@ -105,7 +105,7 @@ def figure(mech: Mechanism, res: Result, k: int = 0) -> Any:
     pos = {n: (float(res[f"{n}.x"][k]), float(res[f"{n}.y"][k])) for n in mech.tracked_points}
     size = mech.scale
     _draw_ground(ax, mech, pos, size)
-    _draw_links(ax, mech, pos, size)
+    _draw_links(ax, mech, pos)
     _draw_sliders(ax, mech, res, k, pos, size)
     _draw_pins(ax, mech, pos, size)
     ax.set_aspect("equal")
@@ -132,7 +132,7 @@ def _draw_ground(ax: Any, mech: Mechanism, pos: dict, size: float) -> None:
             ax.plot([u, u - r], [y - 3 * r, y - 4 * r], color="k", lw=0.6)
 
 
-def _draw_links(ax: Any, mech: Mechanism, pos: dict, size: float) -> None:
+def _draw_links(ax: Any, mech: Mechanism, pos: dict) -> None:
     """Binary links as bars, links with more members (joints and tracer points) as plates, with their names."""
     from matplotlib.patches import Polygon
 
