@@ -65,11 +65,7 @@ class Chart:
         pred = hermite(self.x, self.q[cols], self.dq[cols], self.ddq[cols], xs, j, ordered=False)
         if self.turn:
             pred += self.wind[cols][:, None] * turns
-        q, unit = self.q[cols], self.unit[cols][:, None]
-        with np.errstate(invalid="ignore"):
-            move = np.max(np.abs(np.diff(q, axis=1)) * unit, axis=0)
-            move += 1e-9 * (1.0 + np.max(np.abs(q[:, :-1]) * unit, axis=0))
-        return pred, move[j]
+        return pred, interval_moves(self.q[cols], self.unit[cols])[j]
 
     def steep(self, step: float) -> np.ndarray:
         """The angle columns that could turn by π/2 or more while the input moves ``step`` (their largest rate
@@ -88,6 +84,17 @@ class Chart:
         turns = np.floor((x - self.x[0]) / self.turn) if self.turn else np.zeros(len(x))
         pred = np.interp(x - turns * self.turn, self.x, self.q[col]) + self.wind[col] * turns
         return TWO_PI * np.round((pred - theta) / TWO_PI)
+
+
+def interval_moves(xc: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """The move across each interval between nodes whose positions are xc (variables, nodes): its largest
+    component measured in ``unit`` (per variable: angles 1 (rad), sliders 2π per mechanism size), plus a floor at
+    round-off of the positions."""
+    unit = unit[:, None]
+    with np.errstate(invalid="ignore"):
+        move = np.max(np.abs(np.diff(xc, axis=1)) * unit, axis=0)
+        move += 1e-9 * (1.0 + np.max(np.abs(xc[:, :-1]) * unit, axis=0))
+    return move
 
 
 def hermite(

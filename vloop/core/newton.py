@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accuracy import EPS
-from .charts import ChartMiss, hermite
+from .charts import ChartMiss, hermite, interval_moves
 from .context import ChangePoint, Failure, Run, change_point_choices, impose_drivers
 from .data import TWO_PI, State
 from .linalg import (
@@ -756,13 +756,8 @@ def _predict(ctx: _Ctx, coarse: np.ndarray, rows: np.ndarray) -> tuple[np.ndarra
 
 
 def _moves(blk: NewtonBlock, xc: np.ndarray) -> np.ndarray:
-    """The move across each interval between nodes whose positions are xc (nu, nodes): the largest component,
-    angles in rad, sliders in 2π per mechanism size, plus a floor at round-off of the positions."""
-    unit = np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale)[:, None]
-    with np.errstate(invalid="ignore"):
-        move = np.max(np.abs(np.diff(xc, axis=1)) * unit, axis=0)
-        move += 1e-9 * (1.0 + np.max(np.abs(xc[:, :-1]) * unit, axis=0))
-    return move
+    """:func:`charts.interval_moves` of the block's unknowns (angles in rad, sliders in 2π per mechanism size)."""
+    return interval_moves(xc, np.where(blk.colscale < 1.0, 1.0, TWO_PI / blk.scale))
 
 
 def _far_dense(blk: NewtonBlock, correction: np.ndarray, move: np.ndarray) -> np.ndarray:
