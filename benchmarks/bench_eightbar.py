@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import vloop  # noqa: E402
-from validators import analytic_eightbar  # noqa: E402
+from validators.analytic import eightbar as analytic_eightbar  # noqa: E402
 
 # The paper's Table 1 / Fig. 1 constants.
 A_, B_, D_, M_, H_ = 3.0, 5.0, 6.15, 6.15, 8.0

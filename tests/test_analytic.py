@@ -20,8 +20,11 @@ import numpy as np
 import pytest
 
 import vloop
-from validators import analytic, analytic_eightbar, analytic_fourbar, analytic_slider_crank
-from validators.analytic_common import LimitPositionError
+from validators import analytic
+from validators.analytic import eightbar as analytic_eightbar
+from validators.analytic import fourbar as analytic_fourbar
+from validators.analytic import slider_crank as analytic_slider_crank
+from validators.analytic.common import LimitPositionError
 from vloop.mechanism import Profile
 from vloop.result import Result
 

@@ -22,7 +22,10 @@ import pytest
 from scipy.optimize import brentq
 
 import vloop
-from validators import analytic, analytic_fourbar, analytic_inverted_slider_crank, analytic_whitworth
+from validators import analytic
+from validators.analytic import fourbar as analytic_fourbar
+from validators.analytic import inverted_slider_crank as analytic_inverted_slider_crank
+from validators.analytic import whitworth as analytic_whitworth
 from vloop.cli import main as vloop_main
 from vloop.compare import assert_histories_close
 

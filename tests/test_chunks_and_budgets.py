@@ -23,7 +23,8 @@ import vloop
 from tests.conftest import MECHANISMS, mechanism_files
 from tests.test_bad_input import ISOSCELES
 from tests.test_change_points import parallelogram
-from validators import analytic, analytic_fourbar
+from validators import analytic
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.cli import main
 from vloop.compare import assert_histories_close
 from vloop.core import grid as sample_grid
@@ -251,7 +252,7 @@ def test_newton_parallelogram_matches_the_closed_form_path():
 
 def test_rectangular_newton_block_by_least_squares():
     """A four-bar whose loop is written twice (4 equations, 2 unknowns: consistent, redundant) is solved by
-    Gauss–Newton and least-squares rates, and matches the hand closed form (validators.analytic_fourbar)."""
+    Gauss–Newton and least-squares rates, and matches the hand closed form (validators.analytic.fourbar)."""
     mech = vloop.load(MECHANISMS / "fourbar_crank_rocker_open.toml")
     sys0 = vloop.compile(mech)
     (lp,) = sys0.loops

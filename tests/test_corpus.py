@@ -2,7 +2,7 @@
 
 * Generation is a pure function of (seed, index); every file loads, has safe names and a sidecar.
 * Every family is drawn, and the four-bars cover every Grashof class and the change points (classified
-  here independently by validators.analytic_fourbar.grashof).
+  here independently by validators.analytic.fourbar.grashof).
 * On a 200-mechanism corpus, every closed form (validators.analytic, incl. the dyad chain for the random
   attachments) agrees with vloop to 1e-9 of each quantity's peak, with the expected sample counts.
 * Change points: the closed form continues on the velocity-continuous branch (proved here by finite
@@ -22,7 +22,10 @@ import pytest
 
 import vloop
 from tests.conftest import mechanism_files
-from validators import analytic, analytic_chain, analytic_changepoint, analytic_fourbar, corpus, engines, harness
+from validators import analytic, corpus, engines, harness
+from validators.analytic import chain as analytic_chain
+from validators.analytic import changepoint as analytic_changepoint
+from validators.analytic import fourbar as analytic_fourbar
 from validators.tolerances import tolerance
 from vloop.cli import main
 from vloop.compare import assert_histories_close

@@ -473,9 +473,9 @@ def test_dynamic_matches_kinematic_on_more_mechanisms(key: str) -> None:
 
 def test_eightbar_matches_the_papers_closed_form_in_both_modes() -> None:
     try:
-        eightbar = importlib.import_module("validators.analytic_eightbar")
+        eightbar = importlib.import_module("validators.analytic.eightbar")
     except ModuleNotFoundError:
-        pytest.skip("validators.analytic_eightbar is not written yet")
+        pytest.skip("validators.analytic.eightbar is not written yet")
     key = str(ROOT / "mechanisms" / "eightbar.toml")
     mech = _mech(key)
     assert eightbar.applies(mech)

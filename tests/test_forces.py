@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 import vloop
-from validators import analytic_forces
+from validators.analytic import forces as analytic_forces
 from vloop.compare import assert_histories_close
 from vloop.forces import ForceError, compile_forces, load_values, solve_forces
 from vloop.mechanism import Driver, Link, MassProperties, Mechanism, length_factor

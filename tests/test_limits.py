@@ -9,7 +9,7 @@ import pytest
 
 import vloop
 from tests.conftest import MECHANISMS
-from validators import analytic_fourbar
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.cli import main
 from vloop.compare import assert_histories_close
 

@@ -201,8 +201,8 @@ def test_the_batch_zooms_every_dip_of_every_variant():
     """Near-parallelograms (rocker 2 + δ): their discriminants dip to ~δ at every folding, too close for a first
     look to dismiss; the batch zooms on all of them at once and finds the branches apart, so it solves them itself
     (before, each went to the single run): bit for bit the single run, and the law of cosines on its fixed branch
-    (validators.analytic_fourbar). The parallelogram itself (δ = 0) passes change points: the single run's."""
-    from validators import analytic_fourbar
+    (validators.analytic.fourbar). The parallelogram itself (δ = 0) passes change points: the single run's."""
+    from validators.analytic import fourbar as analytic_fourbar
     from vloop.core import batch
     from vloop.core.variants import VariantModel, resolve
 
@@ -286,7 +286,7 @@ def test_a_limit_gap_between_rows_stops_the_run_at_its_edge(delta_deg, chart, mo
     """A limit gap narrower than the rows' spacing (no row lands in it) is found by the dips of the discriminant
     and stops the run, on a chart or without: samples 0–8 kept, the limit located at the gap's edge 3π/2 − δ (to
     LIMIT_RTOL of the input's range over the run, 2.5e-10 rad: the bisection's stop), the failure named at an
-    input inside the gap. The closed form (validators.analytic_slider_crank, which asks its own reach at the
+    input inside the gap. The closed form (validators.analytic.slider_crank, which asks its own reach at the
     crank angles where the pin's distance from the line is extreme) stops at the same sample."""
     delta = math.radians(delta_deg)
     mech = gap_slider_crank(delta)

@@ -9,7 +9,8 @@ import pytest
 
 import vloop
 from tests.conftest import MECHANISMS
-from validators import analytic, analytic_fourbar
+from validators import analytic
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.cli import main
 from vloop.compare import assert_histories_close
 from vloop.sweep import feasible_range, rocking, sweep

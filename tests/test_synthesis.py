@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 import vloop
 import vloop.synthesis as syn
-from validators import analytic_fourbar
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.cli import main
 from vloop.synthesis import spec as synth_spec
 from vloop.synthesis.linkages import FOURBAR
@@ -636,7 +636,7 @@ def test_viewer_page_draws_the_targets(written):
 def _sixbar_targets() -> list[list[float]]:
     """Ten points on the path of a tracer on link CD of a Stephenson III six-bar (the catalog's, scaled by 1/5),
     at input angles 0.1 + 2πk/10, by its closed form (validators/analytic_sixbar_stephenson3.py)."""
-    from validators import analytic_sixbar_stephenson3
+    from validators.analytic import sixbar_stephenson3 as analytic_sixbar_stephenson3
     from vloop.synthesis.linkages import STEPHENSON3
 
     truth = STEPHENSON3.mechanism(STEPHENSON3.nominal, name="six", omega=1.0, times=np.array([0.0]))
@@ -653,7 +653,8 @@ def test_sixbar_where_no_fourbar_reaches(seed):
     Stephenson III search (seeded with those four-bars) finds a six-bar through all ten, for every seed 0–4.
     Re-solved by the six-bar's closed form and by Pinocchio at the stated instants, its tracer is within its
     reported error (+1e-9 of the size) of every point."""
-    from validators import analytic_sixbar_stephenson3, pinocchio
+    from validators import pinocchio
+    from validators.analytic import sixbar_stephenson3 as analytic_sixbar_stephenson3
 
     points = _sixbar_targets()
     four = syn.path(points, count=1, seed=seed, linkage="fourbar", generations=300, tolerance=0.002)
@@ -677,7 +678,7 @@ def test_polish_reaches_the_exact_linkage_from_nearby(topology):
     through every point to 1e-9 of the size at the instants it states, confirmed by the closed form."""
     import sys
 
-    from validators import analytic_sixbar_stephenson3
+    from validators.analytic import sixbar_stephenson3 as analytic_sixbar_stephenson3
     from vloop.synthesis.defects import Requirements
     from vloop.synthesis.linkages import STEPHENSON3
 
@@ -748,7 +749,7 @@ def test_slider_crank_function_round_trip(a, b, e, th0, data):
     """An offset slider-crank (crank a, rod b, offset e; the test's own B at t = 0) and its own crank angles and
     slider positions at three instants (closed form, validators/analytic_slider_crank.py) → the slider-crank
     function generator → a, b, e to 1e-9 of b; it meets each pair to 1e-9."""
-    from validators import analytic_slider_crank
+    from validators.analytic import slider_crank as analytic_slider_crank
     from vloop.synthesis.linkages import SLIDER_CRANK
 
     A = a * np.exp(1j * th0)

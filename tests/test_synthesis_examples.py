@@ -27,7 +27,7 @@ import numpy as np
 
 import vloop
 import vloop.synthesis as syn
-from validators import analytic_fourbar
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.synthesis.function import chebyshev
 from vloop.synthesis.linkages import lengths
 

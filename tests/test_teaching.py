@@ -24,7 +24,8 @@ import numpy as np
 import pytest
 
 import vloop
-from validators import analytic_fourbar, analytic_slider_crank
+from validators.analytic import fourbar as analytic_fourbar
+from validators.analytic import slider_crank as analytic_slider_crank
 from vloop.cli import main as vloop_main
 from vloop.teaching import centres as C
 from vloop.teaching import report

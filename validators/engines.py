@@ -87,7 +87,7 @@ class Analytic(Engine):
         return analytic.solve(mech, times, **options)
 
     def with_forces(self, mech: Mechanism) -> Result:
-        from . import analytic_forces
+        from .analytic import forces as analytic_forces
 
         if not analytic_forces.available(mech):
             return self.solve(mech)

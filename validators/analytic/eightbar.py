@@ -49,7 +49,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     AXIS_TOL,
     Assembly,
     branch_sign,

@@ -5,7 +5,7 @@ six-bars, the five-bar, the inverted slider-crank and the Whitworth mechanism
 are each solved as a sequence of the dyads below, in the order a student would
 draw them. Nothing here touches vloop's loop equations or solver.
 
-Conventions as in :mod:`validators.analytic_common`: a point is carried as
+Conventions as in :mod:`validators.analytic.common`: a point is carried as
 complex arrays (z, ż, z̈) = (x + j·y, ...), an angle as (φ, ω, α) [rad, rad/s,
 rad/s²], CCW positive from +x; lengths in the file's units. u × v is
 Im(conj(u)·v).
@@ -63,7 +63,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import LINK_FIELDS, POINT_FIELDS, SLIDER_FIELDS, Result
 
-from .analytic_common import TWO_PI, Assembly, Kin, branch_sign, cross
+from .common import TWO_PI, Assembly, Kin, branch_sign, cross
 
 __all__ = ["GuidedAssembly", "carry", "fixed_kin", "local_vector", "rpr", "rrr", "rrr_sigma"]
 

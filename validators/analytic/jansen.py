@@ -21,7 +21,7 @@ with θ_T the upper triangle's angle (θ_T = φ_QU − β, β the direction of Q
 its frame) and ρ_X its frame vector Q→X.
 
 Each dyad "P1–X–P2, lengths l1, l2" (P1, P2 known with their rates) is solved as
-in :mod:`validators.analytic_dyads` (law of cosines; rates by differentiating the
+in :mod:`validators.analytic.dyads` (law of cosines; rates by differentiating the
 loop and projecting on e^{jφ2}, e^{jφ1}):
     δ = P2 − P1, f = |δ|, p = (l1² − l2² + f²)/(2f), φ1 = arg δ + σ·atan2(√(l1² − p²), p),
     X = P1 + l1·e^{jφ1}, φ2 = arg(X − P2),
@@ -47,7 +47,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     Assembly,
     check_dyads,
     crank_driver,
@@ -58,7 +58,7 @@ from .analytic_common import (
     pins,
     pins_of,
 )
-from .analytic_dyads import carry, fixed_kin, local_vector, rrr, rrr_sigma
+from .dyads import carry, fixed_kin, local_vector, rrr, rrr_sigma
 
 NAME = "jansen"
 

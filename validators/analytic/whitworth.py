@@ -17,7 +17,7 @@ Loops (complex numbers):
 with φ the slot direction, θ4 = φ − γ the lever's angle (γ the slot's angle in
 the lever frame), ρ_C the lever-frame vector O4→C, θ5 the rod's direction C→D.
 
-Dyad 1, RPR (inverted slider; derivation in :mod:`validators.analytic_dyads`):
+Dyad 1, RPR (inverted slider; derivation in :mod:`validators.analytic.dyads`):
 δ = A − O4 = ρ·e^{jψ} from the crank;  s_A = σ1·√(ρ² − e²),  φ = ψ − atan2(e, s_A);
 ω4 = Im(e^{−jφ}·Ȧ)/s_A,  ṡ_A = Re(e^{−jφ}·Ȧ) + ω4·e,
 α4 = (Im(e^{−jφ}·Ä) − 2·ω4·ṡ_A + ω4²·e)/s_A.  σ1 = sign(s_A) at t = 0.
@@ -25,7 +25,7 @@ Dyad 1, RPR (inverted slider; derivation in :mod:`validators.analytic_dyads`):
 C by rigid-body transport on the lever: C = O4 + e^{jθ4}·ρ_C,
 Ċ = j·ω4·(C − O4), C̈ = (j·α4 − ω4²)·(C − O4).
 
-Dyad 2, RRP (rod and ram; :func:`validators.analytic_slider_crank.rrp_dyad`):
+Dyad 2, RRP (rod and ram; :func:`validators.analytic.slider_crank.rrp_dyad`):
 with n = j·w and η = (C − L0)·n the distance of C from the ram's line,
 sin(θ5 − arg w) = −η/ℓ, cos(θ5 − arg w) = σ2·√(1 − η²/ℓ²) (σ2 = sign((D − C)·w)
 at t = 0); λ = w·C + ℓ·cos(θ5 − arg w); rates by differentiating those two
@@ -51,7 +51,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     branch_sign,
     check_dyads,
     crank_driver,
@@ -63,8 +63,8 @@ from .analytic_common import (
     pins,
     pins_of,
 )
-from .analytic_dyads import GuidedAssembly, carry, fixed_kin, local_vector, rpr
-from .analytic_slider_crank import rrp_dyad
+from .dyads import GuidedAssembly, carry, fixed_kin, local_vector, rpr
+from .slider_crank import rrp_dyad
 
 NAME = "whitworth"
 

@@ -3,12 +3,12 @@
 A four-bar whose lengths satisfy s + l = p + q (shortest + longest = the other two: the
 parallelogram, the kite, any "change-point" linkage) passes through configurations where all
 four pins are collinear. There the two assembly branches (open and crossed) meet, and the
-closed form of :mod:`validators.analytic_fourbar` — which keeps the branch sign σ fixed — jumps
+closed form of :mod:`validators.analytic.fourbar` — which keeps the branch sign σ fixed — jumps
 from one branch to the other: its angles are continuous but its velocities are not. The
 physical motion (and vloop, once it follows the branch that keeps the velocities continuous)
 goes straight on. This module gives that motion.
 
-Notation as in :mod:`validators.analytic_fourbar`: crank O2A (a, input φ2 = θ2 + β2), coupler AB
+Notation as in :mod:`validators.analytic.fourbar`: crank O2A (a, input φ2 = θ2 + β2), coupler AB
 (b), rocker O4B (c), ground d at angle θ1; δ = O4 − A, f = |δ|, p = (b² − c² + f²)/(2f),
 q = √(b² − p²), θ3 = arg δ + σ·atan2(q, p), B = A + b·e^{jθ3}, θ4 = arg(B − O4). Velocities and
 accelerations are the four-bar's (projections of the differentiated loop on e^{jθ4}, e^{jθ3}).
@@ -29,7 +29,7 @@ the number of times (net, which has the right parity) the input crossed a change
 exactly at φc the branch is undefined (0/0 in the rates): such a grid is refused.
 
 Degenerate kites (a = d and b = c: A reaches O4, f = 0, B anywhere on a circle) are not
-covered (:func:`applies` is False; :mod:`validators.analytic_fourbar` applies as usual).
+covered (:func:`applies` is False; :mod:`validators.analytic.fourbar` applies as usual).
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from . import analytic_fourbar as fourbar
-from .analytic_common import (
+from . import fourbar
+from .common import (
     TWO_PI,
     Assembly,
     branch_sign,

@@ -1,4 +1,4 @@
-"""Plumbing shared by the hand-derived closed forms (``validators.analytic_*``).
+"""Plumbing shared by the hand-derived closed forms (``validators.analytic``).
 
 Nothing here solves a loop equation: this module only reads the mechanism
 description (driver input, body frames, who is pinned to whom), anchors the

@@ -47,7 +47,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     ROUNDOFF,
     TWO_PI,
     Assembly,

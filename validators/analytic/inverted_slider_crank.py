@@ -19,7 +19,7 @@ through A at distance e from O4 makes sin(ψ − φ) = e/ρ, so
 σ = sign(s) at t = 0 (which way along the axis the block sits from O4). No
 assembly where ρ ≤ |e| (the crank pin comes closer to O4 than the slot's offset).
 
-Velocities and accelerations (the RPR dyad of :mod:`validators.analytic_dyads`,
+Velocities and accelerations (the RPR dyad of :mod:`validators.analytic.dyads`,
 δ̇ = Ȧ = j·ω2·(A − O2), δ̈ = Ä = (j·α2 − ω2²)·(A − O2)):
 
     ω = Im(conj(u)·δ̇)/s,               ṡ = Re(conj(u)·δ̇) + ω·e,
@@ -48,7 +48,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     ROUNDOFF,
     branch_sign,
     check_assembly,
@@ -63,7 +63,7 @@ from .analytic_common import (
     pins,
     pins_of,
 )
-from .analytic_dyads import GuidedAssembly, carry, fixed_kin, rpr
+from .dyads import GuidedAssembly, carry, fixed_kin, rpr
 
 NAME = "inverted_slider_crank"
 

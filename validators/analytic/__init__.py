@@ -19,37 +19,37 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from . import (
-    analytic_chain,
-    analytic_changepoint,
-    analytic_eightbar,
-    analytic_fivebar,
-    analytic_fourbar,
-    analytic_inverted_slider_crank,
-    analytic_jansen,
-    analytic_sixbar_stephenson3,
-    analytic_sixbar_watt2,
-    analytic_slider_crank,
-    analytic_whitworth,
+    chain,
+    changepoint,
+    eightbar,
+    fivebar,
+    fourbar,
+    inverted_slider_crank,
+    jansen,
+    sixbar_stephenson3,
+    sixbar_watt2,
+    slider_crank,
+    whitworth,
 )
-from .analytic_common import LimitPositionError
+from .common import LimitPositionError
 
 CLOSED_FORMS: tuple[ModuleType, ...] = (
-    analytic_eightbar,
-    analytic_slider_crank,
-    analytic_fourbar,
-    analytic_inverted_slider_crank,
-    analytic_whitworth,
-    analytic_sixbar_watt2,
-    analytic_sixbar_stephenson3,
-    analytic_fivebar,
-    analytic_jansen,
+    eightbar,
+    slider_crank,
+    fourbar,
+    inverted_slider_crank,
+    whitworth,
+    sixbar_watt2,
+    sixbar_stephenson3,
+    fivebar,
+    jansen,
 )
 
-# Tried before CLOSED_FORMS: change-point four-bars (where analytic_fourbar's fixed branch sign would jump
+# Tried before CLOSED_FORMS: change-point four-bars (where fourbar's fixed branch sign would jump
 # branches) continue on the velocity-continuous branch. Tried after: any other chain of dyads on cranks
 # (the corpus's random attachments), solved dyad by dyad from its structure.
-BEFORE: tuple[ModuleType, ...] = (analytic_changepoint,)
-FALLBACK: tuple[ModuleType, ...] = (analytic_chain,)
+BEFORE: tuple[ModuleType, ...] = (changepoint,)
+FALLBACK: tuple[ModuleType, ...] = (chain,)
 
 __all__ = ["BEFORE", "CLOSED_FORMS", "FALLBACK", "LimitPositionError", "available", "closed_form_for", "solve"]
 

@@ -4,7 +4,7 @@ Structure (checked by :func:`applies`; names are free): ground pivots O2, O5;
 two crank drivers, O2A (a, θ2, ω2, α2) and O5D (e, θ5, ω5, α5); link AC (l3) and
 link DC (l4) pinned together at the output pin C. Every pin joins exactly two
 bodies. φ3 = arg(C − A), φ4 = arg(C − D) (member-vector directions; a body's own
-θ is φ − β, β the vector's angle in its frame, see analytic_common).
+θ is φ − β, β the vector's angle in its frame, see validators.analytic.common).
 
 Loop (complex numbers):
 
@@ -37,7 +37,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     Assembly,
     check_assembly,
     driver_input,
@@ -47,7 +47,7 @@ from .analytic_common import (
     pins,
     pins_of,
 )
-from .analytic_dyads import carry, fixed_kin, rrr, rrr_sigma
+from .dyads import carry, fixed_kin, rrr, rrr_sigma
 
 NAME = "fivebar"
 

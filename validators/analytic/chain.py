@@ -3,8 +3,8 @@
 Textbook mechanisms are "Assur groups of class II": starting from the ground and the driven
 cranks, every other link belongs to a dyad hung on points already known, and each dyad has a
 closed form. This module finds such an order for any mechanism (names free, structure only)
-and solves it with the dyads of :mod:`validators.analytic_dyads` and
-:mod:`validators.analytic_slider_crank`. It is the closed form of the corpus's "random
+and solves it with the dyads of :mod:`validators.analytic.dyads` and
+:mod:`validators.analytic.slider_crank`. It is the closed form of the corpus's "random
 ternary attachments" (a four-bar or slider-crank with dyads hung on new pins of its links) and
 of the tilted eight-bars; the catalog's hand-written closed forms apply first where they exist.
 
@@ -15,17 +15,17 @@ every body is known (:func:`plan`; if none applies and bodies remain, there is n
   (:func:`vloop.drivers.evaluate`); its points by rigid transport z = z_P + e^{jθ}·(ρ − ρ_P).
 * **RRR** — two unknown links L1, L2 pinned together at an unknown X, L1 to a known point P1 and
   L2 to a known P2 (their only known points): law of cosines in triangle P1–X–P2
-  (:func:`validators.analytic_dyads.rrr`, derivation there), σ = side of P1→P2 on which X lies
+  (:func:`validators.analytic.dyads.rrr`, derivation there), σ = side of P1→P2 on which X lies
   at t = 0; each link's θ is the direction of P→X less that vector's angle in its frame.
 * **RRP** — an unknown link from a known P1 to an unknown X that is the pin of a block on a
   ground-fixed line (through X at t = 0, along the slider axis u): projection on the line's
-  normal (:func:`validators.analytic_slider_crank.rrp_dyad`), σ = sign((X − P1)·u) at t = 0.
+  normal (:func:`validators.analytic.slider_crank.rrp_dyad`), σ = sign((X − P1)·u) at t = 0.
 * **RPR** — an unknown guide link turning about a known point O, carrying the slot of a block
   whose pin P is known: the slot at offset e = u × (P − O) from O (u the axis at t = 0),
-  s = σ·√(|P − O|² − e²) (:func:`validators.analytic_dyads.rpr`), σ = sign(s) at t = 0.
+  s = σ·√(|P − O|² − e²) (:func:`validators.analytic.dyads.rpr`), σ = sign(s) at t = 0.
 
 Blocks turn with their guides; slider s, ṡ, s̈ and every other point come from
-:class:`validators.analytic_dyads.GuidedAssembly`. Mechanisms with a driven slider (linear
+:class:`validators.analytic.dyads.GuidedAssembly`. Mechanisms with a driven slider (linear
 actuator) or loops that must be solved together (a Stephenson III driven at its output) have no
 such order: :func:`applies` is False.
 """
@@ -39,7 +39,7 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .analytic_common import (
+from .common import (
     branch_sign,
     check_dyads,
     driver_input,
@@ -47,8 +47,8 @@ from .analytic_common import (
     member_vector,
     pins,
 )
-from .analytic_dyads import GuidedAssembly, carry, fixed_kin, local_vector, rpr, rrr, rrr_sigma
-from .analytic_slider_crank import rrp_dyad
+from .dyads import GuidedAssembly, carry, fixed_kin, local_vector, rpr, rrr, rrr_sigma
+from .slider_crank import rrp_dyad
 
 NAME = "dyad_chain"
 

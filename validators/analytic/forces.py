@@ -1,7 +1,7 @@
 """Closed-form kinetostatics of the slider-crank and the four-bar, derived by hand (engine "analytic").
 
-The kinematics come from the closed forms (:mod:`validators.analytic_slider_crank`,
-:mod:`validators.analytic_fourbar`); nothing of vloop's solver or force code is used.
+The kinematics come from the closed forms (:mod:`validators.analytic.slider_crank`,
+:mod:`validators.analytic.fourbar`); nothing of vloop's solver or force code is used.
 
 Notation (all vectors in the world plane, SI units). F_ij is the force body i exerts on body j
 (Norton's convention), a × b = a_x b_y − a_y b_x. For every moving body i with mass m_i, centre of
@@ -52,15 +52,15 @@ from vloop.forces import ForceResult
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from . import analytic_fourbar, analytic_slider_crank
-from .forces_common import factor, force_result, load_series, mass_table
+from ..forces_common import factor, force_result, load_series, mass_table
+from . import fourbar, slider_crank
 
 ENGINE = "analytic"
 
 
 def available(mech: Mechanism) -> bool:
     """True for a crank-driven slider-crank or four-bar (the structures solved here)."""
-    return analytic_slider_crank.applies(mech) or analytic_fourbar.applies(mech)
+    return slider_crank.applies(mech) or fourbar.applies(mech)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -150,11 +150,11 @@ def _fourbar(b: _Bodies, r: Any) -> tuple[dict, dict, dict, dict]:
 def solve_forces(mech: Mechanism, times: np.ndarray | None = None, kinematics: Result | None = None) -> ForceResult:
     """Closed-form driver torque [N·m], pin forces, slider normal force and moment [N, N·m] and shaking
     force over ``times`` [s] (kinematics from the closed forms unless given)."""
-    sc, fb = analytic_slider_crank.roles(mech), analytic_fourbar.roles(mech)
+    sc, fb = slider_crank.roles(mech), fourbar.roles(mech)
     if sc is None and fb is None:
         raise ValueError(f"{mech.name}: no closed-form force analysis (slider-crank and four-bar only)")
     if kinematics is None:
-        mod = analytic_slider_crank if sc is not None else analytic_fourbar
+        mod = slider_crank if sc is not None else fourbar
         kinematics = mod.solve(mech, times)
     b = _Bodies(mech, kinematics)
     drivers, pins, sliders, axes = _slider_crank(b, sc) if sc is not None else _fourbar(b, fb)
@@ -164,7 +164,7 @@ def solve_forces(mech: Mechanism, times: np.ndarray | None = None, kinematics: R
 
 def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     """Closed-form kinematics and forces in one Result (engine "analytic")."""
-    mod = analytic_slider_crank if analytic_slider_crank.applies(mech) else analytic_fourbar
+    mod = slider_crank if slider_crank.applies(mech) else fourbar
     kin = mod.solve(mech, times)
     frc = solve_forces(mech, kinematics=kin)
     return Result(kin.mechanism, ENGINE, kin.t, {**kin.columns, **frc.columns}, kin.health, dict(kin.meta))
