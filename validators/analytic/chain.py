@@ -3,8 +3,7 @@
 Textbook mechanisms are "Assur groups of class II": starting from the ground and the driven
 cranks, every other link belongs to a dyad hung on points already known, and each dyad has a
 closed form. This module finds such an order for any mechanism (names free, structure only)
-and solves it with the dyads of :mod:`validators.analytic.dyads` and
-:mod:`validators.analytic.slider_crank`. It is the closed form of the corpus's "random
+and solves it with the dyads of :mod:`validators.analytic.dyads`. It is the closed form of the corpus's "random
 ternary attachments" (a four-bar or slider-crank with dyads hung on new pins of its links) and
 of the tilted eight-bars; the catalog's hand-written closed forms apply first where they exist.
 
@@ -19,7 +18,7 @@ every body is known (:func:`plan`; if none applies and bodies remain, there is n
   at t = 0; each link's θ is the direction of P→X less that vector's angle in its frame.
 * **RRP** — an unknown link from a known P1 to an unknown X that is the pin of a block on a
   ground-fixed line (through X at t = 0, along the slider axis u): projection on the line's
-  normal (:func:`validators.analytic.slider_crank.rrp_dyad`), σ = sign((X − P1)·u) at t = 0.
+  normal (:func:`validators.analytic.dyads.rrp`), σ = sign((X − P1)·u) at t = 0.
 * **RPR** — an unknown guide link turning about a known point O, carrying the slot of a block
   whose pin P is known: the slot at offset e = u × (P − O) from O (u the axis at t = 0),
   s = σ·√(|P − O|² − e²) (:func:`validators.analytic.dyads.rpr`), σ = sign(s) at t = 0.
@@ -47,8 +46,7 @@ from .common import (
     member_vector,
     pins,
 )
-from .dyads import GuidedAssembly, carry, fixed_kin, local_vector, rpr, rrr, rrr_sigma
-from .slider_crank import rrp_dyad
+from .dyads import GuidedAssembly, carry, close_rrr, fixed_kin, local_vector, rpr, rrp
 
 NAME = "dyad_chain"
 
@@ -183,7 +181,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
             inputs.append(th[0])
             asm.set_angle(step.bodies[0], *th)
         elif step.kind == "rrr":
-            fails.append(_rrr(asm, step, z0))
+            fails.append(_rrr(asm, step))
         elif step.kind == "rrp":
             fails.append(_rrp(asm, step, z0))
         else:
@@ -212,16 +210,10 @@ def _carry_members(asm: GuidedAssembly, body: str) -> None:
             asm.set_point(j, *carry(asm.points[k], asm.angles[body], local_vector(asm.mech, body, k, j)))
 
 
-def _rrr(asm: GuidedAssembly, step: Step, z0: dict[str, complex]) -> tuple[np.ndarray, str]:
+def _rrr(asm: GuidedAssembly, step: Step) -> tuple[np.ndarray, str]:
     l1, l2 = step.bodies
     p1, p2, x = step.joints
-    len1, _ = member_vector(asm.bodies[l1], p1, x)
-    len2, _ = member_vector(asm.bodies[l2], p2, x)
-    sigma = rrr_sigma(z0[p1], z0[p2], z0[x], f"{asm.mech.name}: dyad {p1}–{x}–{p2}")
-    ok, phi1, phi2, zx = rrr(asm.points[p1], asm.points[p2], len1, len2, sigma)
-    asm.set_from_vector(l1, p1, x, *phi1)
-    asm.set_from_vector(l2, p2, x, *phi2)
-    asm.set_point(x, *zx)
+    ok, _, _ = close_rrr(asm, (l1, l2), (p1, p2, x), asm.points[p1], asm.points[p2])
     return ok, f"dyad {l1}, {l2} ({p1}–{x}–{p2}) cannot close"
 
 
@@ -231,7 +223,7 @@ def _rrp(asm: GuidedAssembly, step: Step, z0: dict[str, complex]) -> tuple[np.nd
     length, _ = member_vector(asm.bodies[rod], p1, x)
     u = complex(*asm.mech.sliders[block].axis)
     sigma = branch_sign(float((np.conj(u) * (z0[x] - z0[p1])).real), f"{asm.mech.name}: rod {rod} across its line")
-    ok, (th, om, al), _ = rrp_dyad(asm.points[p1], length, z0[x], u, sigma)
+    ok, (th, om, al), _ = rrp(asm.points[p1], length, z0[x], u, sigma)
     asm.set_from_vector(rod, p1, x, th, om, al)
     r = length * np.exp(1j * th)
     z, zd, zdd = asm.points[p1]

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -99,6 +100,51 @@ def member_vector(body: Body, j1: str, j2: str) -> tuple[float, float]:
     """(length, β): distance from ``j1`` to ``j2`` on ``body`` and its direction in the body frame."""
     (x1, y1), (x2, y2) = body.local[j1], body.local[j2]
     return math.hypot(x2 - x1, y2 - y1), math.atan2(y2 - y1, x2 - x1)
+
+
+@dataclass(frozen=True)
+class CrankStart:
+    """Where every role search starts: the ground, the driven crank, its ground pivot, every pin, the ground's pins."""
+
+    ground: str
+    crank: str
+    pivot: str
+    pins: dict[str, tuple[str, ...]]
+    ground_pins: set[str]
+
+
+def crank_start(
+    mech: Mechanism, *, links: int, sliders: int, pin_count: int, ground_pivots: int, binary: bool = True
+) -> CrankStart | None:
+    """The crank of a mechanism with one crank driver and these counts, or None.
+
+    ``links`` bodies that are links (the ground included), ``sliders`` blocks, ``pin_count`` pins (each joining
+    exactly two bodies when ``binary``), ``ground_pivots`` pins on the ground, one of them the crank's pivot,
+    which joins only the ground and the crank.
+    """
+    drv = crank_driver(mech)
+    if drv is None or len(mech.links) != links or len(mech.sliders) != sliders:
+        return None
+    g, crank, pivot = mech.ground, drv.target, drv.pivot
+    pm = pins(mech)
+    if len(pm) != pin_count or (binary and any(len(bs) != 2 for bs in pm.values())):
+        return None
+    gp = pins_of(mech, g)
+    if len(gp) != ground_pivots or pivot not in gp or set(pm[pivot]) != {g, crank}:
+        return None
+    return CrankStart(g, crank, pivot, pm, gp)
+
+
+def sole_pin(mech: Mechanism, body: str, *known: str) -> str | None:
+    """The one pin of ``body`` other than ``known``, or None if it has none or several."""
+    rest = pins_of(mech, body) - set(known)
+    return rest.pop() if len(rest) == 1 else None
+
+
+def next_link(start: CrankStart, pin: str, known: str) -> str | None:
+    """The body across the two-body ``pin`` from ``known``, unless it is the ground (then None)."""
+    b = other_body(start.pins[pin], known)
+    return None if b == start.ground else b
 
 
 def cross(u: complex | np.ndarray, v: complex | np.ndarray) -> Any:

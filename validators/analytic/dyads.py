@@ -1,9 +1,10 @@
-"""Hand-solved dyads and moving-guide sliders, shared by the multi-loop closed forms.
+"""The validators' own dyad formulas, shared by every closed form built from dyads.
 
 Not a closed form of its own (it is not in ``analytic.CLOSED_FORMS``): the
-six-bars, the five-bar, the inverted slider-crank and the Whitworth mechanism
-are each solved as a sequence of the dyads below, in the order a student would
-draw them. Nothing here touches vloop's loop equations or solver.
+six-bars, the five-bar, Jansen's legs, the inverted slider-crank, the Whitworth
+mechanism, the slider-crank's rod and any chain of dyads (:mod:`.chain`) are each
+solved as a sequence of the dyads below, in the order a student would draw them.
+Nothing here touches vloop's loop equations or solver.
 
 Conventions as in :mod:`validators.analytic.common`: a point is carried as
 complex arrays (z, ż, z̈) = (x + j·y, ...), an angle as (φ, ω, α) [rad, rad/s,
@@ -44,6 +45,17 @@ direction) and the block sits at s along it, so with u = e^{jφ}
       α = (Im(conj(u)·δ̈) − 2·ω·ṡ + ω²·e)/s,   s̈ = Re(conj(u)·δ̈) + α·e + ω²·s.
   Singular where s = 0 (the block over the pivot).
 
+RRP dyad (:func:`rrp`, a rod and a block on a ground line): rod P1→X of length
+b, X the pin of a block sliding on the line L0 + λ·u (n = j·u its normal).
+With η = (P1 − L0)·n the distance of P1 from the line and ψ = θ − arg u:
+
+  Position: η + b·sin ψ = 0, so sin ψ = −η/b, cos ψ = σ·√(1 − sin²ψ)
+  (σ = sign((X − P1)·u) at t = 0), θ = arg u + ψ, s = u·X = u·P1 + b·cos ψ.
+  No assembly where η² ≥ b².
+  Velocity: b·cos ψ·ω = −η̇, ṡ = u·Ṗ1 − b·sin ψ·ω.
+  Acceleration: α = (b·sin ψ·ω² − η̈)/(b·cos ψ),
+  s̈ = u·P̈1 − b·cos ψ·ω² − b·sin ψ·α.
+
 Slider on a moving guide (:class:`GuidedAssembly`): the file's s is the
 projection of the block's joint P on the turning axis u(t) = e^{j(θg + γ)}
 from the guide's first joint G (γ = axis angle − guide angle at t = 0). With
@@ -63,9 +75,20 @@ import numpy as np
 from vloop.mechanism import Mechanism
 from vloop.result import LINK_FIELDS, POINT_FIELDS, SLIDER_FIELDS, Result
 
-from .common import TWO_PI, Assembly, Kin, branch_sign, cross
+from .common import TWO_PI, Assembly, Kin, branch_sign, cross, member_vector
 
-__all__ = ["GuidedAssembly", "carry", "fixed_kin", "local_vector", "rpr", "rrr", "rrr_sigma"]
+__all__ = [
+    "GuidedAssembly",
+    "carry",
+    "close_rrr",
+    "crank_pin",
+    "fixed_kin",
+    "local_vector",
+    "rpr",
+    "rrp",
+    "rrr",
+    "rrr_sigma",
+]
 
 
 def fixed_kin(z: complex, n: int) -> Kin:
@@ -129,6 +152,57 @@ def rrr(z1: Kin, z2: Kin, l1: float, l2: float, sigma: float) -> tuple[np.ndarra
 def rrr_sigma(z1: complex, z2: complex, x: complex, what: str) -> float:
     """σ of :func:`rrr` from t = 0 positions: +1 if X is left of P1→P2, −1 if right (refuses a toggle)."""
     return branch_sign(float(cross(z2 - z1, x - z1)), what)
+
+
+def crank_pin(asm: Assembly, crank: str, pivot: str, pin: str, inputs: Kin) -> Kin:
+    """The pin of a crank turning about a fixed pivot: carried from the pivot by a·e^{jβ} (the crank frame's O→A)."""
+    a, beta = member_vector(asm.bodies[crank], pivot, pin)
+    return carry(fixed_kin(asm.fixed(pivot), len(asm.t)), inputs, a * np.exp(1j * beta))
+
+
+def close_rrr(
+    asm: Assembly, links: tuple[str, str], joints: tuple[str, str, str], z1: Kin, z2: Kin
+) -> tuple[np.ndarray, Kin, float]:
+    """Close the RRR dyad of ``links`` (L1 from P1, L2 from P2) meeting at X, ``joints`` = (P1, P2, X).
+
+    Lengths from the body frames, σ from the t = 0 coordinates (:func:`rrr_sigma`); stores both links' angles
+    and X's kinematics in ``asm``. Returns (ok, X's kinematics, σ).
+    """
+    (l1, l2), (p1, p2, x) = links, joints
+    len1, _ = member_vector(asm.bodies[l1], p1, x)
+    len2, _ = member_vector(asm.bodies[l2], p2, x)
+    z0 = asm.mech.joints
+    at = (complex(*z0[p1]), complex(*z0[p2]), complex(*z0[x]))
+    sigma = rrr_sigma(*at, f"{asm.mech.name}: pin {x} on the line {p1}{p2}")
+    ok, phi1, phi2, zx = rrr(z1, z2, len1, len2, sigma)
+    asm.set_from_vector(l1, p1, x, *phi1)
+    asm.set_from_vector(l2, p2, x, *phi2)
+    asm.set_point(x, *zx)
+    return ok, zx, sigma
+
+
+def rrp(zA: Kin, b: float, L0: complex, u: complex, sigma: float) -> tuple[np.ndarray, Kin, Kin]:
+    """The RRP dyad of the module docstring: rod A→B of length b, B on the line L0 + λ·u.
+
+    Returns (ok, (θ, ω, α), (s, ṡ, s̈)) with θ the direction A→B (not unwrapped)
+    and s = u·B; ``ok`` is False where the line is out of reach (η² ≥ b²).
+    """
+    z, zd, zdd = zA
+    n = 1j * u
+    eta = (np.conj(n) * (z - L0)).real
+    etad = (np.conj(n) * zd).real
+    etadd = (np.conj(n) * zdd).real
+    sin_psi = -eta / b
+    disc = 1.0 - sin_psi * sin_psi
+    ok = disc > 0.0
+    cos_psi = sigma * np.sqrt(np.where(ok, disc, 1.0))
+    om3 = -etad / (b * cos_psi)
+    al3 = (b * sin_psi * om3 * om3 - etadd) / (b * cos_psi)
+    th3 = np.angle(u) + np.arctan2(sin_psi, cos_psi)
+    s = (np.conj(u) * z).real + b * cos_psi
+    sd = (np.conj(u) * zd).real - b * sin_psi * om3
+    sdd = (np.conj(u) * zdd).real - b * cos_psi * om3 * om3 - b * sin_psi * al3
+    return ok, (th3, om3, al3), (s, sd, sdd)
 
 
 def rpr(zP: Kin, zO: Kin, e: float, sigma: float) -> tuple[np.ndarray, Kin, Kin]:

@@ -54,13 +54,12 @@ from .common import (
     Assembly,
     branch_sign,
     check_assembly,
-    crank_driver,
+    crank_start,
     driver_input,
     evaluation_times,
     member_vector,
     other_body,
-    pins,
-    pins_of,
+    sole_pin,
 )
 
 NAME = "eightbar"
@@ -83,26 +82,17 @@ class Roles:
 
 def roles(mech: Mechanism) -> Roles | None:
     """Identify the eight-bar structure of the paper's Fig. 1, or None."""
-    drv = crank_driver(mech)
-    if drv is None or len(mech.links) != 5 or len(mech.sliders) != 3:
+    st = crank_start(mech, links=5, sliders=3, pin_count=5, ground_pivots=1, binary=False)
+    if st is None or any(sl.guide != st.ground for sl in mech.sliders.values()):
         return None
-    g, crank, o2 = mech.ground, drv.target, drv.pivot
-    if any(sl.guide != g for sl in mech.sliders.values()):
-        return None
-    pm = pins(mech)
-    if len(pm) != 5 or pins_of(mech, g) != {o2} or set(pm.get(o2, ())) != {g, crank}:
-        return None
-    cp = pins_of(mech, crank) - {o2}
-    if len(cp) != 1:
-        return None
-    a = cp.pop()
-    coupler = other_body(pm[a], crank)
+    crank, o2, pm = st.crank, st.pivot, st.pins
+    a = sole_pin(mech, crank, o2)
+    coupler = None if a is None else other_body(pm[a], crank)
     if coupler is None or coupler not in mech.links:
         return None
-    kp = pins_of(mech, coupler) - {a}
-    if len(kp) != 1:
+    b = sole_pin(mech, coupler, a)
+    if b is None:
         return None
-    b = kp.pop()
     at_b = [x for x in pm[b] if x != coupler]
     blocks_b = [x for x in at_b if x in mech.sliders]
     rods = [x for x in mech.links if x in at_b]  # file order
@@ -113,10 +103,9 @@ def roles(mech: Mechanism) -> Roles | None:
         return None
     ends, blocks = [], []
     for rod in rods:
-        rp = pins_of(mech, rod) - {b}
-        if len(rp) != 1:
+        e = sole_pin(mech, rod, b)
+        if e is None:
             return None
-        e = rp.pop()
         blk = other_body(pm[e], rod)
         if blk not in mech.sliders or mech.sliders[blk].joint != e or abs(mech.sliders[blk].axis[0]) > AXIS_TOL:
             return None

@@ -47,7 +47,7 @@ from .common import (
     pins,
     pins_of,
 )
-from .dyads import carry, fixed_kin, rrr, rrr_sigma
+from .dyads import close_rrr, crank_pin
 
 NAME = "fivebar"
 
@@ -111,38 +111,28 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     r = roles(mech)
     if r is None:
         raise ValueError(f"{mech.name}: not a five-bar driven by its two cranks")
-    bodies = mech.bodies()
-    a, beta2 = member_vector(bodies[r.crank2], r.O2, r.A)
-    e, beta5 = member_vector(bodies[r.crank5], r.O5, r.D)
-    l3, _ = member_vector(bodies[r.link3], r.A, r.C)
-    l4, _ = member_vector(bodies[r.link4], r.D, r.C)
-    z = {j: complex(*mech.joints[j]) for j in (r.A, r.C, r.D)}
-    sigma = rrr_sigma(z[r.A], z[r.D], z[r.C], f"{mech.name}: pin {r.C} on the line {r.A}{r.D}")
-
     t, inserted, anchor = evaluation_times(mech, times)
     drv = {d.target: d for d in mech.drivers}
-    th2, om2, al2 = driver_input(drv[r.crank2], t)
-    th5, om5, al5 = driver_input(drv[r.crank5], t)
+    th2, th5 = driver_input(drv[r.crank2], t), driver_input(drv[r.crank5], t)
     asm = Assembly(mech, t, inserted, anchor)
-    n = len(t)
-    zA = carry(fixed_kin(asm.fixed(r.O2), n), (th2, om2, al2), a * np.exp(1j * beta2))
-    zD = carry(fixed_kin(asm.fixed(r.O5), n), (th5, om5, al5), e * np.exp(1j * beta5))
-    ok, phi3, phi4, zC = rrr(zA, zD, l3, l4, sigma)
+    asm.set_angle(r.crank2, *th2)
+    asm.set_angle(r.crank5, *th5)
+    zA, zD = crank_pin(asm, r.crank2, r.O2, r.A, th2), crank_pin(asm, r.crank5, r.O5, r.D, th5)
+    asm.set_point(r.A, *zA)
+    asm.set_point(r.D, *zD)
+    ok, _, sigma = close_rrr(asm, (r.link3, r.link4), (r.A, r.D, r.C), zA, zD)
     f = np.abs(zD[0] - zA[0])
     check_assembly(
         ok,
         mech=mech,
         t=t,
         inserted=inserted,
-        theta_in=th2,
+        theta_in=th2[0],
         what=lambda k: f"links {r.link3} and {r.link4} cannot reach each other (|{r.A}{r.D}| = {f[k]:.10g})",
         limit=None,
         resolve=lambda tt: solve(mech, tt),
     )
-    asm.set_angle(r.crank2, th2, om2, al2)
-    asm.set_angle(r.crank5, th5, om5, al5)
-    asm.set_from_vector(r.link3, r.A, r.C, *phi3)
-    asm.set_from_vector(r.link4, r.D, r.C, *phi4)
-    for j, zz in ((r.A, zA), (r.D, zD), (r.C, zC)):
-        asm.set_point(j, *zz)
-    return asm.result(NAME, {"branch": int(sigma), "lengths": [a, l3, l4, e]})
+    bodies = mech.bodies()
+    lengths = [member_vector(bodies[b], j1, j2)[0] for b, j1, j2 in ((r.crank2, r.O2, r.A), (r.link3, r.A, r.C))]
+    lengths += [member_vector(bodies[b], j1, j2)[0] for b, j1, j2 in ((r.link4, r.D, r.C), (r.crank5, r.O5, r.D))]
+    return asm.result(NAME, {"branch": int(sigma), "lengths": lengths})

@@ -54,7 +54,7 @@ from .common import (
     LimitPositionError,
     branch_sign,
     check_assembly,
-    crank_driver,
+    crank_start,
     cross,
     driver_input,
     evaluation_times,
@@ -62,8 +62,8 @@ from .common import (
     member_vector,
     other_body,
     passes_between,
-    pins,
     pins_of,
+    sole_pin,
 )
 
 NAME = "fourbar"
@@ -99,27 +99,19 @@ class Dims:
 
 def roles(mech: Mechanism) -> Roles | None:
     """Identify a crank-driven four-bar (four bodies, four order-one pins), or None."""
-    drv = crank_driver(mech)
-    if drv is None or mech.sliders or len(mech.links) != 4:
+    st = crank_start(mech, links=4, sliders=0, pin_count=4, ground_pivots=2)
+    if st is None:
         return None
-    g, crank, o2 = mech.ground, drv.target, drv.pivot
-    pm = pins(mech)
-    if len(pm) != 4 or any(len(bs) != 2 for bs in pm.values()):
-        return None
-    gp = pins_of(mech, g)
-    if len(gp) != 2 or o2 not in gp or set(pm[o2]) != {g, crank}:
-        return None
-    o4 = (gp - {o2}).pop()
+    g, crank, o2, pm = st.ground, st.crank, st.pivot, st.pins
+    o4 = (st.ground_pins - {o2}).pop()
     rocker = other_body(pm[o4], g)
-    cp = pins_of(mech, crank) - {o2}
-    if rocker is None or len(cp) != 1:
+    a = sole_pin(mech, crank, o2)
+    if rocker is None or a is None:
         return None
-    a = cp.pop()
     coupler = other_body(pm[a], crank)
-    rp = pins_of(mech, rocker) - {o4}
-    if coupler is None or coupler in (g, rocker) or len(rp) != 1:
+    b = sole_pin(mech, rocker, o4)
+    if coupler is None or coupler in (g, rocker) or b is None:
         return None
-    b = rp.pop()
     if set(pm[b]) != {coupler, rocker} or pins_of(mech, coupler) != {a, b}:
         return None
     return Roles(g, crank, coupler, rocker, o2, a, b, o4)

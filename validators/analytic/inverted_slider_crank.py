@@ -52,7 +52,7 @@ from .common import (
     ROUNDOFF,
     branch_sign,
     check_assembly,
-    crank_driver,
+    crank_start,
     cross,
     driver_input,
     evaluation_times,
@@ -60,10 +60,9 @@ from .common import (
     member_vector,
     other_body,
     passes_between,
-    pins,
     pins_of,
 )
-from .dyads import GuidedAssembly, carry, fixed_kin, rpr
+from .dyads import GuidedAssembly, crank_pin, fixed_kin, rpr
 
 NAME = "inverted_slider_crank"
 
@@ -85,21 +84,15 @@ class Roles:
 
 def roles(mech: Mechanism) -> Roles | None:
     """Identify ground–crank–block–rocker with the block sliding on the rocker, or None."""
-    drv = crank_driver(mech)
-    if drv is None or len(mech.links) != 3 or len(mech.sliders) != 1:
+    st = crank_start(mech, links=3, sliders=1, pin_count=3, ground_pivots=2)
+    if st is None:
         return None
     block, sl = next(iter(mech.sliders.items()))
-    g, crank, o2 = mech.ground, drv.target, drv.pivot
+    g, crank, o2, pm = st.ground, st.crank, st.pivot, st.pins
     rocker = sl.guide
     if rocker in (g, crank):
         return None
-    pm = pins(mech)
-    if len(pm) != 3 or any(len(bs) != 2 for bs in pm.values()):
-        return None
-    gp = pins_of(mech, g)
-    if len(gp) != 2 or o2 not in gp or set(pm[o2]) != {g, crank}:
-        return None
-    o4 = (gp - {o2}).pop()
+    o4 = (st.ground_pins - {o2}).pop()
     if other_body(pm[o4], g) != rocker or pins_of(mech, rocker) != {o4}:
         return None
     if pins_of(mech, crank) != {o2, sl.joint} or set(pm[sl.joint]) != {crank, block}:
@@ -140,7 +133,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     t, inserted, anchor = evaluation_times(mech, times)
     th2, om2, al2 = driver_input(drv, t)
     asm = GuidedAssembly(mech, t, inserted, anchor)
-    zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
+    zA = crank_pin(asm, r.crank, r.O2, r.A, (th2, om2, al2))
     ok, phi, _ = rpr(zA, fixed_kin(zO4, len(t)), e, sigma)
     # the slot reaches the crank pin while |A − O4| ≥ |e|; |A − O4| is least where A lies on the line O2O4
     zO2 = complex(asm.fixed(r.O2))

@@ -58,7 +58,7 @@ from .common import (
     pins,
     pins_of,
 )
-from .dyads import carry, fixed_kin, local_vector, rrr, rrr_sigma
+from .dyads import carry, close_rrr, fixed_kin, local_vector
 
 NAME = "jansen"
 
@@ -175,25 +175,11 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     fails = []
     for lg in leg_list:
         zQ = fixed_kin(z0[lg.Q], n)
-
-        def length(body: str, p: str, q: str) -> float:
-            return member_vector(bodies[body], p, q)[0]
-
-        def sigma(p1: str, p2: str, x: str) -> float:
-            return rrr_sigma(z0[p1], z0[p2], z0[x], f"{mech.name}: pin {x} on the line {p1}{p2}")
-
-        ok1, pj, pb, zU = rrr(zM, zQ, length(lg.j, m, lg.U), length(lg.upper, lg.Q, lg.U), sigma(m, lg.Q, lg.U))
-        ok2, pk, pc, zW = rrr(zM, zQ, length(lg.k, m, lg.W), length(lg.c, lg.Q, lg.W), sigma(m, lg.Q, lg.W))
-        asm.set_from_vector(lg.j, m, lg.U, *pj)
-        asm.set_from_vector(lg.upper, lg.Q, lg.U, *pb)
-        asm.set_from_vector(lg.k, m, lg.W, *pk)
-        asm.set_from_vector(lg.c, lg.Q, lg.W, *pc)
+        ok1, _, _ = close_rrr(asm, (lg.j, lg.upper), (m, lg.Q, lg.U), zM, zQ)
+        ok2, zW, _ = close_rrr(asm, (lg.k, lg.c), (m, lg.Q, lg.W), zM, zQ)
         zX = carry(zQ, asm.angles[lg.upper], local_vector(mech, lg.upper, lg.Q, lg.X))
-        ok3, pf, pg, zY = rrr(zX, zW, length(lg.f, lg.X, lg.Y), length(lg.foot, lg.W, lg.Y), sigma(lg.X, lg.W, lg.Y))
-        asm.set_from_vector(lg.f, lg.X, lg.Y, *pf)
-        asm.set_from_vector(lg.foot, lg.W, lg.Y, *pg)
-        for j, zz in ((lg.U, zU), (lg.W, zW), (lg.X, zX), (lg.Y, zY)):
-            asm.set_point(j, *zz)
+        asm.set_point(lg.X, *zX)
+        ok3, _, _ = close_rrr(asm, (lg.f, lg.foot), (lg.X, lg.W, lg.Y), zX, zW)
         fails += [
             (ok1, f"links {lg.j} and {lg.upper} cannot close"),
             (ok2, f"links {lg.k} and {lg.c} cannot close"),

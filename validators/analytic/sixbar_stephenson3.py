@@ -34,102 +34,50 @@ R2 = −P̈ + l5·ω5²·e^{jφ5} − l6·ω6²·e^{jφ6}:
 
 σ1 = sign((O4 − A) × (B − A)), σ2 = sign((O6 − P) × (E − P)) at t = 0. A dyad
 cannot be closed where its base |δ| leaves (|l1 − l2|, l1 + l2). The general dyad
-is :func:`validators.analytic.dyads.rrr`.
+is :func:`validators.analytic.dyads.rrr`; the steps are :func:`validators.analytic.sixbar.solve`'s.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .common import (
-    Assembly,
-    check_dyads,
-    crank_driver,
-    driver_input,
-    evaluation_times,
-    member_vector,
-    other_body,
-    pins,
-    pins_of,
-)
-from .dyads import carry, fixed_kin, local_vector, rrr, rrr_sigma
+from . import sixbar
+from .common import next_link, pins_of
+from .sixbar import SixBar
 
 NAME = "sixbar_stephenson3"
 
 __all__ = ["applies", "roles", "solve"]
 
 
-@dataclass(frozen=True)
-class Roles:
-    """Which bodies and joints play which part in the Stephenson III six-bar."""
-
-    ground: str
-    crank: str
-    coupler: str  # ternary: A, B, P
-    rocker: str
-    link5: str
-    output: str
-    O2: str
-    A: str
-    B: str
-    O4: str
-    P: str
-    E: str
-    O6: str
-
-
-def roles(mech: Mechanism) -> Roles | None:
+def roles(mech: Mechanism) -> SixBar | None:
     """Identify a four-bar whose ternary coupler drives a dyad to a third ground pivot, or None."""
-    drv = crank_driver(mech)
-    if drv is None or mech.sliders or len(mech.links) != 6:
+    start = sixbar.four_bar_start(mech)
+    if start is None:
         return None
-    g, crank, o2 = mech.ground, drv.target, drv.pivot
-    pm = pins(mech)
-    if len(pm) != 7 or any(len(bs) != 2 for bs in pm.values()):
-        return None
-    gp = pins_of(mech, g)
-    if len(gp) != 3 or o2 not in gp or set(pm[o2]) != {g, crank}:
-        return None
-    cp = pins_of(mech, crank) - {o2}
-    if len(cp) != 1:
-        return None
-    a = cp.pop()
-    coupler = other_body(pm[a], crank)
-    if coupler is None or coupler == g:
-        return None
+    st, a, coupler = start
     kp = pins_of(mech, coupler) - {a}
     if len(kp) != 2:
         return None
     # of the coupler's two other pins, B leads to a rocker pivoted on the ground, P to the dyad
     found = []
     for b in kp:
-        rocker = other_body(pm[b], coupler)
-        rp = pins_of(mech, rocker) if rocker not in (None, g) else set()
-        if len(rp) == 2 and len(rp & gp) == 1:
-            found.append((b, rocker, (rp & gp).pop()))
+        rocker = next_link(st, b, coupler)
+        rp = pins_of(mech, rocker) if rocker is not None else set()
+        if len(rp) == 2 and len(rp & st.ground_pins) == 1:
+            found.append((b, rocker, (rp & st.ground_pins).pop()))
     if len(found) != 1:
         return None
     b, rocker, o4 = found[0]
     p = (kp - {b}).pop()
-    link5 = other_body(pm[p], coupler)
-    if link5 is None or link5 in (g, rocker):
+    dyad = sixbar.second_dyad(mech, st, coupler, p, rocker, o4)
+    if dyad is None:
         return None
-    lp = pins_of(mech, link5) - {p}
-    if len(lp) != 1:
-        return None
-    e = lp.pop()
-    output = other_body(pm[e], link5)
-    if output is None or output == g:
-        return None
-    op = pins_of(mech, output) - {e}
-    if len(op) != 1 or (o6 := op.pop()) not in gp - {o2, o4}:
-        return None
-    return Roles(g, crank, coupler, rocker, link5, output, o2, a, b, o4, p, e, o6)
+    link5, e, output, o6 = dyad
+    return SixBar(st.ground, st.crank, coupler, rocker, link5, output, st.pivot, a, b, o4, p, e, o6, coupler, a)
 
 
 def applies(mech: Mechanism) -> bool:
@@ -146,35 +94,4 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     r = roles(mech)
     if r is None:
         raise ValueError(f"{mech.name}: not a crank-driven Stephenson III six-bar")
-    drv = mech.drivers[0]
-    bodies = mech.bodies()
-    a, beta2 = member_vector(bodies[r.crank], r.O2, r.A)
-    b, _ = member_vector(bodies[r.coupler], r.A, r.B)
-    c, _ = member_vector(bodies[r.rocker], r.O4, r.B)
-    l5, _ = member_vector(bodies[r.link5], r.P, r.E)
-    l6, _ = member_vector(bodies[r.output], r.O6, r.E)
-    z = {j: complex(*mech.joints[j]) for j in (r.A, r.B, r.O4, r.P, r.E, r.O6)}
-    sigma1 = rrr_sigma(z[r.A], z[r.O4], z[r.B], f"{mech.name}: pin {r.B} on the line {r.A}{r.O4}")
-    sigma2 = rrr_sigma(z[r.P], z[r.O6], z[r.E], f"{mech.name}: pin {r.E} on the line {r.P}{r.O6}")
-
-    t, inserted, anchor = evaluation_times(mech, times)
-    n = len(t)
-    th2, om2, al2 = driver_input(drv, t)
-    asm = Assembly(mech, t, inserted, anchor)
-    zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
-    ok1, phi3, phi4, zB = rrr(zA, fixed_kin(z[r.O4], n), b, c, sigma1)
-    asm.set_from_vector(r.coupler, r.A, r.B, *phi3)
-    asm.set_from_vector(r.rocker, r.O4, r.B, *phi4)
-    zP = carry(zA, asm.angles[r.coupler], local_vector(mech, r.coupler, r.A, r.P))
-    ok2, phi5, phi6, zE = rrr(zP, fixed_kin(z[r.O6], n), l5, l6, sigma2)
-    fails = (
-        (ok1, f"coupler {r.coupler} and rocker {r.rocker} cannot close"),
-        (ok2, f"link {r.link5} and rocker {r.output} cannot close"),
-    )
-    check_dyads(fails, mech=mech, t=t, inserted=inserted, theta_in=th2, resolve=lambda tt: solve(mech, tt))
-    asm.set_angle(r.crank, th2, om2, al2)
-    asm.set_from_vector(r.link5, r.P, r.E, *phi5)
-    asm.set_from_vector(r.output, r.O6, r.E, *phi6)
-    for j, zz in ((r.A, zA), (r.B, zB), (r.P, zP), (r.E, zE)):
-        asm.set_point(j, *zz)
-    return asm.result(NAME, {"branch": [int(sigma1), int(sigma2)], "lengths": [a, b, c, l5, l6]})
+    return sixbar.solve(mech, times, r, NAME, "link")

@@ -50,16 +50,17 @@ from .common import (
     Assembly,
     branch_sign,
     check_assembly,
-    crank_driver,
+    crank_start,
     driver_input,
     evaluation_times,
     gap_text,
     member_vector,
     other_body,
     passes_between,
-    pins,
     pins_of,
+    sole_pin,
 )
+from .dyads import rrp
 
 NAME = "slider_crank"
 
@@ -79,57 +80,22 @@ class Roles:
 
 def roles(mech: Mechanism) -> Roles | None:
     """Identify the slider-crank structure, or None if the mechanism is not one."""
-    drv = crank_driver(mech)
-    if drv is None or len(mech.links) != 3 or len(mech.sliders) != 1:
+    st = crank_start(mech, links=3, sliders=1, pin_count=3, ground_pivots=1)
+    if st is None:
         return None
     block, sl = next(iter(mech.sliders.items()))
-    g, crank, o2 = mech.ground, drv.target, drv.pivot
-    pm = pins(mech)
-    if sl.guide != g or len(pm) != 3 or any(len(bs) != 2 for bs in pm.values()):
+    a = sole_pin(mech, st.crank, st.pivot)
+    rod = None if a is None else other_body(st.pins[a], st.crank)
+    if sl.guide != st.ground or rod is None or rod not in mech.links or pins_of(mech, rod) != {a, sl.joint}:
         return None
-    if pins_of(mech, g) != {o2} or o2 not in pm or set(pm[o2]) != {g, crank}:
+    if set(st.pins[sl.joint]) != {rod, block}:
         return None
-    cp = pins_of(mech, crank) - {o2}
-    if len(cp) != 1:
-        return None
-    a = cp.pop()
-    rod = other_body(pm[a], crank)
-    if rod is None or rod not in mech.links or pins_of(mech, rod) != {a, sl.joint}:
-        return None
-    if set(pm[sl.joint]) != {rod, block}:
-        return None
-    return Roles(g, crank, rod, block, o2, a, sl.joint)
+    return Roles(st.ground, st.crank, rod, block, st.pivot, a, sl.joint)
 
 
 def applies(mech: Mechanism) -> bool:
     """True for a crank-driven slider-crank: ground–crank–rod–block on a ground-fixed line."""
     return roles(mech) is not None
-
-
-def rrp_dyad(
-    zA: tuple[np.ndarray, np.ndarray, np.ndarray], b: float, L0: complex, u: complex, sigma: float
-) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Rod AB of length b whose end B slides on the line L0 + λ·u (module docstring).
-
-    Returns (ok, (θ3, ω3, α3), (s, ṡ, s̈)) with θ3 the direction A→B (not unwrapped)
-    and s = u·B; ``ok`` is False where the line is out of reach (η² ≥ b²).
-    """
-    z, zd, zdd = zA
-    n = 1j * u
-    eta = (np.conj(n) * (z - L0)).real
-    etad = (np.conj(n) * zd).real
-    etadd = (np.conj(n) * zdd).real
-    sin_psi = -eta / b
-    disc = 1.0 - sin_psi * sin_psi
-    ok = disc > 0.0
-    cos_psi = sigma * np.sqrt(np.where(ok, disc, 1.0))
-    om3 = -etad / (b * cos_psi)
-    al3 = (b * sin_psi * om3 * om3 - etadd) / (b * cos_psi)
-    th3 = np.angle(u) + np.arctan2(sin_psi, cos_psi)
-    s = (np.conj(u) * z).real + b * cos_psi
-    sd = (np.conj(u) * zd).real - b * sin_psi * om3
-    sdd = (np.conj(u) * zdd).real - b * cos_psi * om3 * om3 - b * sin_psi * al3
-    return ok, (th3, om3, al3), (s, sd, sdd)
 
 
 def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
@@ -157,7 +123,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     zO2 = asm.fixed(r.O2)
     rA = a * np.exp(1j * (th2 + beta2))  # O2→A
     zA = (zO2 + rA, 1j * om2 * rA, (1j * al2 - om2 * om2) * rA)
-    ok, (th3, om3, al3), _ = rrp_dyad(zA, b, L0, u, sigma)
+    ok, (th3, om3, al3), _ = rrp(zA, b, L0, u, sigma)
     # the crank pin's distance from the line, a·cos(θ2 + β2 − arg n) + const, is extreme at θ2 = arg n − β2 (+ π)
     extremes = [np.angle(1j * u) - beta2 + k * np.pi for k in (0, 1)]
 

@@ -25,11 +25,11 @@ Dyad 1, RPR (inverted slider; derivation in :mod:`validators.analytic.dyads`):
 C by rigid-body transport on the lever: C = O4 + e^{jθ4}·ρ_C,
 Ċ = j·ω4·(C − O4), C̈ = (j·α4 − ω4²)·(C − O4).
 
-Dyad 2, RRP (rod and ram; :func:`validators.analytic.slider_crank.rrp_dyad`):
+Dyad 2, RRP (rod and ram; :func:`validators.analytic.dyads.rrp`):
 with n = j·w and η = (C − L0)·n the distance of C from the ram's line,
 sin(θ5 − arg w) = −η/ℓ, cos(θ5 − arg w) = σ2·√(1 − η²/ℓ²) (σ2 = sign((D − C)·w)
 at t = 0); λ = w·C + ℓ·cos(θ5 − arg w); rates by differentiating those two
-projections (that module's docstring).
+projections (derivation there).
 
 Time ratio (:func:`time_ratio`), for the catalog's layout: slot and C on a line
 through O4, ram line through O4 perpendicular to O2O4, d < a. The ram stops where
@@ -54,17 +54,16 @@ from vloop.result import Result
 from .common import (
     branch_sign,
     check_dyads,
-    crank_driver,
+    crank_start,
     cross,
     driver_input,
     evaluation_times,
     member_vector,
     other_body,
-    pins,
     pins_of,
+    sole_pin,
 )
-from .dyads import GuidedAssembly, carry, fixed_kin, local_vector, rpr
-from .slider_crank import rrp_dyad
+from .dyads import GuidedAssembly, carry, crank_pin, fixed_kin, local_vector, rpr, rrp
 
 NAME = "whitworth"
 
@@ -90,10 +89,10 @@ class Roles:
 
 def roles(mech: Mechanism) -> Roles | None:
     """Identify crank–block–lever (RPR) followed by rod–ram (RRP), or None."""
-    drv = crank_driver(mech)
-    if drv is None or len(mech.links) != 4 or len(mech.sliders) != 2:
+    st = crank_start(mech, links=4, sliders=2, pin_count=5, ground_pivots=2)
+    if st is None:
         return None
-    g, crank, o2 = mech.ground, drv.target, drv.pivot
+    g, crank, o2, pm = st.ground, st.crank, st.pivot, st.pins
     on_lever = [n for n, s in mech.sliders.items() if s.guide != g]
     on_ground = [n for n, s in mech.sliders.items() if s.guide == g]
     if len(on_lever) != 1 or len(on_ground) != 1:
@@ -101,22 +100,13 @@ def roles(mech: Mechanism) -> Roles | None:
     block, ram = on_lever[0], on_ground[0]
     lever = mech.sliders[block].guide
     a, d = mech.sliders[block].joint, mech.sliders[ram].joint
-    pm = pins(mech)
-    if len(pm) != 5 or any(len(bs) != 2 for bs in pm.values()):
-        return None
-    gp = pins_of(mech, g)
-    if len(gp) != 2 or o2 not in gp or set(pm[o2]) != {g, crank}:
-        return None
-    o4 = (gp - {o2}).pop()
+    o4 = (st.ground_pins - {o2}).pop()
     if lever in (g, crank) or other_body(pm[o4], g) != lever:
         return None
     if pins_of(mech, crank) != {o2, a} or set(pm[a]) != {crank, block}:
         return None
-    lp = pins_of(mech, lever) - {o4}
-    if len(lp) != 1:
-        return None
-    c = lp.pop()
-    rod = other_body(pm[c], lever)
+    c = sole_pin(mech, lever, o4)
+    rod = None if c is None else other_body(pm[c], lever)
     if rod is None or rod not in mech.links or pins_of(mech, rod) != {c, d} or set(pm[d]) != {rod, ram}:
         return None
     return Roles(g, crank, block, lever, rod, ram, o2, a, o4, c, d)
@@ -146,7 +136,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         raise ValueError(f"{mech.name}: not a crank / slotted lever / rod / ram quick-return mechanism")
     drv = mech.drivers[0]
     bodies = mech.bodies()
-    a, beta2 = member_vector(bodies[r.crank], r.O2, r.A)
+    a, _ = member_vector(bodies[r.crank], r.O2, r.A)
     ell, _ = member_vector(bodies[r.rod], r.C, r.D)
     u0 = complex(*mech.sliders[r.block].axis)
     w = complex(*mech.sliders[r.ram].axis)
@@ -159,11 +149,11 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     t, inserted, anchor = evaluation_times(mech, times)
     th2, om2, al2 = driver_input(drv, t)
     asm = GuidedAssembly(mech, t, inserted, anchor)
-    zA = carry(fixed_kin(asm.fixed(r.O2), len(t)), (th2, om2, al2), a * np.exp(1j * beta2))
+    zA = crank_pin(asm, r.crank, r.O2, r.A, (th2, om2, al2))
     ok1, phi, _ = rpr(zA, fixed_kin(zO4, len(t)), e, sigma1)
     asm.set_from_axis(r.lever, r.block, phi)
     zC = carry(fixed_kin(zO4, len(t)), asm.angles[r.lever], local_vector(mech, r.lever, r.O4, r.C))
-    ok2, th5, _ = rrp_dyad(zC, ell, zD0, w, sigma2)
+    ok2, th5, _ = rrp(zC, ell, zD0, w, sigma2)
     fails = (
         (ok1, f"the slot of {r.lever} cannot reach the crank pin {r.A}"),
         (ok2, f"rod {r.rod} (length {ell:g}) cannot reach the line of ram {r.ram}"),
