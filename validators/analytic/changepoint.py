@@ -45,9 +45,7 @@ from . import fourbar
 from .common import (
     TWO_PI,
     Assembly,
-    branch_sign,
     check_assembly,
-    cross,
     driver_input,
     evaluation_times,
 )
@@ -100,21 +98,13 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         raise ValueError(f"{mech.name}: not a (non-degenerate) change-point four-bar")
     r = fourbar.roles(mech)
     m = fourbar.dims(mech, r)
-    zO2, zO4 = complex(*mech.joints[r.O2]), complex(*mech.joints[r.O4])
-    zA0, zB0 = complex(*mech.joints[r.A]), complex(*mech.joints[r.B])
-    sigma0 = branch_sign(float(cross(zO4 - zA0, zB0 - zA0)), f"{mech.name}: pin {r.B} on the diagonal {r.A}{r.O4}")
+    sigma0 = fourbar.branch_at_start(mech, r)
     t, inserted, anchor = evaluation_times(mech, times)
     th_in, w2, al2 = driver_input(mech.drivers[0], t)
     near = np.min([np.abs(np.remainder(th_in - c + math.pi, TWO_PI) - math.pi) for c in angles], axis=0)
     sigma = branch_signs(th_in, anchor, sigma0, angles)
 
-    phi2 = th_in + m.beta2
-    rA = m.a * np.exp(1j * phi2)
-    zA = zO2 + rA
-    delta = zO4 - zA
-    f = np.abs(delta)
-    p = (m.b * m.b - m.c * m.c + f * f) / (2.0 * f)
-    q2 = (m.b - p) * (m.b + p)
+    delta, _, p, q2 = fourbar.diagonal(mech, r, m, th_in)
     ok = (q2 > -TOUCH * m.b * m.b) & (near > 1e-9)
     check_assembly(
         ok,

@@ -53,7 +53,7 @@ from .common import (
     AXIS_TOL,
     Assembly,
     branch_sign,
-    check_assembly,
+    check_dyads,
     crank_start,
     driver_input,
     evaluation_times,
@@ -171,16 +171,7 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
         kdd = d * al5 * c5 - d * w5 * w5 * s5
         rod_sol.append((rod, end, h, th5, w5, al5, k, kd, kdd))
 
-    check_assembly(
-        np.logical_and.reduce([m for m, _ in failures]),
-        mech=mech,
-        t=t,
-        inserted=inserted,
-        theta_in=th_in,
-        what=lambda i: "; ".join(msg for m, msg in failures if not m[i]),
-        limit=None,
-        resolve=lambda tt: solve(mech, tt),
-    )
+    check_dyads(failures, mech=mech, t=t, inserted=inserted, theta_in=th_in, resolve=lambda tt: solve(mech, tt))
     asm = Assembly(mech, t, inserted, anchor)
     zO2 = complex(x0, y0)
     rA = a * np.exp(1j * th2)

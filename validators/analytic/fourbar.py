@@ -192,18 +192,11 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     m = dims(mech, r)
     drv = mech.drivers[0]
     zO2, zO4 = complex(*mech.joints[r.O2]), complex(*mech.joints[r.O4])
-    zA0, zB0 = complex(*mech.joints[r.A]), complex(*mech.joints[r.B])
-    sigma = branch_sign(float(cross(zO4 - zA0, zB0 - zA0)), f"{mech.name}: pin {r.B} on the diagonal {r.A}{r.O4}")
+    sigma = branch_at_start(mech, r)
 
     t, inserted, anchor = evaluation_times(mech, times)
     th_in, w2, al2 = driver_input(drv, t)
-    phi2 = th_in + m.beta2
-    rA = m.a * np.exp(1j * phi2)
-    zA = zO2 + rA
-    delta = zO4 - zA
-    f = np.abs(delta)
-    p = (m.b * m.b - m.c * m.c + f * f) / (2.0 * f)
-    q2 = (m.b - p) * (m.b + p)
+    delta, f, p, q2 = diagonal(mech, r, m, th_in)
     # |A − O4| is extreme where A lies on the line O2O4: θ2 + β2 = arg(O4 − O2) (+ π)
     extremes = [np.angle(zO4 - zO2) - m.beta2 + k * np.pi for k in (0, 1)]
 
@@ -244,6 +237,25 @@ def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
     asm = coupler_and_rocker(Assembly(mech, t, inserted, anchor), r, m, (th_in, w2, al2), th3)
     meta = {"branch": int(sigma), "a": m.a, "b": m.b, "c": m.c, "d": m.d, "grashof": grashof(mech)}
     return asm.result(NAME, meta)
+
+
+def branch_at_start(mech: Mechanism, r: Roles) -> float:
+    """σ at t = 0: +1 if B lies left of the diagonal A→O4 in the file's coordinates, −1 if right."""
+    zO4, zA0, zB0 = (complex(*mech.joints[j]) for j in (r.O4, r.A, r.B))
+    return branch_sign(float(cross(zO4 - zA0, zB0 - zA0)), f"{mech.name}: pin {r.B} on the diagonal {r.A}{r.O4}")
+
+
+def diagonal(mech: Mechanism, r: Roles, m: Dims, th_in: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(δ, f, p, q²) at crank angles θ [rad]: δ = O4 − A, f = |δ|, B's foot p along δ and height² q² = b² − p²."""
+    zO2, zO4 = complex(*mech.joints[r.O2]), complex(*mech.joints[r.O4])
+    phi2 = th_in + m.beta2
+    rA = m.a * np.exp(1j * phi2)
+    zA = zO2 + rA
+    delta = zO4 - zA
+    f = np.abs(delta)
+    p = (m.b * m.b - m.c * m.c + f * f) / (2.0 * f)
+    q2 = (m.b - p) * (m.b + p)
+    return delta, f, p, q2
 
 
 def coupler_and_rocker(asm: Assembly, r: Roles, m: Dims, crank: tuple[np.ndarray, ...], th3: np.ndarray) -> Assembly:

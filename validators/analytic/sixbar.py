@@ -87,12 +87,15 @@ def second_dyad(
     return link5, e, output, o6
 
 
-def solve(mech: Mechanism, times: np.ndarray | None, r: SixBar, name: str, link5_kind: str) -> Result:
-    """The steps of the module docstring over ``times``; ``link5_kind`` names link5 in a failure's message.
+def solve(mech: Mechanism, times: np.ndarray | None, r: SixBar | None, names: tuple[str, str, str]) -> Result:
+    """The steps of the module docstring over ``times``; ``names``: the closed form's, the family's, link5's kind.
 
-    Raises LimitPositionError (a ValueError) at the first sample a dyad cannot be closed, with the samples
-    before it in ``.partial``.
+    Raises ValueError if ``r`` is None (not this family), and LimitPositionError (a ValueError) at the first
+    sample a dyad cannot be closed, with the samples before it in ``.partial``.
     """
+    name, family, link5_kind = names
+    if r is None:
+        raise ValueError(f"{mech.name}: not a crank-driven {family}")
     bodies = mech.bodies()
     lengths = [
         member_vector(bodies[b], j1, j2)[0]
@@ -125,6 +128,6 @@ def solve(mech: Mechanism, times: np.ndarray | None, r: SixBar, name: str, link5
         t=t,
         inserted=inserted,
         theta_in=th2[0],
-        resolve=lambda tt: solve(mech, tt, r, name, link5_kind),
+        resolve=lambda tt: solve(mech, tt, r, names),
     )
     return asm.result(name, {"branch": [int(sigma1), int(sigma2)], "lengths": lengths})

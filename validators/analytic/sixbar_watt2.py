@@ -83,12 +83,5 @@ def applies(mech: Mechanism) -> bool:
 
 
 def solve(mech: Mechanism, times: np.ndarray | None = None) -> Result:
-    """Closed-form kinematics over ``times`` (default: the file's [time]).
-
-    Raises LimitPositionError (a ValueError) at the first sample a dyad cannot
-    be closed, with the samples before it in ``.partial``.
-    """
-    r = roles(mech)
-    if r is None:
-        raise ValueError(f"{mech.name}: not a crank-driven Watt II six-bar")
-    return sixbar.solve(mech, times, r, NAME, "coupler")
+    """Closed-form kinematics over ``times`` (default: the file's [time]): :func:`validators.analytic.sixbar.solve`."""
+    return sixbar.solve(mech, times, roles(mech), (NAME, "Watt II six-bar", "coupler"))
