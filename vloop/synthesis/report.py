@@ -3,10 +3,10 @@
     candidates.csv        one row per candidate (solutions ranked first; defects named), empty cells for
                           quantities a candidate has not (a position it never reached)
     candidates.parquet    the same table, where pyarrow is installed
-    NAME_k.toml           each of the best ``files`` solutions: closed t = 0 coordinates, its [time] covering the
-                          working motion and every precision instant (listed in the header comment)
-    structural_error.png | path.png | poses.png   with ``plot``
-    NAME_k.html           with ``html``: the viewer page of each file, the targets drawn on it
+    NAME_k.toml           each of the best solutions (files=3 of them): closed t = 0 coordinates, its [time]
+                          covering the working motion and every precision instant (listed in the header comment)
+    structural_error.png | path.png | poses.png   with plot=True
+    NAME_k.html           with html=True: the viewer page of each file, the targets drawn on it
 
 Everything is written through one :class:`~vloop.output.OutputSet` (published together or not at all).
 """
