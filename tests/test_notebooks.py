@@ -1,10 +1,11 @@
 """Notebooks: the two example notebooks in docs/ run, and every result type shows itself in a notebook.
 
-* docs/lecture_fourbar.ipynb and docs/design_study.ipynb are stored without outputs and executed here with
-  nbclient (a real kernel); each asserts its own numbers against formulas written out in its cells (Norton's
-  closed form, the velocity loop, the instant centre as a line intersection, the transmission angle by the law
-  of cosines, the power balance, the crank-rocker's extreme transmission angles, Monte-Carlo against the
-  linearized σ), so a notebook that runs is a notebook whose numbers were checked.
+* docs/lecture_fourbar.ipynb and docs/design_study.ipynb are stored without outputs and executed here by the
+  command docs/notebooks.md gives (nbconvert, a real kernel); each asserts its own numbers against formulas
+  written out in its cells (Norton's closed form, the velocity loop, the instant centre as a line intersection,
+  the transmission angle by the law of cosines, the power balance, the crank-rocker's extreme transmission
+  angles, Monte-Carlo against the linearized σ), so a notebook that runs is a notebook whose numbers were
+  checked. The command that opens one (JupyterLab) is installed with the notebooks extra.
 * ``_repr_html_`` of Mechanism, Result, ForceResult and StudyResult: an HTML table whose numbers are the data's
   (ranges against numpy's min and max, Gruebler's M of the paper's eight-bar), every name escaped.
 * ``Result.to_pandas()``: the columns and their units (angles rad, lengths the file's).
@@ -12,8 +13,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
+import shlex
+import subprocess
+import sys
 import time
 from html.parser import HTMLParser
 from pathlib import Path
@@ -38,28 +43,50 @@ def test_there_are_two_notebooks_stored_without_outputs() -> None:
             assert "execution" not in cell.get("metadata", {}), path.name
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
-def test_the_notebook_runs_and_checks_its_numbers(path: Path) -> None:
-    nbformat = pytest.importorskip("nbformat", reason="pip install -e '.[notebooks]'")
-    nbclient = pytest.importorskip("nbclient", reason="pip install -e '.[notebooks]'")
+def _documented_commands() -> tuple[list[str], list[str]]:
+    """The two lines of docs/notebooks.md's shell block: (run both notebooks, open the lecture)."""
+    page = (ROOT / "docs" / "notebooks.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```sh\n(.*?)```", page, flags=re.S)
+    assert len(blocks) == 1, "docs/notebooks.md: one shell block with the two commands"
+    run, open_ = (shlex.split(line) for line in blocks[0].strip().splitlines())
+    return run, open_
+
+
+def test_the_documented_commands_run_both_notebooks_and_their_checks(tmp_path: Path) -> None:
+    """docs/notebooks.md's first command (nbconvert, a real kernel) executes both notebooks; each asserts its
+    own numbers against formulas written out in its cells, so a notebook that runs is one whose numbers were
+    checked. The outputs it writes hold what the cells print."""
+    pytest.importorskip("nbconvert", reason="pip install -e '.[notebooks]'")
     pytest.importorskip("ipykernel", reason="pip install -e '.[notebooks]'")
-    nb = nbformat.read(path, as_version=4)
+    run, _ = _documented_commands()
+    assert run[:4] == ["jupyter", "nbconvert", "--to", "notebook"] and run[-2:] == ["--output-dir", "out/notebooks"]
+    assert sorted(run[5:-2]) == sorted(f"docs/{p.name}" for p in NOTEBOOKS)
+    exe = Path(sys.executable).with_name("jupyter")
     start = time.perf_counter()
-    client = nbclient.NotebookClient(
-        nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": path.parent}}
-    )
-    client.execute()  # raises CellExecutionError, naming the cell, where one fails (its asserts included)
+    proc = subprocess.run([str(exe), *run[1:-1], str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]  # a failing cell (its asserts included) is named here
     seconds = time.perf_counter() - start
-    text = "".join(o.get("text", "") for c in nb.cells for o in c.get("outputs", []) if o["output_type"] == "stream")
-    html = "".join(
-        o.get("data", {}).get("text/html", "") for c in nb.cells for o in c.get("outputs", []) if "data" in o
-    )
-    if path.stem == "lecture_fourbar":
-        assert "by hand: θ3 = 20.2979°, θ4 = 57.3249°" in text and "power balance" in text
-        assert 'sandbox="allow-scripts"' in html and "<b>Result</b>" in html and "<b>ForceResult</b>" in html
-    else:
-        assert "rocker swing: nominal" in text and "StudyResult(" in html
-    print(f"{path.name}: {seconds:.1f} s")  # with the kernel's start; a few seconds each
+    for path in NOTEBOOKS:
+        nb = json.loads((tmp_path / path.name).read_text(encoding="utf-8"))
+        outputs = [o for c in nb["cells"] for o in c.get("outputs", [])]
+        text = "".join("".join(o.get("text", "")) for o in outputs if o["output_type"] == "stream")
+        html = "".join("".join(o.get("data", {}).get("text/html", "")) for o in outputs if "data" in o)
+        if path.stem == "lecture_fourbar":
+            assert "by hand: θ3 = 20.2979°, θ4 = 57.3249°" in text and "power balance" in text
+            assert 'sandbox="allow-scripts"' in html and "<b>Result</b>" in html and "<b>ForceResult</b>" in html
+        else:
+            assert "rocker swing: nominal" in text and "StudyResult(" in html
+    print(f"both notebooks: {seconds:.1f} s")  # with the kernels' start
+
+
+def test_the_documented_front_end_is_installed() -> None:
+    """docs/notebooks.md's second command opens a notebook in JupyterLab: its front end and its command are
+    installed with the notebooks extra (the server itself is not started here)."""
+    if importlib.util.find_spec("jupyterlab") is None:
+        pytest.skip("pip install -e '.[notebooks]'")
+    _, open_ = _documented_commands()
+    assert open_[:2] == ["jupyter", "lab"] and (ROOT / open_[2]).is_file()
+    assert Path(sys.executable).with_name("jupyter-lab").is_file()  # what `jupyter lab` runs
 
 
 # ---------------------------------------------------------------- rich display
