@@ -55,7 +55,9 @@ def one_clean_line(err: str) -> str:
 
 
 def finite_csv(path: Path) -> np.ndarray:
-    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    """The data rows of a written table; a run stopped before its first sample writes the header only (no rows)."""
+    header, *data = path.read_text(encoding="utf-8").splitlines()
+    rows = np.loadtxt(data, delimiter=",", ndmin=2) if data else np.empty((0, header.count(",") + 1))
     assert np.all(np.isfinite(rows)), f"{path} holds non-finite numbers"
     return rows
 
