@@ -4,7 +4,9 @@ is fetched from the network, and the key tables in it are the schemas' own.
 MkDocs' strict build checks the links written in the pages (validation settings in mkdocs.yml: links to
 missing pages and missing anchors are warnings, strict makes them errors). The built HTML is then read back
 to check what MkDocs does not: the links that the theme, the navigation and the API reference generate,
-and that every script, stylesheet and image is a file of the site (the site works offline).
+and that every script, stylesheet and image is a file of the site (the site works offline). The notebooks
+are pages with their outputs, the API pages show no raw reST, the tutorials lead the navigation, and search
+works with the site opened from disk (a headless browser).
 """
 
 from __future__ import annotations
@@ -171,3 +173,66 @@ def test_the_escaped_case_is_tested():
     """The five-cell test above meets a `|` inside a cell (else it would not test the escape)."""
     keys = [k for sections in SCHEMAS.values() for s in sections for k in s.keys]
     assert any("|" in text for k in keys for text in (k.name, k.type, k.default, k.unit, k.doc))
+
+
+def test_the_notebooks_are_pages_with_their_outputs(site):
+    """The example notebooks are executed at build time and shown with what their cells print and draw
+    (not linked as raw JSON): the lecture's hand check, its figures as images of the site, the viewer inline."""
+    lecture = (site / "lecture_fourbar.html").read_text(encoding="utf-8")
+    study = (site / "design_study.html").read_text(encoding="utf-8")
+    assert "by hand: θ3 = 20.2979°, θ4 = 57.3249°" in lecture and "power balance" in lecture
+    assert (
+        len(re.findall(r'<img [^>]*src="data:image/png;base64,', lecture)) >= 3 and 'sandbox="allow-scripts"' in lecture
+    )
+    assert "rocker swing: nominal" in study and "StudyResult(" in study
+    notebooks = (site / "notebooks.html").read_text(encoding="utf-8")
+    assert 'href="lecture_fourbar.html"' in notebooks and 'href="design_study.html"' in notebooks
+
+
+def test_the_api_pages_show_no_raw_markup(site):
+    """Docstrings' reST literals and Sphinx roles are rendered, never shown as ``text`` or :func:`text`."""
+    raw = []
+    for path in sorted((site / "api").glob("*.html")):
+        text = unescape(re.sub(r"<[^>]+>", "", path.read_text(encoding="utf-8")))
+        raw += [f"{path.name}: {m.group(0)}" for m in re.finditer(r"``[^`\n]+``|:(func|class|mod|meth|attr):`", text)]
+    assert not raw, raw[:10]
+
+
+def test_the_tutorials_lead_the_navigation():
+    """Four tutorials (student, instructor, designer, nightly user) under "Tutorials", first after Home."""
+    import yaml
+
+    class _Loader(yaml.SafeLoader):  # mkdocs.yml's !ENV and !!python tags, read as plain values
+        pass
+
+    _Loader.add_multi_constructor("!", lambda loader, suffix, node: None)
+    _Loader.add_multi_constructor("tag:yaml.org,2002:python/", lambda loader, suffix, node: None)
+    nav = yaml.load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"), Loader=_Loader)["nav"]
+    assert list(nav[1]) == ["Tutorials"], nav[1]
+    pages = [next(iter(entry.values())) for entry in nav[1]["Tutorials"]]
+    assert pages == [f"tutorials/{n}.md" for n in ("student", "instructor", "designer", "nightly")]
+
+
+def test_search_works_from_disk(site):
+    """Opened as a file (file://, no server), the search box finds pages: the offline plugin inlines the index
+    and the worker runs in an iframe (its shim is a file of the site); the browser fetches nothing from the
+    network. Chromium headless, as the other browser tests."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install -e '.[dev]'")
+    if not Path("/usr/bin/chromium").exists():
+        pytest.skip("Debian's chromium is not installed (.ci/run installs it)")
+    args = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update"]
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=args)
+        try:
+            page = browser.new_page()
+            requested: list[str] = []
+            page.on("request", lambda r: requested.append(r.url))
+            page.goto((site / "index.html").resolve().as_uri())
+            page.fill("input.md-search__input", "transmission")
+            page.wait_for_selector(".md-search-result__item", timeout=30_000)
+            found = page.locator(".md-search-result__item").all_inner_texts()
+        finally:
+            browser.close()
+    assert any("transmission" in item.lower() for item in found), found[:3]
+    outside = [u for u in requested if urlsplit(u).scheme not in ("file", "data", "blob", "about")]
+    assert not outside, outside
