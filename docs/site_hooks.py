@@ -8,10 +8,11 @@ pointed at a CDN (the site fetches nothing).
 from __future__ import annotations
 
 import re
+from typing import Any
 
 _EMPTY_SCRIPT = re.compile(r"<script src=\"\">\s*</script>")
 
 
-def on_post_page(output: str, page, config) -> str:  # noqa: ANN001 (MkDocs' hook signature)
+def on_post_page(output: str, page: Any, config: Any) -> str:
     """Drop every ``<script src="">`` (an empty address loads the page itself as a script)."""
     return _EMPTY_SCRIPT.sub("", output)
