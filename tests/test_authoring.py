@@ -9,8 +9,8 @@ References, independent of the authoring step:
   coordinates replaced by a hint off by up to ±20 % per coordinate, and every result column must agree
   to 1e-12 of its size;
 * for the Watt II written without any moving coordinate, hand geometry: every pin distance against the
-  stated lengths, the angle B–O4–C, the crank angle, and the open/crossed shape of both four-bars by a
-  segment-intersection test written out here;
+  stated lengths, the angle B–O4–C, the crank angle, and the side of each four-bar's diagonal its middle
+  joint lies on (the branch name), by a cross product written out here;
 * ambiguous and impossible dimension sets: refused with one line and exit code 2.
 """
 
@@ -156,8 +156,12 @@ def test_the_watt_six_bar_assembly_by_hand_geometry() -> None:
     def crossed(q: list[complex]) -> bool:
         return crosses(q[0], q[1], q[2], q[3]) or crosses(q[1], q[2], q[3], q[0])
 
-    assert not crossed([p["O2"], p["A"], p["B"], p["O4"]])  # loop 1 "open"
-    assert crossed([p["O4"], p["C"], p["D"], p["O6"]])  # loop 2 "crossed"
+    def left(a: complex, b: complex, m: complex) -> bool:  # m to the left of the line a→b
+        return ((b - a).conjugate() * (m - a)).imag > 0
+
+    assert not crossed([p["O2"], p["A"], p["B"], p["O4"]]) and left(p["A"], p["O4"], p["B"])  # loop 1 "open"
+    # loop 2 "open" (D left of C→O6) although its quadrilateral crosses itself at this instant
+    assert crossed([p["O4"], p["C"], p["D"], p["O6"]]) and left(p["C"], p["O6"], p["D"])
 
 
 # ---------------------------------------------------------------- vloop assemble: the round trip
@@ -214,7 +218,7 @@ def test_assemble_to_standard_output_and_its_refusals(tmp_path: Path, capsys) ->
         vloop.loads(captured.out.split("\n", 1)[1]).joints
         == vloop.load(MECHANISMS / "sixbar_watt2_dimensions.toml").joints
     )
-    assert "loop 2 (O4–C–D–O6): crossed (named)" in captured.err
+    assert "loop 2 (O4–C–D–O6): open (D left of C→O6) (named)" in captured.err
     assert main(["assemble", str(MECHANISMS / "eightbar.toml"), "--out", str(tmp_path / "x.toml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not written from dimensions (links.l2 has no length" in err

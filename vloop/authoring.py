@@ -29,7 +29,8 @@ from .compiler import compile_system, loop_system
 from .core.solver import close_at_start
 from .errors import MechanismError
 from .method.assembly import DEFAULT_ASSEMBLY_TOL, close_group, inputs_at_start
-from .method.loops import Block, Loop, LoopSystem, branch_name, term_values
+from .method.branches import NAMES, branch_sigma, dyad_branch
+from .method.loops import Block, LoopSystem, term_values
 from .method.structure import Structure, block_structure
 from .model import MassProperties, Mechanism, Slider, joint_mean, to_world
 
@@ -201,10 +202,13 @@ def _choose(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> t
         raise _cannot_close(system, block, why)
     known = set(system.drivers) | {v for b in blocks[: i + 1] for v in b.unknowns}
     placed = _placed(system, known, set(block.unknowns))
-    names = {s: _branch(system, out, loop, known) for s, out in cands.items()}
+    sides = {s: dyad_branch(system, dataclasses.replace(block, sigma=s), out, blocks) for s, out in cands.items()}
+    names = {s: b.name if b else None for s, b in sides.items()}
     wanted = mech.options.get("branches", {}).get(loop.index + 1)
+    if wanted in NAMES:
+        branch_sigma(system, block, wanted, blocks)  # refused where the names do not apply to this dyad
     sigma, how = _pick(system, cands, names, placed, wanted, block)
-    branch = names[sigma] or f"assembly σ = {sigma:+.0f}"
+    branch = sides[sigma].text() if sides[sigma] else f"assembly σ = {sigma:+.0f}"
     return dataclasses.replace(block, sigma=sigma), cands[sigma], Choice(loop.index + 1, loop.label, branch, how)
 
 
@@ -219,15 +223,9 @@ def _pick(
     """The branch σ and why: the name asked for, else the hints ("keep" the nearer, "flip" the other)."""
     mech, li = system.mechanism, block.loops[0]
     where = f"{mech.source}: [solver] branches: loop {li + 1} ({system.loops[li].label})"
-    if wanted in ("open", "crossed"):
-        if all(n is None for n in names.values()):
-            raise MechanismError(
-                f"{where} is not a four-joint loop: 'open'/'crossed' name a four-bar's branches; give rough "
-                "coordinates of its joints instead",
-                entry="solver",
-            )
+    if wanted in NAMES:
         hit = [s for s, n in names.items() if n == wanted]
-        if not hit:
+        if len(hit) != 1:  # none, or (at a toggle, the middle joint on the line) no side to tell
             raise MechanismError(f"{where} cannot be assembled {wanted} at t = 0", entry="solver")
         return hit[0], "named"
     if len(cands) == 1:
@@ -306,15 +304,6 @@ def _distance(system: LoopSystem, q: np.ndarray, points: list[int]) -> float:
     return float(
         sum(abs(p - complex(*mech.joints[system.point_names[k]])) ** 2 for p, k in zip(z, points, strict=True))
     )
-
-
-def _branch(system: LoopSystem, q: np.ndarray, loop: Loop, known: set[int]) -> str | None:
-    """ "open" or "crossed" for a four-joint loop whose joints the known variables place, else None."""
-    needs = _point_vars(system)
-    on_loop = {j for _, j in loop.nodes} & set(system.point_names)
-    if any(not needs[system.point_names.index(j)] <= known for j in on_loop):
-        return None
-    return branch_name(system, q, loop)
 
 
 # ---------------------------------------------------------------- the closed mechanism

@@ -344,8 +344,8 @@ def _info_mobility(system: Any) -> list[str]:
 
 
 def _info_loops(system: Any) -> list[str]:
+    from .method.branches import dyad_branch
     from .method.equations import grashof
-    from .method.loops import branch_name
 
     mech = system.mechanism
     L, J, _ = mech.gruebler()
@@ -355,9 +355,10 @@ def _info_loops(system: Any) -> list[str]:
     for b in system.blocks:
         if b.kind in ("RRR", "RRP", "RPR"):
             lp = system.loops[b.loops[0]]
-            name = branch_name(system, system.q0, lp)
+            branch = dyad_branch(system, b, system.q0)
             lines.append(
-                f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}{f' ({name})' if name else ''}"
+                f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}"
+                f"{f': {branch.text()}' if branch else ''}"
             )
     for li, cls, (g, p1, c, p2) in grashof(system):
         lines.append(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")

@@ -19,8 +19,9 @@ import numpy as np
 from .core.solver import assemble_blocks
 from .errors import MechanismError
 from .method.assembly import assemble, moved
+from .method.branches import NAMES, branch_sigma
 from .method.graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
-from .method.loops import Block, LoopSystem, branch_name
+from .method.loops import Block, LoopSystem
 from .method.structure import Structure, analyse, block_structure
 from .model import Body, Mechanism
 
@@ -114,17 +115,9 @@ def _choose_branches(
                 "assembly branches",
                 entry="solver",
             )
-        flip = choice == "flip"
-        if choice in ("open", "crossed"):
-            now = branch_name(sys, q0, sys.loops[li])
-            if now is None:
-                raise MechanismError(
-                    f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a four-joint "
-                    "loop; 'open'/'crossed' name a four-bar's branches — use 'flip' or 'keep'",
-                    entry="solver",
-                )
-            flip = now != choice
-        if flip:
+        if choice in NAMES:
+            new[i] = dataclasses.replace(blocks[i], sigma=branch_sigma(sys, blocks[i], choice, blocks))
+        elif choice == "flip":
             new[i] = dataclasses.replace(blocks[i], sigma=-blocks[i].sigma)
     if new == list(blocks):
         return blocks, q0, report

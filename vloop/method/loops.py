@@ -28,7 +28,6 @@ __all__ = [
     "LoopGroup",
     "LoopSystem",
     "TermIndex",
-    "branch_name",
     "loop_jacobian",
     "loop_polygon",
     "loop_residual",
@@ -207,19 +206,3 @@ def loop_polygon(sys: LoopSystem, q: np.ndarray, loop: Loop) -> list[complex]:
     if len(pts) > 1 and abs(pts[0] - pts[-1]) <= tol:
         pts.pop()
     return pts
-
-
-def _segments_cross(a: complex, b: complex, c: complex, d: complex) -> bool:
-    def orient(p: complex, q: complex, r: complex) -> float:
-        return ((q - p).conjugate() * (r - p)).imag
-
-    return orient(a, b, c) * orient(a, b, d) < 0 and orient(c, d, a) * orient(c, d, b) < 0
-
-
-def branch_name(sys: LoopSystem, q: np.ndarray, loop: Loop) -> str | None:
-    """ "open" or "crossed" for a loop of four joints (a four-bar's quadrilateral), else None."""
-    pts = loop_polygon(sys, q, loop)
-    if len(pts) != 4:
-        return None
-    crossed = _segments_cross(pts[0], pts[1], pts[2], pts[3]) or _segments_cross(pts[1], pts[2], pts[3], pts[0])
-    return "crossed" if crossed else "open"
