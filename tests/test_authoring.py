@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 import vloop
+from vloop.authoring import assemble_mechanism
 from vloop.cli import main
 from vloop.files.fileformat import to_dict
 from vloop.mechanism import loads as read_only
@@ -181,7 +182,73 @@ def test_assemble_writes_a_file_that_loads_to_the_same_mechanism(stem: str, tmp_
     first, again = vloop.load(path), vloop.load(fixed)
     _same_numbers(to_dict(first), to_dict(again), 1e-15 * first.scale)
     assert _worst(vloop.solve(first), vloop.solve(again), first.scale) <= 1e-14
-    assert vloop.dumps(vloop.load(fixed)) == fixed.read_text(encoding="utf-8").split("\n", 1)[1]  # a fixed point
+    again_text = fixed.read_text(encoding="utf-8")
+    assert main(["assemble", str(fixed), "--out", str(tmp_path / "again.toml")]) == 0  # a fixed point: the same text
+    assert (tmp_path / "again.toml").read_text(encoding="utf-8").split("\n", 1)[1] == again_text.split("\n", 1)[1]
+
+
+WITH_COMMENTS = """# A four-bar from its dimensions, commented as a user writes it.
+name = "commented"   # the name
+units = "mm"
+
+[joints]          # ground pivots, and a rough B
+O2 = [0, 0]       # crank pivot, as integers
+O4 = [7.0, 0.0]
+B = [6, 5]        # rough: the assembly moves it
+
+[links]
+ground = { joints = ["O2", "O4"], ground = true }
+l2 = { joints = ["O2", "A"], length = 2.0 }   # crank
+l3 = { joints = ["A", "B"], length = 6.0 }
+l4 = { joints = ["O4", "B"], length = 5.0 }
+
+[[drivers]]
+link = "l2"
+theta0 = 1.0471975511965976   # 60 deg
+omega = 3.0
+
+[time]            # one turn, as a range (never a list of 201 times)
+start = 0.0
+stop = 2.0
+step = 0.01
+
+[solver]
+tol = 1e-12
+branches = { 1 = "crossed" }   # the other assembly than the hint's
+"""
+
+
+def test_assemble_keeps_the_users_text(tmp_path: Path, capsys) -> None:
+    """Comments, [time] as a range and every other line survive; only the moving joints' coordinates change (A
+    added, B closed), [solver] branches is taken out with a comment; the file re-reads to the same Mechanism as the
+    assembly, and B is the crossed one (right of A→O4, by hand)."""
+    src = tmp_path / "commented.toml"
+    src.write_text(WITH_COMMENTS, encoding="utf-8")
+    fixed = tmp_path / "fixed.toml"
+    assert main(["assemble", str(src), "--out", str(fixed)]) == 0
+    capsys.readouterr()
+    text = fixed.read_text(encoding="utf-8")
+    old, new = WITH_COMMENTS.splitlines(), text.splitlines()[1:]
+    assert text.splitlines()[0].startswith("# commented: assembled at t = 0 by vloop assemble")
+    changed = [line for line in old if line not in new]
+    assert changed == [
+        "B = [6, 5]        # rough: the assembly moves it",
+        'branches = { 1 = "crossed" }   # the other assembly than the hint\'s',
+    ]
+    added = [line for line in new if line not in old]
+    assert len(added) == 3 and added[0].startswith("B = [") and added[0].endswith("# rough: the assembly moves it")
+    assert added[1].startswith("A = [") and added[2].startswith('# branches = { 1 = "crossed" }')
+    assert (
+        "[time]            # one turn, as a range (never a list of 201 times)\nstart = 0.0\nstop = 2.0\nstep = 0.01\n"
+        in text
+    )
+    closed, _ = assemble_mechanism(read_only(WITH_COMMENTS, source=str(src)))
+    again = read_only(text, source=str(src))
+    assert again.options == {"tol": 1e-12} and closed.options == again.options  # branches: now in the coordinates
+    assert to_dict(again) == to_dict(closed) and np.array_equal(again.times, closed.times)
+    a, b, o4 = (complex(*again.joints[j]) for j in ("A", "B", "O4"))
+    assert ((o4 - a).conjugate() * (b - a)).imag < 0  # B right of A→O4: crossed
+    assert vloop.load(fixed).joints == again.joints  # loading assembles it again: nothing moves
 
 
 def _as_hints(text: str, mech: vloop.Mechanism) -> str:

@@ -355,3 +355,33 @@ def _check_inputs(mech: Mechanism, report: Assembly) -> None:
                 f"more than assembly_tolerance = {tol / mech.scale:g} of the size)",
                 entry=d.entry,
             )
+
+
+# ---------------------------------------------------------------- the closed mechanism as the user's text
+
+
+def closed_text(source: str, closed: Mechanism) -> str:
+    """The file's own text (``source``) with the coordinates of ``closed`` (:func:`assemble_mechanism`'s): every
+    moving joint's coordinates replaced where they are written (a joint without any added to ``[joints]``), ``[solver]
+    branches`` taken out (the coordinates now hold the branches; a comment says so); every other line, comment
+    and layout as written (tomlkit keeps them)."""
+    import tomlkit
+
+    doc = tomlkit.parse(source)
+    joints = doc["joints"]
+    ground = set(closed.links[closed.ground].joints)  # as given: the text stays as written
+    for name, (x, y) in closed.joints.items():
+        if name in ground:
+            continue
+        new = tomlkit.array([float(x), float(y)])
+        if name in joints:
+            old = joints[name]
+            new.trivia.comment_ws, new.trivia.comment = old.trivia.comment_ws, old.trivia.comment
+        joints[name] = new
+    solver = doc.get("solver")
+    if solver is not None and "branches" in solver:
+        named = ", ".join(f'{k} = "{v}"' for k, v in solver["branches"].items())
+        del solver["branches"]
+        solver.add(tomlkit.comment(f"branches = {{ {named} }} was assembled by vloop assemble: now in the coordinates"))
+    text = tomlkit.dumps(doc)
+    return text if text.endswith("\n") else text + "\n"

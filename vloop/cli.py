@@ -409,10 +409,10 @@ def cmd_corpus(args: argparse.Namespace) -> int:
 def cmd_assemble(args: argparse.Namespace) -> int:
     """A file written from dimensions, assembled at t = 0 and written back with closed coordinates (to --out, else
     to standard output); how each dyad's branch was chosen is printed."""
-    from .authoring import assemble_mechanism
+    from .authoring import assemble_mechanism, closed_text
     from .errors import MechanismError
     from .files.dimensions import missing_dimensions
-    from .files.fileformat import dumps, load
+    from .files.fileformat import load
     from .files.output import write_text
 
     draft = load(args.file, allow_external_profiles=args.allow_external_profiles)
@@ -424,7 +424,11 @@ def cmd_assemble(args: argparse.Namespace) -> int:
             entry="file",
         )
     closed, report = assemble_mechanism(draft)
-    text = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n{dumps(closed)}"
+    head = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n"
+    source = Path(args.file).read_text(encoding="utf-8")
+    first, _, rest = source.partition("\n")
+    own = first.startswith(f"# {closed.name}: assembled at t = 0 by vloop assemble from ")  # from an earlier run
+    text = head + closed_text(rest if own else source, closed)
     lines = [f"{closed.name}: {line}" for line in report.lines(closed.units)]
     if args.out is None:
         print(text, end="")
