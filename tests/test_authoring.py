@@ -16,6 +16,7 @@ References, independent of the authoring step:
 
 from __future__ import annotations
 
+import cmath
 import copy
 import dataclasses
 import math
@@ -548,3 +549,103 @@ def test_points_and_centres_of_mass_given_in_their_body_s_frame() -> None:
     data["points"]["A"] = data["points"].pop("P")  # a point named like a joint without coordinates
     with pytest.raises(vloop.MechanismError, match="duplicate name: 'A' is also a joint"):
         vloop.from_dict(data)
+
+
+# ---------------------------------------------------------------- a Newton block: the assembly nearest the hints
+
+S3 = MECHANISMS / "sixbar_stephenson3_output_driven.toml"
+
+
+def _stephenson_assemblies() -> list[dict[str, complex]]:
+    """Every t = 0 assembly of the output-driven Stephenson III, enumerated by hand: D is fixed by the output rocker;
+    for the crank angle θ2 over a turn, A = O2 + a·e^{jθ2}, B the dyad A–B–O4 on either side (two circles), C on the
+    coupler (C − A = ρ·(B − A), ρ read from the drawing); the roots of |C − D| − l5 (sign changes on 20,000 angles,
+    then brentq) are the assemblies."""
+    from scipy.optimize import brentq
+
+    m = vloop.load(S3)
+    p = {j: complex(*xy) for j, xy in m.joints.items()}
+    a, b, c, l5 = abs(p["A"] - p["O2"]), abs(p["B"] - p["A"]), abs(p["B"] - p["O4"]), abs(p["D"] - p["C"])
+    rho = (p["C"] - p["A"]) / (p["B"] - p["A"])
+
+    def joints(th: float, side: float) -> dict[str, complex] | None:
+        A = p["O2"] + a * cmath.exp(1j * th)
+        d = abs(p["O4"] - A)
+        x = (b * b - c * c + d * d) / (2 * d)
+        if b * b - x * x < 0:
+            return None
+        u = (p["O4"] - A) / d
+        B = A + u * (x + side * 1j * math.sqrt(b * b - x * x))
+        return {"A": A, "B": B, "C": A + rho * (B - A)}
+
+    def f(th: float, side: float) -> float:
+        j = joints(th, side)
+        return math.nan if j is None else abs(j["C"] - p["D"]) - l5
+
+    out = []
+    grid = np.linspace(-math.pi, math.pi, 20_001)
+    for side in (1.0, -1.0):
+        vals = [f(t, side) for t in grid]
+        for t0, t1, f0, f1 in zip(grid, grid[1:], vals, vals[1:], strict=False):
+            if math.isfinite(f0) and math.isfinite(f1) and f0 * f1 < 0:
+                out.append(joints(brentq(f, t0, t1, args=(side,), xtol=1e-15), side))
+    return out
+
+
+def _hinted(seed: int, spread: float) -> dict:
+    global HINT
+    old, HINT = HINT, spread
+    try:
+        return dimensions_only(S3, np.random.default_rng(seed))
+    finally:
+        HINT = old
+
+
+def _check_nearest(data: dict, by_hand: list[dict[str, complex]]) -> str:
+    """'accepted' (the assembly taken is the hand enumeration's nearest) or 'refused' (a near tie by the hand's count)."""
+    import tomli_w
+
+    hints = {j: complex(*data["joints"][j]) for j in ("A", "B", "C")}
+    dist = sorted((math.sqrt(sum(abs(s[j] - hints[j]) ** 2 for j in hints)), i) for i, s in enumerate(by_hand))
+    ratio = dist[1][0] / dist[0][0]
+    try:
+        closed, report = assemble_mechanism(read_only(tomli_w.dumps(data), source="s3"))
+    except vloop.MechanismError as exc:
+        assert ratio < 1.5 + 1e-9 and "less than 1.5 times as far" in str(exc), (ratio, str(exc))
+        return "refused"
+    assert ratio >= 1.5 - 1e-9, ratio
+    nearest = by_hand[dist[0][1]]
+    assert max(abs(complex(*closed.joints[j]) - nearest[j]) for j in nearest) <= 1e-9 * closed.scale
+    line = report.lines(closed.units)[0]
+    assert line.startswith(f"loops 1 (O2–A–B–O4) and 2 (O2–A–C–D–O6): assembly 1 of {len(by_hand)} found")
+    assert f"nearest the coordinates: {dist[0][0]:.3g} m against {dist[1][0]:.3g}" in line
+    return "accepted"
+
+
+@pytest.mark.parametrize(("spread", "seeds"), [(0.1, range(3)), (0.2, range(3))])
+def test_a_newton_block_takes_the_assembly_nearest_the_hints(spread: float, seeds: range) -> None:
+    """Hints off by up to ±10 % and ±20 %: every assembly accepted is the nearest of all (hand enumeration above:
+    2 assemblies), every refusal a near tie (the next nearest less than 1.5 times as far)."""
+    by_hand = _stephenson_assemblies()
+    assert len(by_hand) == 2
+    drawn = vloop.load(S3).joints
+    assert min(max(abs(s[j] - complex(*drawn[j])) for j in s) for s in by_hand) <= 1e-12 * 10  # the drawn one
+    for seed in seeds:
+        _check_nearest(_hinted(seed, spread), by_hand)
+
+
+@pytest.mark.slow
+def test_a_newton_block_over_many_draws() -> None:
+    by_hand = _stephenson_assemblies()
+    for spread in (0.1, 0.2):
+        verdicts = [_check_nearest(_hinted(seed, spread), by_hand) for seed in range(20)]
+        print(f"±{spread:.0%}: {verdicts.count('accepted')} accepted, {verdicts.count('refused')} refused of 20")
+
+
+def test_hints_half_way_between_two_assemblies_are_refused() -> None:
+    by_hand = _stephenson_assemblies()
+    data = _hinted(0, 0.0)
+    for j in ("A", "B", "C"):
+        mid = (by_hand[0][j] + by_hand[1][j]) / 2
+        data["joints"][j] = [mid.real, mid.imag]
+    assert _check_nearest(data, by_hand) == "refused"

@@ -9,7 +9,10 @@ closed forms (:func:`vloop.core.solver.close_at_start`), group by group in solvi
   "crossed" for a four-joint loop; "keep" / "flip" relative to the hints), else the one nearer the hinted joints
   it places (the sum of squared distances); with neither, the file is ambiguous and refused, naming the key to
   add; where neither assembly exists, the dimensions cannot close and the file is refused;
-* a block of coupled loops (Newton) starts from the hints (they must be given) and must converge.
+* a block of coupled loops (Newton) needs hints: every assembly Newton finds from them and from 512 seeded starts
+  is listed, and the one nearest the hints taken (root-sum-square distance over the hinted joints the block places);
+  refused where none closes, or where the next nearest is less than 1.5 times as far (the hints do not tell the two
+  apart). The report names it ("assembly 1 of n found") and both distances.
 
 The result is the same Mechanism with its coordinates closed to round-off (the ground's as given), slider axes
 at their t = 0 directions, points and centres of mass where their bodies carry them; the branches it was asked
@@ -28,7 +31,7 @@ import numpy as np
 from .compiler import compile_system, loop_system
 from .core.solver import close_at_start
 from .errors import MechanismError
-from .method.assembly import DEFAULT_ASSEMBLY_TOL, close_group, inputs_at_start
+from .method.assembly import DEFAULT_ASSEMBLY_TOL, STARTS, assemblies, inputs_at_start
 from .method.branches import NAMES, branch_sigma, dyad_branch
 from .method.loops import Block, LoopSystem, term_values
 from .method.structure import Structure, block_structure
@@ -40,13 +43,19 @@ TIE = 1e-12  # two assemblies whose squared distances to the hints differ by les
 
 @dataclass
 class Choice:
-    """How one dyad's assembly was chosen: its loop (number from 1), the branch name ("open"/"crossed", or "σ = ±1"
-    where the loop has no four joints) and why ("named", "nearest the hints", "the only assembly")."""
+    """How one block's assembly was chosen: its loop (number from 1; ``others``: the further loops of a Newton block,
+    (number, label) each), the branch (a dyad's name and side, or "σ = ±1"; a Newton block's "assembly k of n
+    found") and why ("named", "nearest the hints", "the only assembly")."""
 
     loop: int
     label: str
     branch: str
     why: str
+    others: tuple[tuple[int, str], ...] = ()
+
+    def text(self) -> str:
+        loops = [f"{self.loop} ({self.label})", *(f"{n} ({label})" for n, label in self.others)]
+        return f"loop{'s' if self.others else ''} {' and '.join(loops)}: {self.branch} ({self.why})"
 
 
 @dataclass
@@ -60,7 +69,7 @@ class Assembly:
 
     def lines(self, units: str) -> list[str]:
         """The report as text, one line per dyad and one for the hints."""
-        out = [f"loop {c.loop} ({c.label}): {c.branch} ({c.why})" for c in self.choices]
+        out = [c.text() for c in self.choices]
         if self.moved:
             worst = max(self.moved, key=self.moved.__getitem__)
             out.append(f"hinted joints moved by up to {self.moved[worst]:.4g} {units} ({worst})")
@@ -94,7 +103,7 @@ def _dyad_by_dyad(system: LoopSystem, structure: Structure, report: Assembly) ->
     _check_branches(system, blocks)
     for i, block in enumerate(blocks):
         if block.kind == "newton":
-            _newton(system, block, q)
+            report.choices.append(_newton(system, blocks, q, i))
         elif block.kind == "PP":
             q = _close(system, blocks, q, i)
         else:
@@ -155,9 +164,16 @@ def _cannot_close(system: LoopSystem, block: Block, why: str) -> MechanismError:
     )
 
 
-def _newton(system: LoopSystem, block: Block, q: np.ndarray) -> None:
-    """A block of coupled loops, closed by the assembly's Newton from the hints (which it needs)."""
-    mech = system.mechanism
+TIE_RATIO = 1.5  # a Newton block's second-nearest assembly less than this many times as far as the nearest: refused
+
+
+def _newton(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> Choice:
+    """A block of coupled loops: every assembly Newton finds from the hints and from many starts
+    (:func:`vloop.method.assembly.assemblies`), the one nearest the hints taken (root-sum-square distance over the
+    hinted joints the block places, those where the assemblies differ), written into ``q``; refused where none
+    closes, or where the next nearest is less than :data:`TIE_RATIO` times as far (the hints do not tell them
+    apart)."""
+    block, mech = blocks[i], system.mechanism
     labels = ", ".join(f"{li + 1} ({system.loops[li].label})" for li in block.loops)
     unhinted = sorted({j for v in block.unknowns for j in _defining_joints(system, v) if j in mech.unplaced})
     if unhinted:
@@ -166,12 +182,43 @@ def _newton(system: LoopSystem, block: Block, q: np.ndarray) -> None:
             f"coordinates: give rough coordinates of {', '.join(unhinted)}",
             entry="joints",
         )
-    if not close_group(system, list(block.loops), list(block.unknowns), q):
+    found = assemblies(system, list(block.loops), list(block.unknowns), q)
+    if not found:
         raise MechanismError(
-            f"{mech.source}: [joints] loops {labels} do not close from the coordinates given: the dimensions "
-            "cannot close there, or the coordinates are too far from an assembly (give closer ones)",
+            f"{mech.source}: [joints] loops {labels} do not close: no assembly found from the coordinates or from "
+            f"{STARTS} other starts; check the dimensions",
             entry="joints",
         )
+    known = set(system.drivers) | {v for b in blocks[: i + 1] for v in b.unknowns}
+    dist = _hint_distances(system, found, _placed(system, known, set(block.unknowns)))
+    order = sorted(range(len(found)), key=dist.__getitem__)
+    best = order[0]
+    first, *rest = (system.loops[li] for li in block.loops)
+    choice = Choice(first.index + 1, first.label, f"assembly 1 of {len(found)} found", "the only assembly found",
+                    tuple((lp.index + 1, lp.label) for lp in rest))  # fmt: skip
+    if len(found) > 1:
+        near, next_ = dist[best], dist[order[1]]
+        if next_ < TIE_RATIO * near:
+            raise MechanismError(
+                f"{mech.source}: [joints] loops {labels} have {len(found)} assemblies at t = 0 and the coordinates are "
+                f"about as near two of them ({near:.3g} and {next_:.3g} {mech.units}: less than {TIE_RATIO:g} times "
+                "as far): give closer coordinates of the joints they place",
+                entry="joints",
+            )
+        choice.why = f"nearest the coordinates: {near:.3g} {mech.units} against {next_:.3g} for the next"
+    q[:] = found[best]
+    return choice
+
+
+def _hint_distances(system: LoopSystem, found: list[np.ndarray], placed: list[int]) -> list[float]:
+    """Root-sum-square distance of each assembly from the hints, over the hinted joints in ``placed`` whose position
+    differs between the assemblies (a joint all of them put at one place tells nothing)."""
+    mech = system.mechanism
+    hinted = [k for k in placed if system.point_names[k] in mech.joints and system.point_names[k] not in mech.unplaced]
+    pos = np.array([term_values(system, row) @ system.path[:, hinted] for row in found]).reshape(len(found), -1)
+    moving = np.ptp(np.abs(pos - pos[0]), axis=0) > 1e-9 * mech.scale if len(found) > 1 else np.ones(len(hinted), bool)
+    hints = np.array([complex(*mech.joints[system.point_names[k]]) for k in hinted])
+    return [float(math.sqrt(np.sum(np.abs(p - hints)[moving] ** 2))) for p in pos]
 
 
 def _defining_joints(system: LoopSystem, v: int) -> tuple[str, ...]:

@@ -15,7 +15,7 @@ import numpy as np
 from ..drivers import evaluate
 from ..errors import MechanismError
 from ..model import Mechanism, mobility_message
-from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
+from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, loop_terms, term_values
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size
@@ -206,6 +206,56 @@ def close_group(sys: LoopSystem, loops: list[int], unknowns: list[int], q: np.nd
     _close(g, q, unknowns)
     F = np.abs(g.residual(g.at(q)[0]))
     return bool(np.all(np.isfinite(F)) and F.max(initial=0.0) <= CLOSED * sys.mechanism.scale)
+
+
+STARTS = 512  # random starts besides the given one, for the assemblies of a group (seeded: the same every time)
+
+
+def assemblies(system: LoopSystem, loops: list[int], unknowns: list[int], q: np.ndarray) -> list[np.ndarray]:
+    """The assemblies of ``loops`` in ``unknowns`` (the other variables as in ``q``) that Newton finds from ``q`` and
+    from :data:`STARTS` seeded random starts (angles uniform over a turn, slides within twice the size of ``q``'s):
+    every configuration closed to 1e-11 of the size, each once (angles compared modulo 2π, to 1e-7), the one
+    reached from ``q`` first where it closes. Newton from many starts is not a proof that none is missed."""
+    mech, na = system.mechanism, system.n_angles
+    cols = np.asarray(unknowns)
+    rng = np.random.default_rng(0)
+    starts = np.repeat(q[None, :], STARTS + 1, axis=0)
+    angle = cols < na
+    starts[1:, cols[angle]] = rng.uniform(-math.pi, math.pi, (STARTS, int(angle.sum())))
+    slides = cols[~angle]
+    starts[1:, slides] = q[slides] + rng.uniform(-2, 2, (STARTS, len(slides))) * mech.scale
+    near = _newton_many(system, loops, cols, starts)
+    distinct: list[np.ndarray] = []
+    for row in near:
+        diff = row[cols] - np.array([d[cols] for d in distinct]).reshape(-1, len(cols))
+        diff[:, angle] = np.angle(np.exp(1j * diff[:, angle]))
+        diff[:, ~angle] /= mech.scale
+        if not np.any(np.all(np.abs(diff) <= 1e-7, axis=1)):
+            distinct.append(row)
+    return [row for row in distinct if close_group(system, loops, list(cols), row)]  # polished in place
+
+
+def _newton_many(system: LoopSystem, loops: list[int], cols: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """Newton (60 steps, each angle's step limited to 1 rad) on ``loops`` for the variables ``cols`` from every row
+    of ``rows`` at once: the rows it closed to 1e-9 of the size, in their order."""
+    k = loop_terms(system, loops)
+    Cg = system.C[np.ix_(loops, k)]
+    na = system.n_angles
+    ang, sl = system.t_ang[k], system.t_sl[k]
+    on_angle = ang[:, None] == cols[None, :]
+    on_slider = (sl[:, None] == cols[None, :] - na) & (cols[None, :] >= na)
+    q = rows.copy()
+    for _ in range(60):
+        z = term_values(system, q, k)
+        e = np.exp(1j * (np.concatenate([q[:, :na], np.zeros((len(q), 1))], axis=1)[:, ang] + system.t_delta[k]))
+        F = z @ Cg.T
+        J = np.einsum("lt,ntc->nlc", Cg, (1j * z)[:, :, None] * on_angle + e[:, :, None] * on_slider)
+        J = np.concatenate((J.real, J.imag), axis=1)
+        step = np.einsum("ncr,nr->nc", np.linalg.pinv(J), -np.concatenate((F.real, F.imag), axis=1))
+        step[:, cols < na] = np.clip(step[:, cols < na], -1.0, 1.0)
+        q[:, cols] += np.where(np.isfinite(step), step, 0.0)
+    F = np.abs(term_values(system, q, k) @ Cg.T).max(axis=1)
+    return [row for row, f in zip(q, F, strict=True) if f <= 1e-9 * system.mechanism.scale]
 
 
 def _max_abs(xs: list[float]) -> float:
