@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MechanismError
-from .loops import ORIGIN, Block, LoopSystem, term_values
+from .loops import ORIGIN, Block, LoopSystem, term_values, turning_with
 
 __all__ = ["CROSSED", "NAMES", "ON_LINE", "OPEN", "DyadBranch", "branch_name", "branch_sigma", "dyad_branch"]
 
@@ -107,11 +107,11 @@ def _known_at(system: LoopSystem, blocks: Sequence[Block], body: str | None) -> 
     mech = system.mechanism
     if body is None or body == mech.ground:
         return -2
-    na = system.n_angles
+    n_angles = system.n_angles
     if body in system.angle_links:
         v = system.angle_links.index(body)
     elif body in system.slider_names:
-        v = na + system.slider_names.index(body)
+        v = n_angles + system.slider_names.index(body)
     else:
         return -2
     if v in system.drivers:
@@ -124,10 +124,8 @@ def _sides(system: LoopSystem, block: Block, q: np.ndarray) -> float:
     ``q``: the sign of Im(conj(u1 + u2)·u1), u1, u2 the loop's vectors turning with the two links (traversed
     either way, the same sign), as the closed form's σ."""
     loop = system.loops[block.loops[0]]
-    z = term_values(system, np.asarray(q, float), np.asarray(loop.terms))
-    a1, a2 = block.unknowns
-    u1 = complex(sum(s * zt for t, s, zt in zip(loop.terms, loop.signs, z, strict=True) if system.t_ang[t] == a1))
-    u2 = complex(sum(s * zt for t, s, zt in zip(loop.terms, loop.signs, z, strict=True) if system.t_ang[t] == a2))
+    z = term_values(system, np.asarray(q, float))
+    u1, u2 = (turning_with(system, loop, z, a) for a in block.unknowns)
     c = (np.conj(u1 + u2) * u1).imag
     if not abs(c) > ON_LINE * abs(u1 + u2) * abs(u1):
         return 0.0
@@ -158,9 +156,9 @@ def branch_name(system: LoopSystem, block: Block, q: np.ndarray, blocks: Sequenc
     if b is None or not b.four_joints:
         return None
     if b.name is None:  # on the line
-        lp = system.loops[block.loops[0]]
+        loop = system.loops[block.loops[0]]
         raise MechanismError(
-            f"{system.mechanism.source}: loop {lp.index + 1} ({lp.label}): {b.text()} (a toggle): neither "
+            f"{system.mechanism.source}: loop {loop.index + 1} ({loop.label}): {b.text()} (a toggle): neither "
             "open nor crossed",
             entry="solver",
         )
@@ -170,14 +168,14 @@ def branch_name(system: LoopSystem, block: Block, q: np.ndarray, blocks: Sequenc
 def branch_sigma(system: LoopSystem, block: Block, name: str, blocks: Sequence[Block] | None = None) -> float:
     """The assembly sign σ of ``block`` that puts its dyad on the branch ``name`` ("open" or "crossed"); a
     MechanismError naming the loop where the names do not apply to it."""
-    lp = system.loops[block.loops[0]]
-    where = f"{system.mechanism.source}: [solver] branches: loop {lp.index + 1} ({lp.label})"
+    loop = system.loops[block.loops[0]]
+    where = f"{system.mechanism.source}: [solver] branches: loop {loop.index + 1} ({loop.label})"
     ends = _ends(system, block, blocks)
     if name not in NAMES:
         raise MechanismError(f"{where}: '{name}' is not a branch name (open, crossed)", entry="solver")
     if ends is None or not ends.four_joints:
         why = "is not a four-joint loop's RRR dyad"
-        if block.kind == "RRR" and len(lp.label.split("–")) == 4:
+        if block.kind == "RRR" and len(loop.label.split("–")) == 4:
             why = "has no input side (neither end of its dyad is known before the other)"
         raise MechanismError(
             f"{where} {why}; 'open'/'crossed' name a four-bar's branches — use 'flip' or 'keep', or hint the joints",
