@@ -31,7 +31,9 @@ from vloop.mechanism import loads as read_only
 from vloop.method.branches import branch_name, branch_sigma, dyad_branch
 
 SAME = 1e-9  # of the size: the drawn assembly reproduced (the closed forms reassemble it to ~1e-14)
-LINE = re.compile(r"loop (\d+) assembly branch at t = 0: sigma = [+-]1: (open|crossed) \((\w+) (left|right) of")
+LINE = re.compile(
+    r"loop (\d+) assembly branch at t = 0: sigma = [+-]1: (open|crossed) \((\w+) (left|right) of (\w+)→(\w+)\)"
+)
 
 
 class _Exact:
@@ -151,8 +153,20 @@ def test_names_refused_where_they_do_not_apply() -> None:
 
 
 def _printed(system: vloop.LoopSystem) -> dict[int, tuple[str, str]]:
-    """loop number → (name, middle joint), as `vloop info` prints them."""
-    return {int(m[1]): (m[2], m[3]) for line in _info_loops(system) if (m := LINE.search(line))}
+    """loop number → (name, middle joint), as `vloop info` prints them; each checked against the drawing: the side
+    printed is the side of the line the middle joint lies on, "open" the left, and a ground pivot is the line's end
+    (the frame side) wherever one of the two ends is one."""
+    mech = system.mechanism
+    ground = set(mech.links[mech.ground].joints)
+    out = {}
+    for line in _info_loops(system):
+        if m := LINE.search(line):
+            name, middle, side, p, q = m[2], m[3], m[4], m[5], m[6]
+            at = {j: complex(*mech.joints[j]) for j in (p, middle, q)}
+            assert _left(at[p], at[q], at[middle]) == (side == "left") == (name == "open"), line
+            assert not (p in ground and q not in ground), line
+            out[int(m[1])] = (name, middle)
+    return out
 
 
 def _at_start(mech: vloop.Mechanism) -> dict[str, complex]:
