@@ -19,6 +19,7 @@ from __future__ import annotations
 import cmath
 import copy
 import dataclasses
+import functools
 import math
 import tomllib
 from pathlib import Path
@@ -556,6 +557,7 @@ def test_points_and_centres_of_mass_given_in_their_body_s_frame() -> None:
 S3 = MECHANISMS / "sixbar_stephenson3_output_driven.toml"
 
 
+@functools.cache
 def _stephenson_assemblies() -> list[dict[str, complex]]:
     """Every t = 0 assembly of the output-driven Stephenson III, enumerated by hand: D is fixed by the output rocker;
     for the crank angle θ2 over a turn, A = O2 + a·e^{jθ2}, B the dyad A–B–O4 on either side (two circles), C on the
@@ -622,7 +624,7 @@ def _check_nearest(data: dict, by_hand: list[dict[str, complex]]) -> str:
     return "accepted"
 
 
-@pytest.mark.parametrize(("spread", "seeds"), [(0.1, range(3)), (0.2, range(3))])
+@pytest.mark.parametrize(("spread", "seeds"), [(0.1, range(2)), (0.2, range(2))])
 def test_a_newton_block_takes_the_assembly_nearest_the_hints(spread: float, seeds: range) -> None:
     """Hints off by up to ±10 % and ±20 %: every assembly accepted is the nearest of all (hand enumeration above:
     2 assemblies), every refusal a near tie (the next nearest less than 1.5 times as far)."""
