@@ -151,14 +151,14 @@ def _close(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> np
 
 def _cannot_close(system: LoopSystem, block: Block, why: str) -> MechanismError:
     mech = system.mechanism
-    lp = system.loops[block.loops[0]]
+    loop = system.loops[block.loops[0]]
     inputs = ", ".join(
         f"{d.symbol} = {x:.6g} {'rad' if d.kind == 'crank' else mech.units}"
         for d, x in zip(mech.drivers, inputs_at_start(mech), strict=True)
     )
     because = "its links cannot reach" if why.startswith("the loop cannot close") else why
     return MechanismError(
-        f"{mech.source}: [links] the dimensions cannot close loop {lp.index + 1} ({lp.label}) at t = 0 with "
+        f"{mech.source}: [links] the dimensions cannot close loop {loop.index + 1} ({loop.label}) at t = 0 with "
         f"{inputs or 'no input'}: {because}; check the lengths and the input's t = 0 value",
         entry="links",
     )
@@ -195,7 +195,7 @@ def _newton(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> C
     best = order[0]
     first, *rest = (system.loops[li] for li in block.loops)
     choice = Choice(first.index + 1, first.label, f"assembly 1 of {len(found)} found", "the only assembly found",
-                    tuple((lp.index + 1, lp.label) for lp in rest))  # fmt: skip
+                    tuple((loop.index + 1, loop.label) for loop in rest))  # fmt: skip
     if len(found) > 1:
         near, next_ = dist[best], dist[order[1]]
         if next_ < TIE_RATIO * near:
@@ -330,12 +330,12 @@ def _ambiguous(system: LoopSystem, block: Block, placed: list[int], names: dict,
 
 def _point_vars(system: LoopSystem) -> list[set[int]]:
     """The variables each point's position depends on (the angles and sliders along its path)."""
-    na = system.n_angles
+    n_angles = system.n_angles
     out = []
     for k in range(len(system.point_names)):
         terms = np.flatnonzero(system.path[:, k])
         used = {int(system.t_ang[t]) for t in terms if system.t_ang[t] >= 0 and system.t_r[t] > 0}
-        out.append(used | {na + int(system.t_sl[t]) for t in terms if system.t_sl[t] >= 0})
+        out.append(used | {n_angles + int(system.t_sl[t]) for t in terms if system.t_sl[t] >= 0})
     return out
 
 
