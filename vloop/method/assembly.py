@@ -206,11 +206,18 @@ def _newton_many(system: LoopSystem, loops: list[int], cols: np.ndarray, rows: n
     group = LoopGroup(system, loops, list(cols))
     turns = cols < system.n_angles
     q = rows.copy()
+    active = np.arange(len(q))  # rows still stepping (a row whose step is below 1e-13 of a unit has converged)
     for _ in range(60):
-        F, J = group.many(q)
+        F, J = group.many(q[active])
         step = np.einsum("ncr,nr->nc", np.linalg.pinv(J), -np.concatenate((F.real, F.imag), axis=1))
         step[:, turns] = np.clip(step[:, turns], -1.0, 1.0)
-        q[:, cols] += np.where(np.isfinite(step), step, 0.0)
+        step = np.where(np.isfinite(step), step, 0.0)
+        q[np.ix_(active, cols)] += step
+        active = active[
+            np.abs(step).max(axis=1, initial=0.0) > 1e-13 * (1 + np.abs(q[np.ix_(active, cols)]).max(axis=1))
+        ]
+        if not len(active):
+            break
     F = np.abs(group.many(q)[0]).max(axis=1)
     return [row for row, f in zip(q, F, strict=True) if f <= 1e-9 * system.mechanism.scale]
 
