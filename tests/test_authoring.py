@@ -9,15 +9,17 @@ References, independent of the authoring step:
   coordinates replaced by a hint off by up to ±20 % per coordinate, and every result column must agree
   to 1e-12 of its size;
 * for the Watt II written without any moving coordinate, hand geometry: every pin distance against the
-  stated lengths, the angle B–O4–C, the crank angle, and the open/crossed shape of both four-bars by a
-  segment-intersection test written out here;
+  stated lengths, the angle B–O4–C, the crank angle, and the side of each four-bar's diagonal its middle
+  joint lies on (the branch name), by a cross product written out here;
 * ambiguous and impossible dimension sets: refused with one line and exit code 2.
 """
 
 from __future__ import annotations
 
+import cmath
 import copy
 import dataclasses
+import functools
 import math
 import tomllib
 from pathlib import Path
@@ -26,6 +28,7 @@ import numpy as np
 import pytest
 
 import vloop
+from vloop.authoring import assemble_mechanism
 from vloop.cli import main
 from vloop.files.fileformat import to_dict
 from vloop.mechanism import loads as read_only
@@ -156,8 +159,12 @@ def test_the_watt_six_bar_assembly_by_hand_geometry() -> None:
     def crossed(q: list[complex]) -> bool:
         return crosses(q[0], q[1], q[2], q[3]) or crosses(q[1], q[2], q[3], q[0])
 
-    assert not crossed([p["O2"], p["A"], p["B"], p["O4"]])  # loop 1 "open"
-    assert crossed([p["O4"], p["C"], p["D"], p["O6"]])  # loop 2 "crossed"
+    def left(a: complex, b: complex, m: complex) -> bool:  # m to the left of the line a→b
+        return ((b - a).conjugate() * (m - a)).imag > 0
+
+    assert not crossed([p["O2"], p["A"], p["B"], p["O4"]]) and left(p["A"], p["O4"], p["B"])  # loop 1 "open"
+    # loop 2 "open" (D left of C→O6) although its quadrilateral crosses itself at this instant
+    assert crossed([p["O4"], p["C"], p["D"], p["O6"]]) and left(p["C"], p["O6"], p["D"])
 
 
 # ---------------------------------------------------------------- vloop assemble: the round trip
@@ -177,7 +184,73 @@ def test_assemble_writes_a_file_that_loads_to_the_same_mechanism(stem: str, tmp_
     first, again = vloop.load(path), vloop.load(fixed)
     _same_numbers(to_dict(first), to_dict(again), 1e-15 * first.scale)
     assert _worst(vloop.solve(first), vloop.solve(again), first.scale) <= 1e-14
-    assert vloop.dumps(vloop.load(fixed)) == fixed.read_text(encoding="utf-8").split("\n", 1)[1]  # a fixed point
+    again_text = fixed.read_text(encoding="utf-8")
+    assert main(["assemble", str(fixed), "--out", str(tmp_path / "again.toml")]) == 0  # a fixed point: the same text
+    assert (tmp_path / "again.toml").read_text(encoding="utf-8").split("\n", 1)[1] == again_text.split("\n", 1)[1]
+
+
+WITH_COMMENTS = """# A four-bar from its dimensions, commented as a user writes it.
+name = "commented"   # the name
+units = "mm"
+
+[joints]          # ground pivots, and a rough B
+O2 = [0, 0]       # crank pivot, as integers
+O4 = [7.0, 0.0]
+B = [6, 5]        # rough: the assembly moves it
+
+[links]
+ground = { joints = ["O2", "O4"], ground = true }
+l2 = { joints = ["O2", "A"], length = 2.0 }   # crank
+l3 = { joints = ["A", "B"], length = 6.0 }
+l4 = { joints = ["O4", "B"], length = 5.0 }
+
+[[drivers]]
+link = "l2"
+theta0 = 1.0471975511965976   # 60 deg
+omega = 3.0
+
+[time]            # one turn, as a range (never a list of 201 times)
+start = 0.0
+stop = 2.0
+step = 0.01
+
+[solver]
+tol = 1e-12
+branches = { 1 = "crossed" }   # the other assembly than the hint's
+"""
+
+
+def test_assemble_keeps_the_users_text(tmp_path: Path, capsys) -> None:
+    """Comments, [time] as a range and every other line survive; only the moving joints' coordinates change (A
+    added, B closed), [solver] branches is taken out with a comment; the file re-reads to the same Mechanism as the
+    assembly, and B is the crossed one (right of A→O4, by hand)."""
+    src = tmp_path / "commented.toml"
+    src.write_text(WITH_COMMENTS, encoding="utf-8")
+    fixed = tmp_path / "fixed.toml"
+    assert main(["assemble", str(src), "--out", str(fixed)]) == 0
+    capsys.readouterr()
+    text = fixed.read_text(encoding="utf-8")
+    old, new = WITH_COMMENTS.splitlines(), text.splitlines()[1:]
+    assert text.splitlines()[0].startswith("# commented: assembled at t = 0 by vloop assemble")
+    changed = [line for line in old if line not in new]
+    assert changed == [
+        "B = [6, 5]        # rough: the assembly moves it",
+        'branches = { 1 = "crossed" }   # the other assembly than the hint\'s',
+    ]
+    added = [line for line in new if line not in old]
+    assert len(added) == 3 and added[0].startswith("B = [") and added[0].endswith("# rough: the assembly moves it")
+    assert added[1].startswith("A = [") and added[2].startswith('# branches = { 1 = "crossed" }')
+    assert (
+        "[time]            # one turn, as a range (never a list of 201 times)\nstart = 0.0\nstop = 2.0\nstep = 0.01\n"
+        in text
+    )
+    closed, _ = assemble_mechanism(read_only(WITH_COMMENTS, source=str(src)))
+    again = read_only(text, source=str(src))
+    assert again.options == {"tol": 1e-12} and closed.options == again.options  # branches: now in the coordinates
+    assert to_dict(again) == to_dict(closed) and np.array_equal(again.times, closed.times)
+    a, b, o4 = (complex(*again.joints[j]) for j in ("A", "B", "O4"))
+    assert ((o4 - a).conjugate() * (b - a)).imag < 0  # B right of A→O4: crossed
+    assert vloop.load(fixed).joints == again.joints  # loading assembles it again: nothing moves
 
 
 def _as_hints(text: str, mech: vloop.Mechanism) -> str:
@@ -214,7 +287,7 @@ def test_assemble_to_standard_output_and_its_refusals(tmp_path: Path, capsys) ->
         vloop.loads(captured.out.split("\n", 1)[1]).joints
         == vloop.load(MECHANISMS / "sixbar_watt2_dimensions.toml").joints
     )
-    assert "loop 2 (O4–C–D–O6): crossed (named)" in captured.err
+    assert "loop 2 (O4–C–D–O6): open (D left of C→O6) (named)" in captured.err
     assert main(["assemble", str(MECHANISMS / "eightbar.toml"), "--out", str(tmp_path / "x.toml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not written from dimensions (links.l2 has no length" in err
@@ -477,3 +550,104 @@ def test_points_and_centres_of_mass_given_in_their_body_s_frame() -> None:
     data["points"]["A"] = data["points"].pop("P")  # a point named like a joint without coordinates
     with pytest.raises(vloop.MechanismError, match="duplicate name: 'A' is also a joint"):
         vloop.from_dict(data)
+
+
+# ---------------------------------------------------------------- a Newton block: the assembly nearest the hints
+
+S3 = MECHANISMS / "sixbar_stephenson3_output_driven.toml"
+
+
+@functools.cache
+def _stephenson_assemblies() -> list[dict[str, complex]]:
+    """Every t = 0 assembly of the output-driven Stephenson III, enumerated by hand: D is fixed by the output rocker;
+    for the crank angle θ2 over a turn, A = O2 + a·e^{jθ2}, B the dyad A–B–O4 on either side (two circles), C on the
+    coupler (C − A = ρ·(B − A), ρ read from the drawing); the roots of |C − D| − l5 (sign changes on 20,000 angles,
+    then brentq) are the assemblies."""
+    from scipy.optimize import brentq
+
+    m = vloop.load(S3)
+    p = {j: complex(*xy) for j, xy in m.joints.items()}
+    a, b, c, l5 = abs(p["A"] - p["O2"]), abs(p["B"] - p["A"]), abs(p["B"] - p["O4"]), abs(p["D"] - p["C"])
+    rho = (p["C"] - p["A"]) / (p["B"] - p["A"])
+
+    def joints(th: float, side: float) -> dict[str, complex] | None:
+        A = p["O2"] + a * cmath.exp(1j * th)
+        d = abs(p["O4"] - A)
+        x = (b * b - c * c + d * d) / (2 * d)
+        if b * b - x * x < 0:
+            return None
+        u = (p["O4"] - A) / d
+        B = A + u * (x + side * 1j * math.sqrt(b * b - x * x))
+        return {"A": A, "B": B, "C": A + rho * (B - A)}
+
+    def f(th: float, side: float) -> float:
+        j = joints(th, side)
+        return math.nan if j is None else abs(j["C"] - p["D"]) - l5
+
+    out = []
+    grid = np.linspace(-math.pi, math.pi, 20_001)
+    for side in (1.0, -1.0):
+        vals = [f(t, side) for t in grid]
+        for t0, t1, f0, f1 in zip(grid, grid[1:], vals, vals[1:], strict=False):
+            if math.isfinite(f0) and math.isfinite(f1) and f0 * f1 < 0:
+                out.append(joints(brentq(f, t0, t1, args=(side,), xtol=1e-15), side))
+    return out
+
+
+def _hinted(seed: int, spread: float) -> dict:
+    global HINT
+    old, HINT = HINT, spread
+    try:
+        return dimensions_only(S3, np.random.default_rng(seed))
+    finally:
+        HINT = old
+
+
+def _check_nearest(data: dict, by_hand: list[dict[str, complex]]) -> str:
+    """'accepted' (the assembly taken is the hand enumeration's nearest) or 'refused' (a near tie by the hand's count)."""
+    import tomli_w
+
+    hints = {j: complex(*data["joints"][j]) for j in ("A", "B", "C")}
+    dist = sorted((math.sqrt(sum(abs(s[j] - hints[j]) ** 2 for j in hints)), i) for i, s in enumerate(by_hand))
+    ratio = dist[1][0] / dist[0][0]
+    try:
+        closed, report = assemble_mechanism(read_only(tomli_w.dumps(data), source="s3"))
+    except vloop.MechanismError as exc:
+        assert ratio < 1.5 + 1e-9 and "less than 1.5 times as far" in str(exc), (ratio, str(exc))
+        return "refused"
+    assert ratio >= 1.5 - 1e-9, ratio
+    nearest = by_hand[dist[0][1]]
+    assert max(abs(complex(*closed.joints[j]) - nearest[j]) for j in nearest) <= 1e-9 * closed.scale
+    line = report.lines(closed.units)[0]
+    assert line.startswith(f"loops 1 (O2–A–B–O4) and 2 (O2–A–C–D–O6): assembly 1 of {len(by_hand)} found")
+    assert f"nearest the coordinates: {dist[0][0]:.3g} m against {dist[1][0]:.3g}" in line
+    return "accepted"
+
+
+@pytest.mark.parametrize(("spread", "seeds"), [(0.1, range(2)), (0.2, range(2))])
+def test_a_newton_block_takes_the_assembly_nearest_the_hints(spread: float, seeds: range) -> None:
+    """Hints off by up to ±10 % and ±20 %: every assembly accepted is the nearest of all (hand enumeration above:
+    2 assemblies), every refusal a near tie (the next nearest less than 1.5 times as far)."""
+    by_hand = _stephenson_assemblies()
+    assert len(by_hand) == 2
+    drawn = vloop.load(S3).joints
+    assert min(max(abs(s[j] - complex(*drawn[j])) for j in s) for s in by_hand) <= 1e-12 * 10  # the drawn one
+    for seed in seeds:
+        _check_nearest(_hinted(seed, spread), by_hand)
+
+
+@pytest.mark.slow
+def test_a_newton_block_over_many_draws() -> None:
+    by_hand = _stephenson_assemblies()
+    for spread in (0.1, 0.2):
+        verdicts = [_check_nearest(_hinted(seed, spread), by_hand) for seed in range(20)]
+        print(f"±{spread:.0%}: {verdicts.count('accepted')} accepted, {verdicts.count('refused')} refused of 20")
+
+
+def test_hints_half_way_between_two_assemblies_are_refused() -> None:
+    by_hand = _stephenson_assemblies()
+    data = _hinted(0, 0.0)
+    for j in ("A", "B", "C"):
+        mid = (by_hand[0][j] + by_hand[1][j]) / 2
+        data["joints"][j] = [mid.real, mid.imag]
+    assert _check_nearest(data, by_hand) == "refused"

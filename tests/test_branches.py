@@ -10,7 +10,7 @@ import pytest
 import vloop
 from tests.conftest import MECHANISMS
 from vloop.compare import assert_histories_close
-from vloop.method.loops import branch_name
+from vloop.method.branches import branch_name
 
 
 def with_solver(path, table: str) -> vloop.Mechanism:
@@ -20,9 +20,9 @@ def with_solver(path, table: str) -> vloop.Mechanism:
 def test_the_t0_branch_is_recorded():
     for name, expected in (("fourbar_crank_rocker_open", "open"), ("fourbar_crank_rocker_crossed", "crossed")):
         system = vloop.compile(vloop.load(MECHANISMS / f"{name}.toml"))
-        assert branch_name(system, system.q0, system.loops[0]) == expected
+        assert branch_name(system, system.blocks[0], system.q0) == expected
     eb = vloop.compile(vloop.load(MECHANISMS / "eightbar.toml"))
-    assert branch_name(eb, eb.q0, eb.loops[0]) is None  # a triangle with a slider: no four-bar naming
+    assert branch_name(eb, eb.blocks[0], eb.q0) is None  # a triangle with a slider: no four-bar naming
     assert [b.sigma for b in eb.blocks] == [-1.0, -1.0, -1.0]
 
 
@@ -33,7 +33,7 @@ def test_choose_crossed_in_the_file():
 
     mech = with_solver(MECHANISMS / "fourbar_crank_rocker_open.toml", 'branches = { 1 = "crossed" }')
     system = vloop.compile(mech)
-    assert branch_name(system, system.q0, system.loops[0]) == "crossed"
+    assert branch_name(system, system.blocks[0], system.q0) == "crossed"
     assert system.assembly["moved"] > 1.0  # B is mirrored across the line A–O4
     res = vloop.solve(system)
     crossed = vloop.load(MECHANISMS / "fourbar_crank_rocker_crossed.toml")

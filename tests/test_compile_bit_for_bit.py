@@ -21,7 +21,7 @@ from vloop.core import plans, sums
 from vloop.drivers import evaluate_all
 from vloop.errors import MechanismError
 from vloop.method import assembly, graph, structure
-from vloop.method.loops import LoopGroup, TermIndex, loop_jacobian, loop_residual, term_values
+from vloop.method.loops import DyadTerms, LoopGroup, TermIndex, loop_jacobian, loop_residual, term_values
 
 N_GENERATED = 120
 
@@ -193,7 +193,7 @@ def test_assembly_is_the_step_by_step_one(systems):
 
 
 def test_a_dyad_group_assembles_like_least_squares():
-    """assembly._Dyad's residual and Jacobian are loop_residual's and loop_jacobian's (to round-off) at random
+    """loops.DyadTerms' residual and Jacobian are loop_residual's and loop_jacobian's (to round-off) at random
     configurations, and a group it cannot step (a singular Jacobian) is left to numpy's least squares."""
     rng = np.random.default_rng(11)
     mechs = [vloop.load(p) for p in mechanism_files()] + [item.mechanism for item in corpus.generate(40, 5)[0]]
@@ -203,7 +203,7 @@ def test_a_dyad_group_assembles_like_least_squares():
         for loops, unknowns in structure.analyse(sys).groups:
             if len(loops) != 1 or len(unknowns) != 2:
                 continue
-            dyad = assembly._Dyad(sys, loops[0], list(unknowns))
+            dyad = DyadTerms(sys, loops[0], list(unknowns))
             for _ in range(3):
                 q = sys.q0 + rng.normal(0, 0.3, sys.n_vars)
                 z, e = dyad.at(q.tolist())
@@ -219,10 +219,10 @@ def test_a_dyad_group_assembles_like_least_squares():
     assert checked > 100
     singular = vloop.compile(vloop.load(mechanism_files()[0]))
     loops, unknowns = next((lp, un) for lp, un in structure.analyse(singular).groups if len(un) == 2)
-    dyad = assembly._Dyad(singular, loops[0], list(unknowns))
+    dyad = DyadTerms(singular, loops[0], list(unknowns))
     dyad.terms = [(0.0, *t[1:]) for t in dyad.terms]  # every coefficient zero: J = 0
     q = singular.q0.copy()
-    assert dyad.close(q) is None and same(q, singular.q0)
+    assert assembly._close_dyad(dyad, q) is None and same(q, singular.q0)
 
 
 def test_loop_group_is_loop_residual_and_jacobian(systems):

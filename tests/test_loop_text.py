@@ -32,6 +32,7 @@ import vloop
 from tests.conftest import MECHANISMS, mechanism_files
 from vloop.cli import main
 from vloop.compiler import compile_system
+from vloop.method.branches import branch_name
 
 TOKEN = re.compile(
     r"\s+|\\,|·|(?P<theta>\\theta_\{\\mathrm\{(?P<tex>[^}]*)\}\}|θ_(?P<plain>[A-Za-z0-9_\-]+))"
@@ -244,7 +245,7 @@ def test_loops_do_not_depend_on_where_the_origin_is(stem: str) -> None:
         system = compile_system(translated(mech, dx, dy))
         text = vloop.method.equations.describe(system)
         texts.add(text.split("\n", 1)[1])  # the heading names the file
-        assert vloop.method.loops.branch_name(system, system.q0, system.loops[0]) == "open"
+        assert branch_name(system, system.blocks[0], system.q0) == "open"
     assert len(texts) == 1, texts
     assert "O2→O4 (ground)" in texts.pop()
 
@@ -264,7 +265,7 @@ def test_translated_four_bar_takes_branch_names() -> None:
     watt = translated(vloop.load(MECHANISMS / "sixbar_watt2.toml"), dx, dy, {"2": "crossed"})
     system = compile_system(watt)
     assert system.loops[1].label == "O4–C–D–O6"
-    assert vloop.method.loops.branch_name(system, system.q0, system.loops[1]) == "crossed"
+    assert branch_name(system, system.blocks[1], system.q0) == "crossed"
 
 
 def test_sliders_keep_measuring_from_the_world_origin() -> None:

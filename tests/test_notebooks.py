@@ -193,3 +193,20 @@ def test_to_pandas_has_every_column_and_its_unit() -> None:
     assert vloop.Result.to_dataframe is vloop.Result.to_pandas
     bare = vloop.Result("m", "csv", res.t, dict(res.columns))  # a Result that does not know its units
     assert bare.to_pandas().attrs["units"]["C.x"] == "L" and bare.to_pandas(length="in").attrs["units"]["C.x"] == "in"
+
+
+def test_to_pandas_converts_lengths_and_leaves_angles() -> None:
+    """A run in millimetres asked for metres: positions, velocities and accelerations × 0.001 (and back to mm
+    × 1000, to inches ÷ 25.4), angles and their rates untouched; an unknown unit refused, naming it."""
+    mech = vloop.load(MECHANISMS / "whitworth_quick_return.toml")  # millimetres
+    res = vloop.solve(mech, times=mech.times[:20])
+    metres, inches = res.to_pandas(length="m"), res.to_pandas(length="in")
+    for col in ("C.x", "C.vy", "C.ax", "l6.s", "l6.v", "l6.a"):
+        assert np.array_equal(metres[col].to_numpy(), res[col] * 0.001), col  # 1 mm = 0.001 m exactly as written
+        assert np.allclose(inches[col].to_numpy(), res[col] / 25.4, rtol=1e-15, atol=0), col  # 1 in = 25.4 mm
+    for col in ("t", "l4.theta", "l4.omega", "l4.alpha"):
+        assert np.array_equal(metres[col].to_numpy(), res.t if col == "t" else res[col]), col
+    assert metres.attrs["units"]["C.vy"] == "m/s" and metres.attrs["units"]["l4.omega"] == "rad/s"
+    assert np.array_equal(res.to_pandas(length="mm")["C.x"].to_numpy(), res["C.x"])  # its own units: as they are
+    with pytest.raises(ValueError, match="'furlong' is not a length unit vloop knows"):
+        res.to_pandas(length="furlong")

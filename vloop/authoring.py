@@ -9,7 +9,10 @@ closed forms (:func:`vloop.core.solver.close_at_start`), group by group in solvi
   "crossed" for a four-joint loop; "keep" / "flip" relative to the hints), else the one nearer the hinted joints
   it places (the sum of squared distances); with neither, the file is ambiguous and refused, naming the key to
   add; where neither assembly exists, the dimensions cannot close and the file is refused;
-* a block of coupled loops (Newton) starts from the hints (they must be given) and must converge.
+* a block of coupled loops (Newton) needs hints: every assembly Newton finds from them and from 512 seeded starts
+  is listed, and the one nearest the hints taken (root-sum-square distance over the hinted joints the block places);
+  refused where none closes, or where the next nearest is less than 1.5 times as far (the hints do not tell the two
+  apart). The report names it ("assembly 1 of n found") and both distances.
 
 The result is the same Mechanism with its coordinates closed to round-off (the ground's as given), slider axes
 at their t = 0 directions, points and centres of mass where their bodies carry them; the branches it was asked
@@ -28,8 +31,9 @@ import numpy as np
 from .compiler import compile_system, loop_system
 from .core.solver import close_at_start
 from .errors import MechanismError
-from .method.assembly import DEFAULT_ASSEMBLY_TOL, close_group, inputs_at_start
-from .method.loops import Block, Loop, LoopSystem, branch_name, term_values
+from .method.assembly import DEFAULT_ASSEMBLY_TOL, STARTS, assemblies, inputs_at_start
+from .method.branches import NAMES, branch_sigma, dyad_branch
+from .method.loops import Block, LoopSystem, term_values
 from .method.structure import Structure, block_structure
 from .model import MassProperties, Mechanism, Slider, joint_mean, to_world
 
@@ -39,13 +43,19 @@ TIE = 1e-12  # two assemblies whose squared distances to the hints differ by les
 
 @dataclass
 class Choice:
-    """How one dyad's assembly was chosen: its loop (number from 1), the branch name ("open"/"crossed", or "σ = ±1"
-    where the loop has no four joints) and why ("named", "nearest the hints", "the only assembly")."""
+    """How one block's assembly was chosen: its loop (number from 1; ``others``: the further loops of a Newton block,
+    (number, label) each), the branch (a dyad's name and side, or "σ = ±1"; a Newton block's "assembly k of n
+    found") and why ("named", "nearest the hints", "the only assembly")."""
 
     loop: int
     label: str
     branch: str
     why: str
+    others: tuple[tuple[int, str], ...] = ()
+
+    def text(self) -> str:
+        loops = [f"{self.loop} ({self.label})", *(f"{n} ({label})" for n, label in self.others)]
+        return f"loop{'s' if self.others else ''} {' and '.join(loops)}: {self.branch} ({self.why})"
 
 
 @dataclass
@@ -59,7 +69,7 @@ class Assembly:
 
     def lines(self, units: str) -> list[str]:
         """The report as text, one line per dyad and one for the hints."""
-        out = [f"loop {c.loop} ({c.label}): {c.branch} ({c.why})" for c in self.choices]
+        out = [c.text() for c in self.choices]
         if self.moved:
             worst = max(self.moved, key=self.moved.__getitem__)
             out.append(f"hinted joints moved by up to {self.moved[worst]:.4g} {units} ({worst})")
@@ -93,7 +103,7 @@ def _dyad_by_dyad(system: LoopSystem, structure: Structure, report: Assembly) ->
     _check_branches(system, blocks)
     for i, block in enumerate(blocks):
         if block.kind == "newton":
-            _newton(system, block, q)
+            report.choices.append(_newton(system, blocks, q, i))
         elif block.kind == "PP":
             q = _close(system, blocks, q, i)
         else:
@@ -141,22 +151,29 @@ def _close(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> np
 
 def _cannot_close(system: LoopSystem, block: Block, why: str) -> MechanismError:
     mech = system.mechanism
-    lp = system.loops[block.loops[0]]
+    loop = system.loops[block.loops[0]]
     inputs = ", ".join(
         f"{d.symbol} = {x:.6g} {'rad' if d.kind == 'crank' else mech.units}"
         for d, x in zip(mech.drivers, inputs_at_start(mech), strict=True)
     )
     because = "its links cannot reach" if why.startswith("the loop cannot close") else why
     return MechanismError(
-        f"{mech.source}: [links] the dimensions cannot close loop {lp.index + 1} ({lp.label}) at t = 0 with "
+        f"{mech.source}: [links] the dimensions cannot close loop {loop.index + 1} ({loop.label}) at t = 0 with "
         f"{inputs or 'no input'}: {because}; check the lengths and the input's t = 0 value",
         entry="links",
     )
 
 
-def _newton(system: LoopSystem, block: Block, q: np.ndarray) -> None:
-    """A block of coupled loops, closed by the assembly's Newton from the hints (which it needs)."""
-    mech = system.mechanism
+TIE_RATIO = 1.5  # a Newton block's second-nearest assembly less than this many times as far as the nearest: refused
+
+
+def _newton(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> Choice:
+    """A block of coupled loops: every assembly Newton finds from the hints and from many starts
+    (:func:`vloop.method.assembly.assemblies`), the one nearest the hints taken (root-sum-square distance over the
+    hinted joints the block places, those where the assemblies differ), written into ``q``; refused where none
+    closes, or where the next nearest is less than :data:`TIE_RATIO` times as far (the hints do not tell them
+    apart)."""
+    block, mech = blocks[i], system.mechanism
     labels = ", ".join(f"{li + 1} ({system.loops[li].label})" for li in block.loops)
     unhinted = sorted({j for v in block.unknowns for j in _defining_joints(system, v) if j in mech.unplaced})
     if unhinted:
@@ -165,12 +182,43 @@ def _newton(system: LoopSystem, block: Block, q: np.ndarray) -> None:
             f"coordinates: give rough coordinates of {', '.join(unhinted)}",
             entry="joints",
         )
-    if not close_group(system, list(block.loops), list(block.unknowns), q):
+    found = assemblies(system, list(block.loops), list(block.unknowns), q)
+    if not found:
         raise MechanismError(
-            f"{mech.source}: [joints] loops {labels} do not close from the coordinates given: the dimensions "
-            "cannot close there, or the coordinates are too far from an assembly (give closer ones)",
+            f"{mech.source}: [joints] loops {labels} do not close: no assembly found from the coordinates or from "
+            f"{STARTS} other starts; check the dimensions",
             entry="joints",
         )
+    known = set(system.drivers) | {v for b in blocks[: i + 1] for v in b.unknowns}
+    dist = _hint_distances(system, found, _placed(system, known, set(block.unknowns)))
+    order = sorted(range(len(found)), key=dist.__getitem__)
+    best = order[0]
+    first, *rest = (system.loops[li] for li in block.loops)
+    choice = Choice(first.index + 1, first.label, f"assembly 1 of {len(found)} found", "the only assembly found",
+                    tuple((loop.index + 1, loop.label) for loop in rest))  # fmt: skip
+    if len(found) > 1:
+        near, next_ = dist[best], dist[order[1]]
+        if next_ < TIE_RATIO * near:
+            raise MechanismError(
+                f"{mech.source}: [joints] loops {labels} have {len(found)} assemblies at t = 0 and the coordinates are "
+                f"about as near two of them ({near:.3g} and {next_:.3g} {mech.units}: less than {TIE_RATIO:g} times "
+                "as far): give closer coordinates of the joints they place",
+                entry="joints",
+            )
+        choice.why = f"nearest the coordinates: {near:.3g} {mech.units} against {next_:.3g} for the next"
+    q[:] = found[best]
+    return choice
+
+
+def _hint_distances(system: LoopSystem, found: list[np.ndarray], placed: list[int]) -> list[float]:
+    """Root-sum-square distance of each assembly from the hints, over the hinted joints in ``placed`` whose position
+    differs between the assemblies (a joint all of them put at one place tells nothing)."""
+    mech = system.mechanism
+    hinted = [k for k in placed if system.point_names[k] in mech.joints and system.point_names[k] not in mech.unplaced]
+    pos = np.array([term_values(system, row) @ system.path[:, hinted] for row in found]).reshape(len(found), -1)
+    moving = np.ptp(np.abs(pos - pos[0]), axis=0) > 1e-9 * mech.scale if len(found) > 1 else np.ones(len(hinted), bool)
+    hints = np.array([complex(*mech.joints[system.point_names[k]]) for k in hinted])
+    return [float(math.sqrt(np.sum(np.abs(p - hints)[moving] ** 2))) for p in pos]
 
 
 def _defining_joints(system: LoopSystem, v: int) -> tuple[str, ...]:
@@ -201,10 +249,13 @@ def _choose(system: LoopSystem, blocks: list[Block], q: np.ndarray, i: int) -> t
         raise _cannot_close(system, block, why)
     known = set(system.drivers) | {v for b in blocks[: i + 1] for v in b.unknowns}
     placed = _placed(system, known, set(block.unknowns))
-    names = {s: _branch(system, out, loop, known) for s, out in cands.items()}
+    sides = {s: dyad_branch(system, dataclasses.replace(block, sigma=s), out, blocks) for s, out in cands.items()}
+    names = {s: b.name if b else None for s, b in sides.items()}
     wanted = mech.options.get("branches", {}).get(loop.index + 1)
+    if wanted in NAMES:
+        branch_sigma(system, block, wanted, blocks)  # refused where the names do not apply to this dyad
     sigma, how = _pick(system, cands, names, placed, wanted, block)
-    branch = names[sigma] or f"assembly σ = {sigma:+.0f}"
+    branch = sides[sigma].text() if sides[sigma] else f"assembly σ = {sigma:+.0f}"
     return dataclasses.replace(block, sigma=sigma), cands[sigma], Choice(loop.index + 1, loop.label, branch, how)
 
 
@@ -219,15 +270,9 @@ def _pick(
     """The branch σ and why: the name asked for, else the hints ("keep" the nearer, "flip" the other)."""
     mech, li = system.mechanism, block.loops[0]
     where = f"{mech.source}: [solver] branches: loop {li + 1} ({system.loops[li].label})"
-    if wanted in ("open", "crossed"):
-        if all(n is None for n in names.values()):
-            raise MechanismError(
-                f"{where} is not a four-joint loop: 'open'/'crossed' name a four-bar's branches; give rough "
-                "coordinates of its joints instead",
-                entry="solver",
-            )
+    if wanted in NAMES:
         hit = [s for s, n in names.items() if n == wanted]
-        if not hit:
+        if len(hit) != 1:  # none, or (at a toggle, the middle joint on the line) no side to tell
             raise MechanismError(f"{where} cannot be assembled {wanted} at t = 0", entry="solver")
         return hit[0], "named"
     if len(cands) == 1:
@@ -285,12 +330,12 @@ def _ambiguous(system: LoopSystem, block: Block, placed: list[int], names: dict,
 
 def _point_vars(system: LoopSystem) -> list[set[int]]:
     """The variables each point's position depends on (the angles and sliders along its path)."""
-    na = system.n_angles
+    n_angles = system.n_angles
     out = []
     for k in range(len(system.point_names)):
         terms = np.flatnonzero(system.path[:, k])
         used = {int(system.t_ang[t]) for t in terms if system.t_ang[t] >= 0 and system.t_r[t] > 0}
-        out.append(used | {na + int(system.t_sl[t]) for t in terms if system.t_sl[t] >= 0})
+        out.append(used | {n_angles + int(system.t_sl[t]) for t in terms if system.t_sl[t] >= 0})
     return out
 
 
@@ -306,15 +351,6 @@ def _distance(system: LoopSystem, q: np.ndarray, points: list[int]) -> float:
     return float(
         sum(abs(p - complex(*mech.joints[system.point_names[k]])) ** 2 for p, k in zip(z, points, strict=True))
     )
-
-
-def _branch(system: LoopSystem, q: np.ndarray, loop: Loop, known: set[int]) -> str | None:
-    """ "open" or "crossed" for a four-joint loop whose joints the known variables place, else None."""
-    needs = _point_vars(system)
-    on_loop = {j for _, j in loop.nodes} & set(system.point_names)
-    if any(not needs[system.point_names.index(j)] <= known for j in on_loop):
-        return None
-    return branch_name(system, q, loop)
 
 
 # ---------------------------------------------------------------- the closed mechanism
@@ -366,3 +402,33 @@ def _check_inputs(mech: Mechanism, report: Assembly) -> None:
                 f"more than assembly_tolerance = {tol / mech.scale:g} of the size)",
                 entry=d.entry,
             )
+
+
+# ---------------------------------------------------------------- the closed mechanism as the user's text
+
+
+def closed_text(source: str, closed: Mechanism) -> str:
+    """The file's own text (``source``) with the coordinates of ``closed`` (:func:`assemble_mechanism`'s): every
+    moving joint's coordinates replaced where they are written (a joint without any added to ``[joints]``), ``[solver]
+    branches`` taken out (the coordinates now hold the branches; a comment says so); every other line, comment
+    and layout as written (tomlkit keeps them)."""
+    import tomlkit
+
+    doc = tomlkit.parse(source)
+    joints = doc["joints"]
+    ground = set(closed.links[closed.ground].joints)  # as given: the text stays as written
+    for name, (x, y) in closed.joints.items():
+        if name in ground:
+            continue
+        new = tomlkit.array([float(x), float(y)])
+        if name in joints:
+            old = joints[name]
+            new.trivia.comment_ws, new.trivia.comment = old.trivia.comment_ws, old.trivia.comment
+        joints[name] = new
+    solver = doc.get("solver")
+    if solver is not None and "branches" in solver:
+        named = ", ".join(f'{k} = "{v}"' for k, v in solver["branches"].items())
+        del solver["branches"]
+        solver.add(tomlkit.comment(f"branches = {{ {named} }} was assembled by vloop assemble: now in the coordinates"))
+    text = tomlkit.dumps(doc)
+    return text if text.endswith("\n") else text + "\n"

@@ -344,8 +344,8 @@ def _info_mobility(system: Any) -> list[str]:
 
 
 def _info_loops(system: Any) -> list[str]:
+    from .method.branches import dyad_branch
     from .method.equations import grashof
-    from .method.loops import branch_name
 
     mech = system.mechanism
     L, J, _ = mech.gruebler()
@@ -355,9 +355,10 @@ def _info_loops(system: Any) -> list[str]:
     for b in system.blocks:
         if b.kind in ("RRR", "RRP", "RPR"):
             lp = system.loops[b.loops[0]]
-            name = branch_name(system, system.q0, lp)
+            branch = dyad_branch(system, b, system.q0)
             lines.append(
-                f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}{f' ({name})' if name else ''}"
+                f"  loop {lp.index + 1} assembly branch at t = 0: sigma = {b.sigma:+.0f}"
+                f"{f': {branch.text()}' if branch else ''}"
             )
     for li, cls, (g, p1, c, p2) in grashof(system):
         lines.append(f"four-bar loop {li + 1}: {cls} (ground {g:.6g}, links {p1:.6g}, {c:.6g}, {p2:.6g})")
@@ -408,10 +409,10 @@ def cmd_corpus(args: argparse.Namespace) -> int:
 def cmd_assemble(args: argparse.Namespace) -> int:
     """A file written from dimensions, assembled at t = 0 and written back with closed coordinates (to --out, else
     to standard output); how each dyad's branch was chosen is printed."""
-    from .authoring import assemble_mechanism
+    from .authoring import assemble_mechanism, closed_text
     from .errors import MechanismError
     from .files.dimensions import missing_dimensions
-    from .files.fileformat import dumps, load
+    from .files.fileformat import load
     from .files.output import write_text
 
     draft = load(args.file, allow_external_profiles=args.allow_external_profiles)
@@ -423,7 +424,11 @@ def cmd_assemble(args: argparse.Namespace) -> int:
             entry="file",
         )
     closed, report = assemble_mechanism(draft)
-    text = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n{dumps(closed)}"
+    head = f"# {closed.name}: assembled at t = 0 by vloop assemble from {Path(args.file).name}\n"
+    source = Path(args.file).read_text(encoding="utf-8")
+    first, _, rest = source.partition("\n")
+    own = first.startswith(f"# {closed.name}: assembled at t = 0 by vloop assemble from ")  # from an earlier run
+    text = head + closed_text(rest if own else source, closed)
     lines = [f"{closed.name}: {line}" for line in report.lines(closed.units)]
     if args.out is None:
         print(text, end="")

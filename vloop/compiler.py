@@ -19,8 +19,9 @@ import numpy as np
 from .core.solver import assemble_blocks
 from .errors import MechanismError
 from .method.assembly import assemble, moved
+from .method.branches import NAMES, branch_sigma
 from .method.graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
-from .method.loops import Block, LoopSystem, branch_name
+from .method.loops import Block, LoopSystem
 from .method.structure import Structure, analyse, block_structure
 from .model import Body, Mechanism
 
@@ -80,13 +81,13 @@ def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray, 
     """The variables (rotating links' angles, then slider displacements), the driven ones, the unknowns,
     and a LoopSystem without blocks, assembled at the typed coordinates."""
     ang, sl, r, delta = mg.terms.arrays()
-    na = len(mg.angle_links)
+    n_angles = len(mg.angle_links)
     driven = tuple(
-        mg.angle_links.index(d.target) if d.kind == "crank" else na + mg.slider_names.index(d.target)
+        mg.angle_links.index(d.target) if d.kind == "crank" else n_angles + mg.slider_names.index(d.target)
         for d in mech.drivers
     )
     coords_q = np.array([bodies[n].theta0 for n in mg.angle_links] + mg.coords_s, float)
-    unknowns = tuple(v for v in range(na + len(mg.slider_names)) if v not in driven)
+    unknowns = tuple(v for v in range(n_angles + len(mg.slider_names)) if v not in driven)
     link_outputs = tuple((name, *mg.owner[name]) for name in mech.moving_links)
     return LoopSystem(
         mech, mg.angle_links, mg.slider_names, ang, sl, r, delta, tuple(mg.terms.label), loops, C,
@@ -96,37 +97,29 @@ def _unknowns(mech: Mechanism, mg: MechanismGraph, loops: tuple, C: np.ndarray, 
 
 
 def _choose_branches(
-    sys: LoopSystem, blocks: tuple[Block, ...], q0: np.ndarray, report: dict
+    system: LoopSystem, blocks: tuple[Block, ...], q0: np.ndarray, report: dict
 ) -> tuple[tuple[Block, ...], np.ndarray, dict]:
     """Put the dyads the file names in [solver] branches on the requested branch, then re-assemble t = 0."""
-    mech = sys.mechanism
+    mech = system.mechanism
     wanted: dict[int, str] = mech.options["branches"]
     by_loop = {b.loops[0]: i for i, b in enumerate(blocks) if len(b.loops) == 1}
     new = list(blocks)
     for number, choice in sorted(wanted.items()):
         li = number - 1
-        if li >= len(sys.loops):
+        if li >= len(system.loops):
             raise MechanismError(f"{mech.source}: [solver] branches: there is no loop {number}", entry="solver")
         i = by_loop.get(li)
         if i is None or blocks[i].kind not in ("RRR", "RRP", "RPR"):
             raise MechanismError(
-                f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a dyad with two "
+                f"{mech.source}: [solver] branches: loop {number} ({system.loops[li].label}) is not a dyad with two "
                 "assembly branches",
                 entry="solver",
             )
-        flip = choice == "flip"
-        if choice in ("open", "crossed"):
-            now = branch_name(sys, q0, sys.loops[li])
-            if now is None:
-                raise MechanismError(
-                    f"{mech.source}: [solver] branches: loop {number} ({sys.loops[li].label}) is not a four-joint "
-                    "loop; 'open'/'crossed' name a four-bar's branches — use 'flip' or 'keep'",
-                    entry="solver",
-                )
-            flip = now != choice
-        if flip:
+        if choice in NAMES:
+            new[i] = dataclasses.replace(blocks[i], sigma=branch_sigma(system, blocks[i], choice, blocks))
+        elif choice == "flip":
             new[i] = dataclasses.replace(blocks[i], sigma=-blocks[i].sigma)
     if new == list(blocks):
         return blocks, q0, report
-    q1 = assemble_blocks(sys, tuple(new), q0)
-    return tuple(new), q1, {**report, **moved(sys, q1), "branches_flipped": True}
+    q1 = assemble_blocks(system, tuple(new), q0)
+    return tuple(new), q1, {**report, **moved(system, q1), "branches_flipped": True}

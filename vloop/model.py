@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from .result import LENGTH_UNITS
+
 
 @dataclass(frozen=True)
 class Link:
@@ -448,9 +450,8 @@ def _stated_points(m: Mechanism, points: tuple[str, ...], local: dict) -> dict:
 
 # ---------------------------------------------------------------- units and mobility
 
-# Length units the force analysis knows (factor to metres): masses are in kg, forces in N, so the
-# file's lengths must be converted; a file with masses or loads in other units is refused.
-LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
+# LENGTH_UNITS (from vloop.result): the length units vloop converts (factor to metres); the force analysis needs one
+# (masses in kg, forces in N), so a file with masses or loads in other units is refused.
 
 
 def length_factor(units: str) -> float:

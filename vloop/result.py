@@ -81,10 +81,28 @@ UNIT_OF_FIELD = {
 }
 
 
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}  # metres per unit
+LENGTH_FIELDS = frozenset(f for f, u in UNIT_OF_FIELD.items() if u.startswith("L"))  # lengths and their rates
+
+
 def column_units(columns: list[str], length: str) -> dict[str, str]:
     """The unit of each output column: ``t`` s, angles rad (rates per s, s²), lengths ``length`` (the file's units;
     rates per s, s²); anything else "1"."""
     return {c: "s" if c == "t" else UNIT_OF_FIELD.get(c.rsplit(".", 1)[-1], "1").replace("L", length) for c in columns}
+
+
+def length_conversion(source: str, target: str) -> float:
+    """The factor that turns lengths in ``source`` units into ``target`` units (1 where the two are the same name);
+    ValueError naming the unit where either is not in :data:`LENGTH_UNITS`."""
+    if source.strip().lower() == target.strip().lower():
+        return 1.0
+    for unit in (source, target):
+        if unit.strip().lower() not in LENGTH_UNITS:
+            raise ValueError(
+                f"cannot convert lengths from {source!r} to {target!r}: {unit!r} is not a length unit vloop knows "
+                f"({', '.join(LENGTH_UNITS)})"
+            )
+    return LENGTH_UNITS[source.strip().lower()] / LENGTH_UNITS[target.strip().lower()]
 
 
 def html_table(rows: list[list[Any]], header: list[str] | None = None, caption: str = "") -> str:
@@ -199,12 +217,20 @@ class Result:
 
     def to_pandas(self, length: str | None = None) -> Any:
         """A pandas DataFrame, one row per sample: ``t`` [s] first, then every column; ``df.attrs["units"]`` maps
-        each column to its unit (angles rad, rad/s, rad/s^2; lengths in the file's units — ``meta["units"]``,
-        which vloop's runs record — or ``length``; "L" where neither says)."""
+        each column to its unit (angles rad, rad/s, rad/s^2, never converted; lengths in the file's units —
+        ``meta["units"]``, which vloop's runs record — or in ``length``: positions, velocities and accelerations
+        converted by :data:`LENGTH_UNITS`' factors; ValueError where either unit is not one of them). A Result that
+        does not know its units takes ``length`` as their name ("L" without it)."""
         import pandas as pd
 
-        df = pd.DataFrame({"t": self.t, **self.columns})
-        df.attrs["units"] = column_units(list(df.columns), length or self.meta.get("units", "L"))
+        own = self.meta.get("units")
+        factor = 1.0 if length is None or own is None else length_conversion(own, length)
+        cols = {
+            k: v * factor if factor != 1.0 and k.rsplit(".", 1)[-1] in LENGTH_FIELDS else v
+            for k, v in self.columns.items()
+        }
+        df = pd.DataFrame({"t": self.t, **cols})
+        df.attrs["units"] = column_units(list(df.columns), length or own or "L")
         return df
 
     to_dataframe = to_pandas  # the name the file-format contract gives it

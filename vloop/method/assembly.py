@@ -4,6 +4,9 @@ The typed coordinates may close the loops only approximately (rounded numbers, s
 a driver's theta0): within ``assembly_tolerance`` of the mechanism size they are assembled to full
 precision by Newton (least squares on all loop equations) and the distance every joint moved is
 reported; beyond it the file is refused, naming the loop and the closure error.
+
+The procedures only (Newton on a group or a dyad, the rank, how far joints moved, a group's assemblies from many
+starts): the loop terms they evaluate are :mod:`vloop.method.loops`'.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import numpy as np
 from ..drivers import evaluate
 from ..errors import MechanismError
 from ..model import Mechanism, mobility_message
-from .loops import LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
+from .loops import DyadTerms, LoopGroup, LoopSystem, TermIndex, loop_jacobian, term_values
 from .structure import Structure
 
 DEFAULT_ASSEMBLY_TOL = 1e-3  # t = 0 closure accepted up to this fraction of the mechanism size
@@ -23,49 +26,52 @@ CLOSED = 1e-11  # loops closed to this fraction of the mechanism's size count as
 SINGULAR_RCOND = 1e-10  # smallest/largest singular value below this: singular Jacobian
 
 
-def assemble(sys: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, np.ndarray | None]:
+def assemble(system: LoopSystem, structure: Structure) -> tuple[np.ndarray, dict, np.ndarray | None]:
     """Close the loops at t = 0, group by group in solving order; check the rank (mobility) there.
 
     Returns the assembled variables, a report: Newton iterations, closure, how far the typed
     joints moved, and for a redundant linkage what is redundant (``report["redundancy"]``), and the
     term vectors there (None without loops).
     """
-    mech = sys.mechanism
-    q = sys.coords_q.copy()
+    mech = system.mechanism
+    q = system.coords_q.copy()
     if mech.drivers:
-        q[list(sys.drivers)] = inputs_at_start(mech)
-    if not sys.loops:
+        q[list(system.drivers)] = inputs_at_start(mech)
+    if not system.loops:
         return q, {"iterations": 0, "closure": 0.0, "moved": 0.0}, None
-    every = TermIndex(sys)
+    every = TermIndex(system)
     z_typed, e_typed = every.at(q)
-    typed = np.array_equal(q, sys.coords_q)  # no driver moved off its coordinates
-    initial = _check_typed_closure(sys, q, z_typed)
-    groups: list[tuple[LoopGroup | _Dyad, list[int]]] = []
+    typed = np.array_equal(q, system.coords_q)  # no driver moved off its coordinates
+    initial = _check_typed_closure(system, q, z_typed)
+    groups: list[tuple[LoopGroup | DyadTerms, list[int]]] = []
     iterations = 0
-    for lp, un in structure.groups:
-        if not un:
+    for loops, unknowns in structure.groups:
+        if not unknowns:
             continue
-        g: LoopGroup | _Dyad | None = _Dyad(sys, lp[0], list(un)) if len(lp) == 1 and len(un) == 2 else None
-        steps = g.close(q) if g is not None else None
+        group: LoopGroup | DyadTerms | None = None
+        steps = None
+        if len(loops) == 1 and len(unknowns) == 2:
+            group = DyadTerms(system, loops[0], list(unknowns))
+            steps = _close_dyad(group, q)
         if steps is None:  # numpy's least squares; the first group starts from the typed q: its vectors are known
-            g = LoopGroup(sys, list(lp), list(un))
-            steps = _close(g, q, list(un), (z_typed[g.k], e_typed[g.k]) if not groups else None)
-        groups.append((g, list(un)))
+            group = LoopGroup(system, list(loops), list(unknowns))
+            steps = _close(group, q, list(unknowns), (z_typed[group.k], e_typed[group.k]) if not groups else None)
+        groups.append((group, list(unknowns)))
         iterations += steps
     z, e = every.at(q) if groups else (z_typed, e_typed)
-    closure = float(np.abs(z @ sys.C.T).max()) / mech.scale
+    closure = float(np.abs(z @ system.C.T).max()) / mech.scale
     if closure > CLOSED:
         raise MechanismError(
             f"{mech.source}: [joints] cannot assemble the mechanism at t = 0 from the given coordinates "
-            f"(closure {closure:.2g} of its size after {iterations} Newton steps){_over_note(sys)}",
+            f"(closure {closure:.2g} of its size after {iterations} Newton steps){_over_note(system)}",
             entry="joints",
         )
-    z0 = z_typed if typed else every.at(sys.coords_q)[0]
-    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(sys, q, z0, z)}
-    for g, unknowns in groups:
-        _check_rank(sys, g.jacobian(z[g.k], e[g.k]), unknowns)
+    z0 = z_typed if typed else every.at(system.coords_q)[0]
+    report = {"iterations": iterations, "closure": closure, "initial_closure": initial, **moved(system, q, z0, z)}
+    for group, unknowns in groups:
+        _check_rank(system, group.jacobian(z[group.k], e[group.k]), unknowns)
     if structure.over_determined:
-        report["redundancy"] = redundancy(sys, q)
+        report["redundancy"] = redundancy(system, q)
     return q, report, z
 
 
@@ -79,30 +85,30 @@ def inputs_at_start(mech: Mechanism) -> list[float]:
     ]
 
 
-def _check_typed_closure(sys: LoopSystem, q: np.ndarray, z: np.ndarray) -> float:
+def _check_typed_closure(system: LoopSystem, q: np.ndarray, z: np.ndarray) -> float:
     """The typed coordinates' closure (fraction of the size); refused beyond ``assembly_tolerance``. ``z``: the
     term vectors at ``q``."""
-    mech = sys.mechanism
+    mech = system.mechanism
     tol = mech.options.get("assembly_tolerance", DEFAULT_ASSEMBLY_TOL)
-    res0 = np.abs(z @ sys.C.T)
+    res0 = np.abs(z @ system.C.T)
     worst = int(res0.argmax())
     if res0[worst] > tol * mech.scale:
-        lp = sys.loops[worst]
+        loop = system.loops[worst]
         why = ""
-        if any(abs(q[v] - sys.coords_q[v]) > 1e-12 for v in sys.drivers):
+        if any(abs(q[v] - system.coords_q[v]) > 1e-12 for v in system.drivers):
             why = " with the drivers' t = 0 values (theta0/s0 differ from the coordinates)"
         raise MechanismError(
-            f"{mech.source}: [joints] the t = 0 coordinates do not close loop {lp.index + 1} ({lp.label}){why}: "
+            f"{mech.source}: [joints] the t = 0 coordinates do not close loop {loop.index + 1} ({loop.label}){why}: "
             f"off by {res0[worst]:.4g} {mech.units} ({res0[worst] / mech.scale:.2g} of the mechanism size; "
-            f"accepted up to {tol:g}){_over_note(sys)}",
+            f"accepted up to {tol:g}){_over_note(system)}",
             entry="joints",
         )
     return float(res0.max()) / mech.scale
 
 
-def _over_note(sys: LoopSystem) -> str:
+def _over_note(system: LoopSystem) -> str:
     """Where Gruebler's count is below the drivers, a failure to close says why it matters."""
-    mech = sys.mechanism
+    mech = system.mechanism
     M = mech.gruebler()[2]
     if M >= len(mech.drivers):
         return ""
@@ -132,80 +138,88 @@ def _close(g: LoopGroup, q: np.ndarray, unknowns: list[int], ze: tuple[np.ndarra
     return 50
 
 
-class _Dyad:
-    """One loop in two unknowns, Newton at t = 0 in Python numbers (numpy's calls cost more than the arithmetic of
-    a few terms): the same steps as :func:`_close` on its LoopGroup — term vectors z = (r + s)·e^{j(φ + δ)}, their
-    derivatives j·z (an angle) and e^{j(φ + δ)} (a slider), the 2×2 step by Cramer's rule. ``k`` and
-    :meth:`jacobian` as LoopGroup's."""
-
-    def __init__(self, sys: LoopSystem, loop: int, unknowns: list[int]) -> None:
-        na = sys.n_angles
-        row = sys.C[loop]
-        self.unknowns = unknowns
-        self.k = np.flatnonzero(row)
-        k = self.k
-        self.terms = []  # (sign, angle or -1, slider variable or -1, r, δ, the unknown turning it, sliding it or -1)
-        columns = (x.tolist() for x in (row[k], sys.t_ang[k], sys.t_sl[k], sys.t_r[k], sys.t_delta[k]))
-        for c, a, i, r, d in zip(*columns, strict=True):
-            v = na + i if i >= 0 else -1
-            turn, slide = (unknowns.index(x) if x in unknowns else -1 for x in (a, v))
-            self.terms.append((float(c), a, v, r, d, turn, slide))
-
-    def at(self, q: list[float]) -> tuple[list[complex], list[complex]]:
-        """The loop's term vectors z and directions e at the variables q."""
-        z, e = [], []
-        for _, a, i, r, d, _, _ in self.terms:
-            phi = (q[a] if a >= 0 else 0.0) + d
-            e.append(complex(math.cos(phi), math.sin(phi)))
-            z.append((r + (q[i] if i >= 0 else 0.0)) * e[-1])
-        return z, e
-
-    def columns(self, z: list[complex], e: list[complex]) -> list[complex]:
-        """The loop's two complex Jacobian columns at its term vectors and directions."""
-        J = [0j, 0j]
-        for (c, _, _, _, _, ua, ui), zt, et in zip(self.terms, z, e, strict=True):
-            if ua >= 0:
-                J[ua] += c * 1j * zt
-            if ui >= 0:
-                J[ui] += c * et
-        return J
-
-    def jacobian(self, zk: np.ndarray, ek: np.ndarray) -> np.ndarray:
-        """[Re; Im] of the Jacobian (2×2) at its term vectors and directions, as LoopGroup.jacobian."""
-        j0, j1 = self.columns(zk.tolist(), ek.tolist())
-        return np.array([[j0.real, j1.real], [j0.imag, j1.imag]])
-
-    def close(self, q: np.ndarray) -> int | None:
-        """Newton from q, written into q; the iterations, or None (q untouched) where a step is singular or not
-        finite or 50 do not converge: the caller then takes :func:`_close`'s least-squares path."""
-        x = q.tolist()
-        u0, u1 = self.unknowns
-        for it in range(1, 51):
-            z, e = self.at(x)
-            F = sum(t[0] * zt for t, zt in zip(self.terms, z, strict=True))
-            j0, j1 = self.columns(z, e)
-            det = j0.real * j1.imag - j1.real * j0.imag
-            if det == 0 or not math.isfinite(det):
-                return None
-            d0 = (j1.real * F.imag - j1.imag * F.real) / det  # J·d = −[Re F; Im F]
-            d1 = (j0.imag * F.real - j0.real * F.imag) / det
-            if not (math.isfinite(d0) and math.isfinite(d1)):
-                return None
-            x[u0] += d0
-            x[u1] += d1
-            if max(abs(d0), abs(d1)) <= 1e-14 * (1 + max(abs(x[u0]), abs(x[u1]))):
-                q[u0], q[u1] = x[u0], x[u1]
-                return it
-        return None
+def _close_dyad(dyad: DyadTerms, q: np.ndarray) -> int | None:
+    """Newton on one loop in two unknowns from q (written into q), in Python numbers (numpy's calls cost more than
+    the arithmetic of a few terms): the same steps as :func:`_close` on its LoopGroup, the 2×2 step by Cramer's rule;
+    the iterations, or None (q untouched) where a step is singular or not finite or 50 do not converge: the caller
+    then takes :func:`_close`'s least-squares path."""
+    x = q.tolist()
+    u0, u1 = dyad.unknowns
+    for it in range(1, 51):
+        z, e = dyad.at(x)
+        F = sum(t[0] * zt for t, zt in zip(dyad.terms, z, strict=True))
+        j0, j1 = dyad.columns(z, e)
+        det = j0.real * j1.imag - j1.real * j0.imag
+        if det == 0 or not math.isfinite(det):
+            return None
+        d0 = (j1.real * F.imag - j1.imag * F.real) / det  # J·d = −[Re F; Im F]
+        d1 = (j0.imag * F.real - j0.real * F.imag) / det
+        if not (math.isfinite(d0) and math.isfinite(d1)):
+            return None
+        x[u0] += d0
+        x[u1] += d1
+        if max(abs(d0), abs(d1)) <= 1e-14 * (1 + max(abs(x[u0]), abs(x[u1]))):
+            q[u0], q[u1] = x[u0], x[u1]
+            return it
+    return None
 
 
-def close_group(sys: LoopSystem, loops: list[int], unknowns: list[int], q: np.ndarray) -> bool:
+def close_group(system: LoopSystem, loops: list[int], unknowns: list[int], q: np.ndarray) -> bool:
     """Close ``loops`` for ``unknowns`` from ``q`` (written into it), the other variables held, by the same Newton
     as the assembly's; whether they close to 1e-11 of the mechanism's size."""
-    g = LoopGroup(sys, loops, unknowns)
+    g = LoopGroup(system, loops, unknowns)
     _close(g, q, unknowns)
     F = np.abs(g.residual(g.at(q)[0]))
-    return bool(np.all(np.isfinite(F)) and F.max(initial=0.0) <= CLOSED * sys.mechanism.scale)
+    return bool(np.all(np.isfinite(F)) and F.max(initial=0.0) <= CLOSED * system.mechanism.scale)
+
+
+STARTS = 512  # random starts besides the given one, for the assemblies of a group (seeded: the same every time)
+
+
+def assemblies(system: LoopSystem, loops: list[int], unknowns: list[int], q: np.ndarray) -> list[np.ndarray]:
+    """The assemblies of ``loops`` in ``unknowns`` (the other variables as in ``q``) that Newton finds from ``q`` and
+    from :data:`STARTS` seeded random starts (angles uniform over a turn, slides within twice the size of ``q``'s):
+    every configuration closed to 1e-11 of the size, each once (angles compared modulo 2π, to 1e-7), the one
+    reached from ``q`` first where it closes. Newton from many starts is not a proof that none is missed."""
+    mech, n_angles = system.mechanism, system.n_angles
+    cols = np.asarray(unknowns)
+    rng = np.random.default_rng(0)
+    starts = np.repeat(q[None, :], STARTS + 1, axis=0)
+    angle = cols < n_angles
+    starts[1:, cols[angle]] = rng.uniform(-math.pi, math.pi, (STARTS, int(angle.sum())))
+    slides = cols[~angle]
+    starts[1:, slides] = q[slides] + rng.uniform(-2, 2, (STARTS, len(slides))) * mech.scale
+    near = _newton_many(system, loops, cols, starts)
+    distinct: list[np.ndarray] = []
+    for row in near:
+        diff = row[cols] - np.array([d[cols] for d in distinct]).reshape(-1, len(cols))
+        diff[:, angle] = np.angle(np.exp(1j * diff[:, angle]))
+        diff[:, ~angle] /= mech.scale
+        if not np.any(np.all(np.abs(diff) <= 1e-7, axis=1)):
+            distinct.append(row)
+    return [row for row in distinct if close_group(system, loops, list(cols), row)]  # polished in place
+
+
+def _newton_many(system: LoopSystem, loops: list[int], cols: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """Newton (60 steps, each angle's step limited to 1 rad) on ``loops`` for the variables ``cols`` from every row
+    of ``rows`` at once: the rows it closed to 1e-9 of the size, in their order."""
+    group = LoopGroup(system, loops, list(cols))
+    turns = cols < system.n_angles
+    q = rows.copy()
+    active = np.arange(len(q))  # rows still stepping (a row whose step is below 1e-13 of a unit has converged)
+    for _ in range(60):
+        F, J = group.many(q[active])
+        step = np.einsum("ncr,nr->nc", np.linalg.pinv(J), -np.concatenate((F.real, F.imag), axis=1))
+        step[:, turns] = np.clip(step[:, turns], -1.0, 1.0)
+        step = np.where(np.isfinite(step), step, 0.0)
+        q[np.ix_(active, cols)] += step
+        active = active[
+            np.abs(step).max(axis=1, initial=0.0) > 1e-13 * (1 + np.abs(q[np.ix_(active, cols)]).max(axis=1))
+        ]
+        if not len(active):
+            break
+    F = np.abs(group.many(q)[0]).max(axis=1)
+    return [row for row, f in zip(q, F, strict=True) if f <= 1e-9 * system.mechanism.scale]
 
 
 def _max_abs(xs: list[float]) -> float:
@@ -214,14 +228,14 @@ def _max_abs(xs: list[float]) -> float:
     return m if all(x == x for x in xs) else math.nan
 
 
-def _check_rank(sys: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:
+def _check_rank(system: LoopSystem, J: np.ndarray, unknowns: list[int]) -> None:
     """A group's Jacobian ``J`` (in ``unknowns``) must have full column rank at t = 0 (else a dead point or
     toggle): its singular values' ratio at least SINGULAR_RCOND."""
     if J.shape == (2, 2) and _clearly_regular(J):
         return
     sv = np.linalg.svd(J, compute_uv=False)
     if sv[-1] < SINGULAR_RCOND * sv[0]:
-        mech = sys.mechanism
+        mech = system.mechanism
         raise MechanismError(
             f"{mech.source}: [joints] the loop Jacobian is singular at t = 0 "
             f"(rank {int(np.sum(sv >= SINGULAR_RCOND * sv[0]))} of {len(unknowns)}): the mechanism is at a dead "
@@ -245,7 +259,7 @@ def _clearly_regular(J: np.ndarray) -> bool:
     return det_low > 100 * SINGULAR_RCOND * (1 + 8 * EPS) * (a * a + b * b + c * c + d * d)
 
 
-def redundancy(sys: LoopSystem, q: np.ndarray) -> dict:
+def redundancy(system: LoopSystem, q: np.ndarray) -> dict:
     """Mobility from the rank of the full loop Jacobian (all variables, driven ones included) at ``q``.
 
     Gruebler's count below the number of drivers is then either a redundant linkage — the rank leaves
@@ -255,10 +269,10 @@ def redundancy(sys: LoopSystem, q: np.ndarray) -> dict:
     """
     import scipy.linalg
 
-    mech = sys.mechanism
-    rows = list(range(len(sys.loops)))
-    n_vars = sys.n_vars
-    J = loop_jacobian(sys, q, rows, list(range(n_vars)))
+    mech = system.mechanism
+    rows = list(range(len(system.loops)))
+    n_vars = system.n_vars
+    J = loop_jacobian(system, q, rows, list(range(n_vars)))
     sv = np.linalg.svd(J, compute_uv=False)
     rank = int(np.sum(sv >= SINGULAR_RCOND * sv[0])) if len(sv) else 0
     mobility = n_vars - rank
@@ -271,20 +285,20 @@ def redundancy(sys: LoopSystem, q: np.ndarray) -> dict:
             entry="drivers",
         )
     _, _, piv = scipy.linalg.qr(J.T, pivoting=True)  # independent equations first
-    dependent = sorted({int(r) % len(sys.loops) for r in piv[rank:]})
+    dependent = sorted({int(r) % len(system.loops) for r in piv[rank:]})
     return {
         "gruebler": M,
         "mobility": mobility,
-        "equations": 2 * len(sys.loops),
+        "equations": 2 * len(system.loops),
         "rank": rank,
-        "redundant_equations": 2 * len(sys.loops) - rank,
+        "redundant_equations": 2 * len(system.loops) - rank,
         "loops": [li + 1 for li in dependent],
     }
 
 
-def redundancy_text(info: dict, sys: LoopSystem) -> str:
+def redundancy_text(info: dict, system: LoopSystem) -> str:
     """The one line vloop prints for a redundant linkage."""
-    where = ", ".join(f"{n} ({sys.loops[n - 1].label})" for n in info["loops"])
+    where = ", ".join(f"{n} ({system.loops[n - 1].label})" for n in info["loops"])
     return (
         f"redundant constraint in loop {where}: Gruebler M = {info['gruebler']}, actual mobility {info['mobility']} "
         f"(loop Jacobian rank {info['rank']} of {info['equations']} equations): it moves only because its "
@@ -292,13 +306,13 @@ def redundancy_text(info: dict, sys: LoopSystem) -> str:
     )
 
 
-def moved(sys: LoopSystem, q: np.ndarray, z0: np.ndarray | None = None, z1: np.ndarray | None = None) -> dict:
+def moved(system: LoopSystem, q: np.ndarray, z0: np.ndarray | None = None, z1: np.ndarray | None = None) -> dict:
     """How far the assembly at ``q`` moved each point from the typed coordinates (``z0``, ``z1``: the term vectors
     at the typed coordinates and at ``q``, where known)."""
-    z0 = term_values(sys, sys.coords_q) if z0 is None else z0
-    z1 = term_values(sys, q) if z1 is None else z1
-    dist = np.abs((z1 - z0) @ sys.path) if len(sys.point_names) else np.zeros(0)
+    z0 = term_values(system, system.coords_q) if z0 is None else z0
+    z1 = term_values(system, q) if z1 is None else z1
+    dist = np.abs((z1 - z0) @ system.path) if len(system.point_names) else np.zeros(0)
     return {
         "moved": float(dist.max(initial=0.0)),
-        "moved_by_point": dict(zip(sys.point_names, dist.tolist(), strict=True)),
+        "moved_by_point": dict(zip(system.point_names, dist.tolist(), strict=True)),
     }

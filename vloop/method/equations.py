@@ -89,55 +89,55 @@ class Legend:
     slider: str | None = None
 
 
-def vector_loops(sys: LoopSystem) -> tuple[list[LoopEquation], list[Legend]]:
+def vector_loops(system: LoopSystem) -> tuple[list[LoopEquation], list[Legend]]:
     """The loop equations as one structure that both the text and the LaTeX are written from (in solving order;
     vectors of zero length left out), and the legend of their letters (in order of first appearance)."""
     letters: dict[object, str] = {}
     legend: list[Legend] = []
-    scale = sys.mechanism.scale
+    scale = system.mechanism.scale
 
     def vector(t: int, sign: float) -> Vector | None:
-        ang, sl, r = int(sys.t_ang[t]), int(sys.t_sl[t]), float(sys.t_r[t])
+        ang, sl, r = int(system.t_ang[t]), int(system.t_sl[t]), float(system.t_r[t])
         if sl < 0 and r <= 1e-14 * scale:  # a chord whose parts cancel (the Whitworth's second ground vector)
             return None
-        key = ("s", sl) if sl >= 0 else ("r", round(r, 12), sys.t_label[t])
+        key = ("s", sl) if sl >= 0 else ("r", round(r, 12), system.t_label[t])
         if key not in letters:
             letters[key] = _letter(len(letters))
-            name = sys.slider_names[sl] if sl >= 0 else None
-            legend.append(Legend(letters[key], f"slider {name}" if name else sys.t_label[t], r, name))
-        delta = (float(sys.t_delta[t]) + (math.pi if sign < 0 else 0.0)) % (2 * math.pi)
-        link = sys.angle_links[ang] if ang >= 0 else None
-        return Vector(t, letters[key], link, sys.slider_names[sl] if sl >= 0 else None, r, delta)
+            name = system.slider_names[sl] if sl >= 0 else None
+            legend.append(Legend(letters[key], f"slider {name}" if name else system.t_label[t], r, name))
+        delta = (float(system.t_delta[t]) + (math.pi if sign < 0 else 0.0)) % (2 * math.pi)
+        link = system.angle_links[ang] if ang >= 0 else None
+        return Vector(t, letters[key], link, system.slider_names[sl] if sl >= 0 else None, r, delta)
 
     def equation(li: int, block: Any = None) -> LoopEquation:
-        lp = sys.loops[li]
-        vectors = tuple(v for t, sg in zip(lp.terms, lp.signs, strict=True) if (v := vector(t, sg)) is not None)
+        loop = system.loops[li]
+        vectors = tuple(v for t, sg in zip(loop.terms, loop.signs, strict=True) if (v := vector(t, sg)) is not None)
         if block is None:
-            return LoopEquation(li + 1, lp.label, vectors)
-        sym = {v: _symbol(sys, v, letters) for v in lp.variables}
-        earlier = [v for v in lp.variables if v not in block.unknowns and v not in sys.drivers]
+            return LoopEquation(li + 1, loop.label, vectors)
+        sym = {v: _symbol(system, v, letters) for v in loop.variables}
+        earlier = [v for v in loop.variables if v not in block.unknowns and v not in system.drivers]
         sources = tuple(sorted({solved_in[v] + 1 for v in earlier if v in solved_in}))
         return LoopEquation(
-            li + 1, lp.label, vectors,
-            tuple(sym[v] for v in lp.variables if v in block.unknowns),
-            tuple(sym[v] for v in lp.variables if v in sys.drivers),
+            li + 1, loop.label, vectors,
+            tuple(sym[v] for v in loop.variables if v in block.unknowns),
+            tuple(sym[v] for v in loop.variables if v in system.drivers),
             (sources, tuple(sym[v] for v in earlier)), block.kind,
         )  # fmt: skip
 
-    solved_in = {v: b.loops[0] for b in sys.blocks for v in b.unknowns}
-    if sys.blocks:
-        loops = [equation(li, b) for b in sys.blocks for li in b.loops]
+    solved_in = {v: b.loops[0] for b in system.blocks for v in b.unknowns}
+    if system.blocks:
+        loops = [equation(li, b) for b in system.blocks for li in b.loops]
     else:
-        loops = [equation(lp.index) for lp in sys.loops]
+        loops = [equation(loop.index) for loop in system.loops]
     return loops, legend
 
 
-def _symbol(sys: LoopSystem, v: int, letters: dict) -> str:
+def _symbol(system: LoopSystem, v: int, letters: dict) -> str:
     """A variable's symbol: θ_NAME for an angle, a slider's letter (s_NAME before it has one)."""
-    na = sys.n_angles
-    if v < na:
-        return f"θ_{sys.angle_links[v]}"
-    return letters.get(("s", v - na), f"s_{sys.slider_names[v - na]}")
+    n_angles = system.n_angles
+    if v < n_angles:
+        return f"θ_{system.angle_links[v]}"
+    return letters.get(("s", v - n_angles), f"s_{system.slider_names[v - n_angles]}")
 
 
 def _theta(name: str, latex: bool) -> str:
@@ -170,16 +170,16 @@ def legend_text(item: Legend, exact: bool = False) -> str:
     return f"{item.letter} = |{item.what}| = {_num(item.r, exact)}"
 
 
-def describe(sys: LoopSystem, latex: bool = False, exact: bool = False) -> str:
+def describe(system: LoopSystem, latex: bool = False, exact: bool = False) -> str:
     """Loop equations, legend and solving order as text (or a LaTeX ``align*`` block), both written from
     :func:`vector_loops`. ``exact``: every number to full precision (the shortest text that reads back to the same
     double), angles that are multiples of π/2 within 1e-12 rad as such."""
-    mech = sys.mechanism
-    loops, legend = vector_loops(sys)
+    mech = system.mechanism
+    loops, legend = vector_loops(system)
     L, J, M = mech.gruebler()
     head = (
-        f"{mech.name}: {len(sys.loops)} vector loop{'s' if len(sys.loops) != 1 else ''} "
-        f"(J − L + 1 = {J} − {L} + 1), mobility M = {M}, {len(sys.unknowns)} unknowns"
+        f"{mech.name}: {len(system.loops)} vector loop{'s' if len(system.loops) != 1 else ''} "
+        f"(J − L + 1 = {J} − {L} + 1), mobility M = {M}, {len(system.unknowns)} unknowns"
     )
     notes = [legend_text(x, exact) for x in legend]
     if latex:
@@ -224,22 +224,22 @@ def grashof_class(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(cls, object).reshape(np.shape(s)), is_grashof
 
 
-def grashof(sys: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, float]]]:
+def grashof(system: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, float]]]:
     """Grashof class of every four-bar loop (ground + three pinned links, no slider).
 
     Returns (loop index, class, (ground, input side, coupler, output side) lengths).
     """
     from .loops import term_values
 
-    z = term_values(sys, sys.q0)
+    z = term_values(system, system.q0)
     out = []
-    for lp in sys.loops:
-        if any(sys.t_sl[t] >= 0 for t in lp.terms):
+    for loop in system.loops:
+        if any(system.t_sl[t] >= 0 for t in loop.terms):
             continue
         order: list[int] = []  # angle owners in traversal order, -1 for the ground
         vec: dict[int, complex] = {}
-        for t, s in zip(lp.terms, lp.signs, strict=True):
-            a = int(sys.t_ang[t])
+        for t, s in zip(loop.terms, loop.signs, strict=True):
+            a = int(system.t_ang[t])
             if a not in vec:
                 order.append(a)
                 vec[a] = 0j
@@ -250,5 +250,5 @@ def grashof(sys: LoopSystem) -> list[tuple[int, str, tuple[float, float, float, 
         order = order[k:] + order[:k]
         g, p1, c, p2 = (abs(vec[a]) for a in order)
         cls = str(grashof_class(np.array([g, p1, c, p2]))[0])
-        out.append((lp.index, cls, (g, p1, c, p2)))
+        out.append((loop.index, cls, (g, p1, c, p2)))
     return out

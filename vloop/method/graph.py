@@ -439,7 +439,7 @@ def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tupl
     """Step 3: each cycle as a loop equation Σ_k C[l, k]·z_k = 0 (C = ±1 along the traversal), one vector per
     body crossed (:func:`crossings`; chords are added to ``mg.terms``)."""
     ang, sl, r = mg.terms.ang, mg.terms.sl, mg.terms.r
-    na = len(mg.angle_links)
+    n_angles = len(mg.angle_links)
     loops = []
     at_l, at_t, coef = [], [], []  # the nonzero coefficients C[l, t]
     origin = origin_name(mech)
@@ -453,7 +453,7 @@ def build_loops(mg: MechanismGraph, mech: Mechanism, cycles: list[list]) -> tupl
             if ang[tid] >= 0 and (r[tid] > 0 or sl[tid] >= 0 or tid in mg.terms.parts):
                 variables.add(ang[tid])
             if sl[tid] >= 0:
-                variables.add(na + sl[tid])
+                variables.add(n_angles + sl[tid])
         label = loop_label(corners, mech, origin)
         at_l += [li] * len(used)
         at_t += used

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MechanismError
-from .loops import Block, LoopSystem, term_values
+from .loops import Block, LoopSystem, term_values, turning_with
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class Structure:
     over_determined: bool = False
 
 
-def analyse(sys: LoopSystem) -> Structure:
+def analyse(system: LoopSystem) -> Structure:
     """Dulmage–Mendelsohn at the level of loops: a maximum matching of equation rows to unknowns, then the
     strongly connected components of "this unknown's equation needs that unknown", dependencies first.
 
@@ -43,16 +43,16 @@ def analyse(sys: LoopSystem) -> Structure:
     same unknowns, so they fall in one group and the lowest loop numbers of the groups differ): any
     maximum matching serves (plain augmenting paths). Otherwise networkx's finds the free unknowns.
     """
-    unk = list(sys.unknowns)
+    unk = list(system.unknowns)
     if not unk:
-        return Structure(((tuple(range(len(sys.loops))), ()),) if sys.loops else (), bool(sys.loops))
-    row_of = _augmenting_matching(sys, unk)
+        return Structure(((tuple(range(len(system.loops))), ()),) if system.loops else (), bool(system.loops))
+    row_of = _augmenting_matching(system, unk)
     if len(row_of) < len(unk):
-        _matching(sys, unk)  # raises, naming the unknowns no loop fixes
-    if len(row_of) < 2 * len(sys.loops):
-        return Structure(((tuple(range(len(sys.loops))), tuple(unk)),), True)
+        _matching(system, unk)  # raises, naming the unknowns no loop fixes
+    if len(row_of) < 2 * len(system.loops):
+        return Structure(((tuple(range(len(system.loops))), tuple(unk)),), True)
     unk_set = set(unk)
-    needs = {v: [w for w in sys.loops[row_of[v]].variables if w in unk_set and w != v] for v in unk}
+    needs = {v: [w for w in system.loops[row_of[v]].variables if w in unk_set and w != v] for v in unk}
     comps = _strong_components(unk, needs)
     comp_of = {v: c for c, members in enumerate(comps) for v in members}
     first_loop = [min(row_of[v] for v in members) for members in comps]
@@ -78,16 +78,16 @@ def analyse(sys: LoopSystem) -> Structure:
     return Structure(tuple(groups))
 
 
-def _augmenting_matching(sys: LoopSystem, unk: list[int]) -> dict[int, int]:
+def _augmenting_matching(system: LoopSystem, unk: list[int]) -> dict[int, int]:
     """A maximum matching of unknowns to loop rows (two per loop), by augmenting paths: unknown → its row's loop."""
     loops_of: dict[int, list[int]] = {v: [] for v in unk}
-    for lp in sys.loops:
-        for v in lp.variables:
+    for loop in system.loops:
+        for v in loop.variables:
             if v in loops_of:
-                loops_of[v].append(lp.index)
-    free_rows = [2] * len(sys.loops)  # rows of each loop not matched yet
+                loops_of[v].append(loop.index)
+    free_rows = [2] * len(system.loops)  # rows of each loop not matched yet
     row_of: dict[int, int] = {}  # unknown → loop of its matched row
-    matched: list[list[int]] = [[] for _ in sys.loops]  # loop → the unknowns matched to its rows
+    matched: list[list[int]] = [[] for _ in system.loops]  # loop → the unknowns matched to its rows
     for v in unk:
         prev = {v: None}  # breadth-first search for a loop with a free row, through matched unknowns
         queue, end = deque([v]), None
@@ -155,25 +155,25 @@ def _strong_components(nodes: list[int], succ: dict[int, list[int]]) -> list[lis
     return comps
 
 
-def _matching(sys: LoopSystem, unk: list[int]) -> tuple[dict, list]:
+def _matching(system: LoopSystem, unk: list[int]) -> tuple[dict, list]:
     """Hopcroft–Karp matching of loop rows (Re, Im) to unknowns; raises if an unknown is fixed by no loop."""
     import networkx as nx
 
     unk_set = set(unk)
     B = nx.Graph()
-    rows = [("row", lp.index, part) for lp in sys.loops for part in (0, 1)]
+    rows = [("row", loop.index, part) for loop in system.loops for part in (0, 1)]
     B.add_nodes_from(rows, bipartite=0)
     B.add_nodes_from((("var", v) for v in unk), bipartite=1)
-    for lp in sys.loops:
-        for v in lp.variables:
+    for loop in system.loops:
+        for v in loop.variables:
             if v in unk_set:
-                B.add_edge(("row", lp.index, 0), ("var", v))
-                B.add_edge(("row", lp.index, 1), ("var", v))
+                B.add_edge(("row", loop.index, 0), ("var", v))
+                B.add_edge(("row", loop.index, 1), ("var", v))
     match = nx.bipartite.hopcroft_karp_matching(B, top_nodes=rows)
-    free = [sys.var_name(v) for v in unk if ("var", v) not in match]
+    free = [system.var_name(v) for v in unk if ("var", v) not in match]
     if free:
         raise MechanismError(
-            f"{sys.mechanism.source}: [links] the loop equations cannot be solved: "
+            f"{system.mechanism.source}: [links] the loop equations cannot be solved: "
             f"{', '.join(free)} are not fixed by any loop (that part can move freely)",
             entry="links",
         )
@@ -181,21 +181,21 @@ def _matching(sys: LoopSystem, unk: list[int]) -> tuple[dict, list]:
 
 
 def block_structure(
-    sys: LoopSystem, structure: Structure, q0: np.ndarray, method: str, z: np.ndarray | None = None
+    system: LoopSystem, structure: Structure, q0: np.ndarray, method: str, z: np.ndarray | None = None
 ) -> tuple[Block, ...]:
     """The blocks to solve, in order: each group classified (closed-form dyad kind and branch σ at the
     t = 0 assembly) under method "auto"; one Newton block over everything under "newton". ``z``: the term
     vectors at ``q0``, where known."""
-    if not sys.unknowns:
+    if not system.unknowns:
         return ()
     if method == "newton" or structure.over_determined:
-        return (Block(tuple(range(len(sys.loops))), tuple(sys.unknowns), "newton"),)
-    zs = (term_values(sys, q0) if z is None else z).tolist()  # Python numbers: numpy's scalar operations
-    return tuple(classify(sys, q0, loops, unknowns, zs) for loops, unknowns in structure.groups)
+        return (Block(tuple(range(len(system.loops))), tuple(system.unknowns), "newton"),)
+    zs = (term_values(system, q0) if z is None else z).tolist()  # Python numbers: numpy's scalar operations
+    return tuple(classify(system, q0, loops, unknowns, zs) for loops, unknowns in structure.groups)
 
 
 def classify(
-    sys: LoopSystem,
+    system: LoopSystem,
     q0: np.ndarray,
     loops: tuple[int, ...],
     unknowns: tuple[int, ...],
@@ -203,33 +203,33 @@ def classify(
 ) -> Block:
     """Closed-form kind and assembly branch (at the t = 0 assembly) of a one-loop block; "newton" otherwise.
     ``z``: the term vectors at ``q0``, where known."""
-    na = sys.n_angles
+    n_angles = system.n_angles
     if len(loops) != 1 or len(unknowns) != 2:
         return Block(loops, unknowns, "newton")
-    lp = sys.loops[loops[0]]
-    angs = [v for v in unknowns if v < na]
-    sls = [v - na for v in unknowns if v >= na]
-    z = term_values(sys, q0) if z is None else z
-    phi = np.append(q0[:na], 0.0)
-    terms = list(zip(lp.terms, lp.signs, strict=True))
+    loop = system.loops[loops[0]]
+    angles = [v for v in unknowns if v < n_angles]
+    slides = [v - n_angles for v in unknowns if v >= n_angles]
+    z = term_values(system, q0) if z is None else z
+    phi = np.append(q0[:n_angles], 0.0)
+    terms = list(zip(loop.terms, loop.signs, strict=True))
 
     def on(a: int) -> complex:  # Σ of the loop's vectors turning with angle a
-        return complex(sum(sg * z[t] for t, sg in terms if sys.t_ang[t] == a))
+        return turning_with(system, loop, z, a)
 
-    if len(angs) == 2:
-        p1 = on(angs[0])
-        X = p1 + on(angs[1])
+    if len(angles) == 2:
+        p1 = on(angles[0])
+        X = p1 + on(angles[1])
         return Block(loops, unknowns, "RRR", math.copysign(1.0, (np.conj(X) * p1).imag))
-    if len(angs) == 1 and len(sls) == 1:
-        a, i = angs[0], sls[0]
-        st = [(t, sg) for t, sg in terms if sys.t_sl[t] == i]
+    if len(angles) == 1 and len(slides) == 1:
+        a, i = angles[0], slides[0]
+        st = [(t, sg) for t, sg in terms if system.t_sl[t] == i]
         if len(st) != 1:
             return Block(loops, unknowns, "newton")
         t, sg = st[0]
-        if sys.t_ang[t] == a:  # the slider rides on the unknown angle: RPR
-            c = sg * np.exp(1j * sys.t_delta[t])
+        if system.t_ang[t] == a:  # the slider rides on the unknown angle: RPR
+            c = sg * np.exp(1j * system.t_delta[t])
             W = (on(a) - sg * z[t]) * np.exp(-1j * phi[a])
-            return Block(loops, unknowns, "RPR", math.copysign(1.0, q0[na + i] + (W * np.conj(c)).real))
-        U = sg * np.exp(1j * (phi[sys.t_ang[t]] + sys.t_delta[t]))
+            return Block(loops, unknowns, "RPR", math.copysign(1.0, q0[n_angles + i] + (W * np.conj(c)).real))
+        U = sg * np.exp(1j * (phi[system.t_ang[t]] + system.t_delta[t]))
         return Block(loops, unknowns, "RRP", math.copysign(1.0, (on(a) * np.conj(U)).real))
     return Block(loops, unknowns, "PP")
