@@ -36,7 +36,7 @@ class Model:
     stiffness: np.ndarray  # k [N·m/rad or N/m]
     damping: np.ndarray  # c
     rest: np.ndarray  # s at rest [rad or m]
-    load_weights: Callable[[float], np.ndarray]  # Q_loads = weights(t) · d(channels)/dq
+    load_weights: Callable[[float], list[tuple[int, float]]]  # Q_loads = Σ w·d(channel)/dq
     qscale: float  # metres per input unit (1 for a crank)
 
     def input_torque(self, t: float, qd: float) -> float:
@@ -51,15 +51,24 @@ class Model:
 
     def rhs(self, t: float, y: np.ndarray) -> list[float]:
         """d/dt of (q, q̇, W_input, W_loads, W_dampers)."""
-        q, qd = y[0], y[1]
+        q, qd = float(y[0]), float(y[1])
         v, d = self.tables.at(q)
-        ds = d[self.springs]
-        q_spring = -float((self.stiffness * (v[self.springs] - self.rest)) @ ds)
-        q_damp = -float((self.damping * ds) @ ds) * qd
-        q_loads = float(self.load_weights(t) @ d)
+        q_spring = q_damp = 0.0
+        for i, k, c, rest in self._springs:
+            q_spring -= k * (v[i] - rest) * d[i]
+            q_damp -= c * d[i] * d[i] * qd
+        q_loads = sum(w * d[i] for i, w in self.load_weights(t))
         t_in = self.input_torque(t, qd)
         qdd = (t_in + q_loads + q_spring + q_damp - d[1] - 0.5 * d[0] * qd * qd) / v[0]
         return [qd, qdd, t_in * qd, q_loads * qd, q_damp * qd]
+
+    @property
+    def _springs(self) -> list[tuple[int, float, float, float]]:
+        rows = self.__dict__.get("_spring_rows")
+        if rows is None:
+            rows = list(zip(self.springs.tolist(), self.stiffness.tolist(), self.damping.tolist(), self.rest.tolist()))
+            self.__dict__["_spring_rows"] = rows
+        return rows
 
 
 def channels_of(mech: Mechanism, dyn: Dynamics) -> list[tuple[str, tuple]]:
@@ -98,8 +107,8 @@ def compile_model(mech: Mechanism, dyn: Dynamics | None = None) -> Model:
     return Model(mech, dyn, tables, springs, k, c, np.array(rest, float), _load_weights(mech, names), tables.qscale)
 
 
-def _load_weights(mech: Mechanism, names: tuple[str, ...]) -> Callable[[float], np.ndarray]:
-    """weights(t) over the channels such that Q_loads = weights · d(channels)/dq (constant loads folded once)."""
+def _load_weights(mech: Mechanism, names: tuple[str, ...]) -> Callable[[float], list[tuple[int, float]]]:
+    """weights(t): (channel, weight) pairs with Q_loads = Σ weight · d(channel)/dq (constant loads folded once)."""
     fixed = np.zeros(len(names))
     varying = []
     for i, ld in enumerate(mech.loads):
@@ -108,13 +117,14 @@ def _load_weights(mech: Mechanism, names: tuple[str, ...]) -> Callable[[float], 
             fixed[rows] += np.atleast_1d(np.asarray(ld.value, float))
         else:
             varying.append((rows, ld))
+    constant = [(i, float(w)) for i, w in enumerate(fixed) if w != 0.0]
     if not varying:
-        return lambda t: fixed
+        return lambda t: constant
 
-    def weights(t: float) -> np.ndarray:
-        w = fixed.copy()
+    def weights(t: float) -> list[tuple[int, float]]:
+        out = list(constant)
         for rows, ld in varying:
-            w[rows] += np.atleast_1d(load_values(ld, np.array([t]))[0])
-        return w
+            out += zip(rows, np.atleast_1d(load_values(ld, np.array([t]))[0]).tolist(), strict=True)
+        return out
 
     return weights

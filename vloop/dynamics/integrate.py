@@ -150,9 +150,10 @@ def _outputs(model: Model, ode: Any, message: str) -> Simulation:
     torque = np.array([model.input_torque(ti, yi) for ti, yi in zip(t, y[1], strict=True)])
     cols = {k: v for k, v in exact.columns.items() if not k.startswith(G_PREFIX)}
     cols[f"{d.target}.{'torque' if d.kind == 'crank' else 'force'}"] = torque
-    result = Result(mech.name, "vloop.simulate", t, cols)
-    result.meta = {**getattr(exact, "meta", {}), "dynamics": {"tables_error": model.tables.error}}
+    meta = {**exact.meta, "dynamics": {"tables_error": model.tables.error, "method": model.dynamics.method}}
+    result = Result(mech.name, "vloop.simulate", t, cols, dict(exact.health), meta)
     turns = ode.t_events[0] if model.tables.period is not None and ode.t_events else np.zeros(0)
+    turns = turns[turns > 0.0]  # the start is no turn
     return Simulation(mech, result, energy, model, np.asarray(turns, float), message, ode)
 
 

@@ -64,24 +64,29 @@ class Tables:
     qscale: float  # metres per input unit (1 for a crank)
     limits: tuple[float, float] | None  # a limited input's limit positions [input units]
 
-    def at(self, q: float) -> tuple[np.ndarray, np.ndarray]:
-        """Every channel's value and derivative d/dq at q (a crank's q anywhere; else within [lo, hi])."""
-        turns = 0.0
+    def at(self, q: float) -> tuple[list[float], list[float]]:
+        """Every channel's value and derivative d/dq at q (a crank's q anywhere; else within [lo, hi]).
+        Plain floats: the integrator calls this a few times per step, where numpy's overhead would dominate."""
+        rows = self.__dict__.get("_rows")
+        if rows is None:
+            rows = self._prepare()
+        knots, values, slopes, inc = rows
+        turns = 0
         if self.period is not None:
-            turns = math.floor((q - self.nodes[0]) / self.period)
+            turns = math.floor((q - knots[0]) / self.period)
             q -= turns * self.period
-        i = min(max(bisect.bisect_right(self._knots, q) - 1, 0), len(self.coef) - 1)
-        u = q - self._knots[i]
-        u2 = u * u
-        p = np.array([u2 * u2 * u, u2 * u2, u2 * u, u2, u, 1.0])
-        return self.coef[i] @ p + turns * self.increment, self.dcoef[i] @ p[1:]
+        i = min(max(bisect.bisect_right(knots, q) - 1, 0), len(values) - 1)
+        u = q - knots[i]
+        v = [((((a * u + b) * u + c) * u + d) * u + e) * u + f for a, b, c, d, e, f in values[i]]
+        if turns:
+            v = [x + turns * k for x, k in zip(v, inc, strict=True)]
+        return v, [(((a * u + b) * u + c) * u + d) * u + e for a, b, c, d, e in slopes[i]]
 
-    @property
-    def _knots(self) -> list[float]:
-        k = self.__dict__.get("_knot_list")
-        if k is None:
-            k = self.__dict__["_knot_list"] = self.nodes.tolist()
-        return k
+    def _prepare(self) -> tuple[list[float], list, list, list[float]]:
+        """The coefficients as nested lists of floats (read once)."""
+        rows = (self.nodes.tolist(), self.coef.tolist(), self.dcoef.tolist(), self.increment.tolist())
+        self.__dict__["_rows"] = rows
+        return rows
 
 
 def centre_points(mech: Mechanism) -> dict[str, Point]:
