@@ -237,7 +237,7 @@ class Dynamics:
     tabulated one (``torque_profile``, columns t, torque), a motor line T = stall·(1 − ẋ/no_load_speed)
     (``motor`` = (stall, no_load_speed)), and a ``flywheel`` [kg·m², or kg on a slider] on the input; the
     file's gravity, masses and [[loads]] act as in the force analysis. Integration: scipy's solve_ivp with
-    ``method`` at ``rtol``/``atol`` (rad and rad/s, or m and m/s).
+    ``method`` at ``rtol``/``atol`` (rad and rad/s, or m and m/s), rows every ``step`` up to ``stop`` [s].
     """
 
     position: float | None = None
@@ -250,6 +250,8 @@ class Dynamics:
     method: str = "DOP853"
     rtol: float = 1e-10
     atol: float = 1e-10
+    stop: float | None = None  # the simulated rows: 0, step, … stop [s] (None: the file's [time])
+    step: float | None = None
 
 
 @dataclass(frozen=True)

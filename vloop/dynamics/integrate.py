@@ -51,13 +51,13 @@ def simulate(
     mech: Mechanism, times: np.ndarray | None = None, *, dynamics: Dynamics | None = None, **changes: Any
 ) -> Simulation:
     """The motion of a one-input mechanism under its loads from its state at t = 0, at ``times`` [s] ≥ 0
-    (default: the file's [time]). ``dynamics``: instead of the file's [dynamics]; ``changes``: fields of it
+    (default: [dynamics] stop and step, else the file's [time]). ``dynamics``: instead of the file's [dynamics]; ``changes``: fields of it
     replaced (e.g. ``flywheel=0.05``, ``method="Radau"``). Raises MotionError (``.partial``: the Simulation
     up to the stop) when the motion reaches a limit position of the input."""
     dyn = dynamics if dynamics is not None else (mech.dynamics or Dynamics())
     dyn = dataclasses.replace(dyn, **changes) if changes else dyn
     _check(mech)
-    times = np.asarray(mech.times if times is None else times, float)
+    times = np.asarray(_rows(mech, dyn) if times is None else times, float)
     if len(times) == 0 or times[0] < 0 or np.any(np.diff(times) <= 0):
         raise MechanismError(f"{mech.name}: [time] for a simulation: increasing times from t ≥ 0", entry="time")
     model = compile_model(mech, dyn)
@@ -66,6 +66,15 @@ def simulate(
     if message:
         raise MotionError(message, entry="dynamics", time=float(sim.t[-1]) if len(sim.t) else 0.0, partial=sim)
     return sim
+
+
+def _rows(mech: Mechanism, dyn: Dynamics) -> np.ndarray:
+    """The simulated rows: 0, step, … stop of [dynamics], else the file's [time]."""
+    if dyn.stop is None or dyn.step is None:
+        return mech.times
+    from ..files.fileformat import time_grid
+
+    return time_grid(0.0, dyn.step, int(math.floor(dyn.stop / dyn.step + 0.5)) + 1)
 
 
 def _check(mech: Mechanism) -> None:
@@ -140,10 +149,10 @@ def _outputs(model: Model, ode: Any, message: str) -> Simulation:
     if len(t) == 0:
         result = Result(mech.name, "vloop.simulate", t, {})
         return Simulation(mech, result, {k: np.zeros(0) for k in ENERGY_COLUMNS}, model, message=message, ode=ode)
-    profile = Profile(t, y[0] / qs, y[1] / qs, qdd / qs, source="simulate")
-    run = dataclasses.replace(aug, drivers=(dataclasses.replace(d, profile=profile),), times=t, dynamics=None)
+    lead, profile = _profile(float(d.x0), t, y[0] / qs, y[1] / qs, qdd / qs)
+    run = dataclasses.replace(aug, drivers=(dataclasses.replace(d, profile=profile),), times=t + lead, dynamics=None)
     try:
-        exact = solve(run, t)
+        exact = solve(run, t + lead)
     except MotionError as exc:
         raise MotionError(f"{exc.message} (the simulated motion)", entry="dynamics", time=exc.time) from None
     energy = _energy(model, exact, y)
@@ -155,6 +164,20 @@ def _outputs(model: Model, ode: Any, message: str) -> Simulation:
     turns = ode.t_events[0] if model.tables.period is not None and ode.t_events else np.zeros(0)
     turns = turns[turns > 0.0]  # the start is no turn
     return Simulation(mech, result, energy, model, np.asarray(turns, float), message, ode)
+
+
+def _profile(x0: float, t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[float, Profile]:
+    """The integrated input as a driver's table (x, ẋ, ẍ at every row) and the rows' delay in it: a run
+    starting away from the coordinates' input x0 is led in from x0 (at rest) to its first row, as a late
+    start is, over 1 s or the time its initial rate would take, so that the t = 0 assembly is the file's."""
+    if abs(x[0] - x0) <= 1e-12 * max(1.0, abs(x0)):
+        return 0.0, Profile(t, x, v, a, source="simulate")
+    lead = 1.0 if v[0] == 0 else min(1.0, abs(x[0] - x0) / abs(v[0]))
+    z = np.zeros(1)
+    return lead, Profile(
+        np.concatenate([z, t + lead]), np.concatenate([[x0], x]), np.concatenate([z, v]), np.concatenate([z, a]),
+        source="simulate",
+    )
 
 
 def _energy(model: Model, exact: Result, y: np.ndarray) -> dict[str, np.ndarray]:

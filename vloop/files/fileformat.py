@@ -1074,12 +1074,27 @@ def read_simulation(raw: Any, m: Mechanism, drivers: list[Driver], ctx: _Context
         if v is not None and not (0 < v < 1 if key == "rtol" else v > 0):
             probs.add("dynamics", f"{key} must be {'between 0 and 1' if key == 'rtol' else 'positive'}, got {v:g}")
         out[key] = v
+    _simulated_rows(raw, out, probs)
     springs = raw.get("springs", [])
     if not isinstance(springs, list):
         probs.add("dynamics.springs", "must be an array of tables [[dynamics.springs]]")
         springs = []
     out["springs"] = tuple(s for i, d in enumerate(springs) if (s := _spring(d, m, f"dynamics.springs[{i}]", probs)))
     return Dynamics(**out)
+
+
+def _simulated_rows(raw: dict, out: dict[str, Any], probs: Problems) -> None:
+    """stop and step [s] of the simulated rows, both or neither, within the time limit."""
+    stop, step = number(raw, "stop", "dynamics", probs), number(raw, "step", "dynamics", probs)
+    if (stop is None) != (step is None):
+        probs.add("dynamics", "give both 'stop' and 'step' (the simulated rows), or neither (the file's [time])")
+    elif stop is not None and step is not None:
+        if not (stop > 0 and step > 0):
+            probs.add("dynamics", f"'stop' and 'step' must be positive, got {stop:g} and {step:g}")
+        elif (limit := _time_limit(stop / step + 1)) is not None:
+            probs.add("dynamics", limit)
+        else:
+            out.update(stop=stop, step=step)
 
 
 def _non_negative(raw: dict, key: str, entry: str, probs: Problems) -> float:
@@ -1139,6 +1154,8 @@ def _simulation_to_dict(dyn: Dynamics) -> dict[str, Any]:
     if dyn.motor is not None:
         out["motor"] = {"stall": dyn.motor[0], "no_load_speed": dyn.motor[1]}
     out.update(flywheel=dyn.flywheel, method=dyn.method, rtol=dyn.rtol, atol=dyn.atol)
+    if dyn.stop is not None:
+        out.update(stop=dyn.stop, step=dyn.step)
     springs = []
     for s in dyn.springs:
         entry: dict[str, Any] = {"joint": s.joint, "links": list(s.ends)} if s.kind == "rotational" else {

@@ -278,6 +278,8 @@ SECTIONS += (
                 "(an implicit one for stiff springs)", "Radau"),
             Key("rtol", "0 < number < 1", "1e-10", "", "the integrator's relative tolerance", 1e-9),
             Key("atol", "number > 0", "1e-10", "rad, rad/s (m, m/s)", "the integrator's absolute tolerance", 1e-9),
+            Key("stop", "number > 0", "[time] stop", "s", "the last simulated row (rows from t = 0)", 5.0),
+            Key("step", "number > 0", "[time] step", "s", "the rows' spacing", 0.01),
             Key("springs", "[[dynamics.springs]]", "none", "", "springs and dampers (next table)", None),
         ),
     ),
