@@ -134,7 +134,7 @@ def _inertia(theta: float, h: float = 1e-5) -> float:
     gp, ap, _ = closed_form(theta + h)
     gm, am, _ = closed_form(theta - h)
     dg, da = (gp - gm) / (2 * h), (ap - am) / (2 * h)
-    return float(sum(m * (dg[i] @ dg[i]) + inertia * da[i] ** 2 for i, (m, inertia) in enumerate(zip(MASS, INERTIA))))
+    return float(sum(m * (dg[i] @ dg[i]) + inertia * da[i] ** 2 for i, (m, inertia) in enumerate(zip(MASS, INERTIA, strict=True))))
 
 
 def test_small_oscillation_period_matches_the_closed_form() -> None:
@@ -168,7 +168,7 @@ def _upward_crossings(sim, level: float) -> np.ndarray:
 def test_constant_torque_on_a_pure_inertia_follows_the_energy_equation() -> None:
     """Only the crank has mass (centre of mass 20 mm from O2): J = I + m·r² is constant, so
     θ = θ₀ + ω₀t + ½(T/J)t² and ½J(ω² − ω₀²) = T·(θ − θ₀)."""
-    text = FOURBAR.replace('gravity = [0.0, -9.81]\n', "").replace(", mass = 0.2355, inertia = 2.826e-4", "")
+    text = FOURBAR.replace("gravity = [0.0, -9.81]\n", "").replace(", mass = 0.2355, inertia = 2.826e-4", "")
     text = text.replace(", mass = 0.157, inertia = 8.373333333333334e-05", "")
     torque, w0 = 0.01, 2.0
     mech = fourbar(Dynamics(torque=torque, rate=w0, **TIGHT), text)

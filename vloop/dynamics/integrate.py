@@ -51,8 +51,8 @@ def simulate(
     mech: Mechanism, times: np.ndarray | None = None, *, dynamics: Dynamics | None = None, **changes: Any
 ) -> Simulation:
     """The motion of a one-input mechanism under its loads from its state at t = 0, at ``times`` [s] ≥ 0
-    (default: [dynamics] stop and step, else the file's [time]). ``dynamics``: instead of the file's [dynamics]; ``changes``: fields of it
-    replaced (e.g. ``flywheel=0.05``, ``method="Radau"``). Raises MotionError (``.partial``: the Simulation
+    (default: [dynamics] stop and step, else the file's [time]). ``dynamics``: instead of the file's
+    [dynamics]; ``changes``: fields of it replaced (e.g. ``flywheel=0.05``, ``method="Radau"``). Raises MotionError (``.partial``: the Simulation
     up to the stop) when the motion reaches a limit position of the input."""
     dyn = dynamics if dynamics is not None else (mech.dynamics or Dynamics())
     dyn = dataclasses.replace(dyn, **changes) if changes else dyn
@@ -74,7 +74,7 @@ def _rows(mech: Mechanism, dyn: Dynamics) -> np.ndarray:
         return mech.times
     from ..files.fileformat import time_grid
 
-    return time_grid(0.0, dyn.step, int(math.floor(dyn.stop / dyn.step + 0.5)) + 1)
+    return time_grid(0.0, dyn.step, math.floor(dyn.stop / dyn.step + 0.5) + 1)
 
 
 def _check(mech: Mechanism) -> None:
@@ -87,7 +87,9 @@ def _check(mech: Mechanism) -> None:
     try:
         length_factor(mech.units)
     except KeyError:
-        raise MechanismError(f"{mech.name}: dynamics needs a known length unit, got {mech.units!r}", entry="units") from None
+        raise MechanismError(
+            f"{mech.name}: dynamics needs a known length unit, got {mech.units!r}", entry="units"
+        ) from None
 
 
 def initial_state(model: Model) -> tuple[float, float]:
@@ -175,7 +177,10 @@ def _profile(x0: float, t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarr
     lead = 1.0 if v[0] == 0 else min(1.0, abs(x[0] - x0) / abs(v[0]))
     z = np.zeros(1)
     return lead, Profile(
-        np.concatenate([z, t + lead]), np.concatenate([[x0], x]), np.concatenate([z, v]), np.concatenate([z, a]),
+        np.concatenate([z, t + lead]),
+        np.concatenate([[x0], x]),
+        np.concatenate([z, v]),
+        np.concatenate([z, a]),
         source="simulate",
     )
 

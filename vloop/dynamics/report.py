@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+
 from ..files.writers import health_columns, write_table
 from ..result import column_units
 from .integrate import ENERGY_COLUMNS, Simulation
@@ -87,7 +88,6 @@ def summary_lines(sim: Simulation) -> list[str]:
         v = res[f"{d.target}.omega"] if d.kind == "crank" else res[f"{d.target}.v"]
         lines.append(f"  at the end: {d.value_text(float(x[-1]), mech.units)}, rate {float(v[-1]):.10g} per s")
         lines.append(
-            f"  energy balance: largest residual {abs(e['residual']).max():.3g} J "
-            f"(largest kinetic energy {span:.6g} J)"
+            f"  energy balance: largest residual {abs(e['residual']).max():.3g} J (largest kinetic energy {span:.6g} J)"
         )
     return lines

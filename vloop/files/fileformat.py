@@ -1052,7 +1052,7 @@ def read_simulation(raw: Any, m: Mechanism, drivers: list[Driver], ctx: _Context
         return None
     check_keys(raw, "dynamics", "dynamics", probs)
     if len(drivers) != 1:
-        probs.add("dynamics", f"forward dynamics needs a mechanism with one input (this one has {len(drivers)} drivers)")
+        probs.add("dynamics", f"forward dynamics needs one input (this mechanism has {len(drivers)} drivers)")
     if m.units.strip().lower() not in LENGTH_UNITS:
         probs.add("units", f"dynamics needs a length unit vloop knows ({', '.join(LENGTH_UNITS)}), got {show(m.units)}")
     out: dict[str, Any] = {}
