@@ -134,7 +134,11 @@ def _inertia(theta: float, h: float = 1e-5) -> float:
     gp, ap, _ = closed_form(theta + h)
     gm, am, _ = closed_form(theta - h)
     dg, da = (gp - gm) / (2 * h), (ap - am) / (2 * h)
-    return float(sum(m * (dg[i] @ dg[i]) + inertia * da[i] ** 2 for i, (m, inertia) in enumerate(zip(MASS, INERTIA, strict=True))))
+    return float(
+        sum(
+            m * (dg[i] @ dg[i]) + inertia * da[i] ** 2 for i, (m, inertia) in enumerate(zip(MASS, INERTIA, strict=True))
+        )
+    )
 
 
 def test_small_oscillation_period_matches_the_closed_form() -> None:

@@ -66,7 +66,15 @@ class Model:
     def _springs(self) -> list[tuple[int, float, float, float]]:
         rows = self.__dict__.get("_spring_rows")
         if rows is None:
-            rows = list(zip(self.springs.tolist(), self.stiffness.tolist(), self.damping.tolist(), self.rest.tolist(), strict=True))
+            rows = list(
+                zip(
+                    self.springs.tolist(),
+                    self.stiffness.tolist(),
+                    self.damping.tolist(),
+                    self.rest.tolist(),
+                    strict=True,
+                )
+            )
             self.__dict__["_spring_rows"] = rows
         return rows
 

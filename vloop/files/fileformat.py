@@ -1158,9 +1158,9 @@ def _simulation_to_dict(dyn: Dynamics) -> dict[str, Any]:
         out.update(stop=dyn.stop, step=dyn.step)
     springs = []
     for s in dyn.springs:
-        entry: dict[str, Any] = {"joint": s.joint, "links": list(s.ends)} if s.kind == "rotational" else {
-            "between": list(s.ends)
-        }
+        entry: dict[str, Any] = (
+            {"joint": s.joint, "links": list(s.ends)} if s.kind == "rotational" else {"between": list(s.ends)}
+        )
         entry.update(k=s.k, c=s.c, **({"rest": s.rest} if s.rest is not None else {}))
         springs.append(entry)
     if springs:
