@@ -52,8 +52,8 @@ def simulate(
 ) -> Simulation:
     """The motion of a one-input mechanism under its loads from its state at t = 0, at ``times`` [s] ≥ 0
     (default: [dynamics] stop and step, else the file's [time]). ``dynamics``: instead of the file's
-    [dynamics]; ``changes``: fields of it replaced (e.g. ``flywheel=0.05``, ``method="Radau"``). Raises MotionError (``.partial``: the Simulation
-    up to the stop) when the motion reaches a limit position of the input."""
+    [dynamics]; ``changes``: fields of it replaced (e.g. ``flywheel=0.05``, ``method="Radau"``). Raises
+    MotionError (``.partial``: the Simulation up to the stop) when the motion reaches a limit of the input."""
     dyn = dynamics if dynamics is not None else (mech.dynamics or Dynamics())
     dyn = dataclasses.replace(dyn, **changes) if changes else dyn
     _check(mech)
