@@ -79,7 +79,7 @@ def _run(mech: Mechanism, times: np.ndarray, step: float) -> Result:
     ss.timeIntegration.generalizedAlpha.computeInitialAccelerations = True
     ss.timeIntegration.startTime = 0.0
     ss.timeIntegration.endTime = float(times[-1])
-    ss.timeIntegration.numberOfSteps = int(round(times[-1] / step))
+    ss.timeIntegration.numberOfSteps = round(times[-1] / step)
     ss.solution.sensors.writePeriod = float(times[1] - times[0]) if len(times) > 1 else step
     records = vexu._Records(model, sensors, 0.0)
     with vexu._Quiet():

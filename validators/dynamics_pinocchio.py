@@ -159,7 +159,7 @@ def _run(mech: Mechanism, times: np.ndarray, h: float) -> Result:
     start = vpin.solve(driven, np.array([0.0]))
     q, v = np.array(start.meta["q"][0], float), np.array(start.meta["v"][0], float)
     model = _Dynamics(mech)
-    rows = int(round((times[1] - times[0]) / h)) if len(times) > 1 else 1
+    rows = round((times[1] - times[0]) / h) if len(times) > 1 else 1
     names = [b for b in mech.moving_links if b in model.pm.body_frame]
     out: dict[str, list[float]] = {f"{b}.{k}": [] for b in names for k in ("theta", "omega")}
     t = 0.0

@@ -125,6 +125,10 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
     if full:  # the ends are the same position: the same coefficients, only the angles' whole turns differ
         d1[:, -1], d2[:, -1] = d1[:, 0], d2[:, 0]
     d2[0] = _spline_slope(nodes * qscale, d1[0], full)
+    bad = ~np.isfinite(vals).all(axis=1) | ~np.isfinite(d1).all(axis=1) | ~np.isfinite(d2).all(axis=1)
+    if np.any(bad):  # e.g. a linear spring between two points that coincide somewhere
+        raise MechanismError(f"{mech.name}: the dynamics' {names[int(np.argmax(bad))]} is not finite over the "
+                             "input's range (a spring between coinciding points?)", entry="dynamics")  # fmt: skip
     mids = 0.5 * (nodes[1:] + nodes[:-1])
     mvals, _, _ = _sample(aug, channels, mids, qscale, flywheel)
     coef = np.stack([_quintic_hermite(nodes * qscale, v, a, b) for v, a, b in zip(vals, d1, d2, strict=True)])
