@@ -61,8 +61,8 @@ _TEACHING = (
 
 def __getattr__(name: str) -> Any:
     """The teaching functions, ``vloop.study``, ``vloop.simulate`` and every submodule (``vloop.teaching.cycle``
-    after a plain ``import vloop``), imported on first use so that ``import vloop`` stays light. Imported by name: modules
-    that import the package for vloop.solve must not look as if they depended on what is built on them."""
+    after a plain ``import vloop``), imported on first use so that ``import vloop`` stays light. Imported by name:
+    modules that import the package for vloop.solve must not look as if they depended on what is built on them."""
     import importlib
     import importlib.util
 
