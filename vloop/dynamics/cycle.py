@@ -12,8 +12,9 @@ its dense output). Over the last cycle:
 * steady: whether the last two cycle times agree to STEADY (relative);
 * start-up time: the end of the first cycle from which every cycle's mean speed is within 1 % of ω̄.
 
-A flywheel for a stated C_s: the textbook's I_s = ΔE/(C_s·ω_avg²) first, then the inertia on the input that
-brings the simulated C_s to the stated value (secant iterations on 1/C_s, nearly linear in the inertia).
+A flywheel for a stated C_s: the textbook's I_s = ΔE/(C_s·ω̄²) first (ΔE of the constant-speed cycle:
+:func:`textbook_energy`), then the inertia on the input that brings the simulated C_s to the stated value
+(secant iterations on 1/C_s, nearly linear in the inertia).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 from ..errors import MechanismError
 from ..model import Mechanism
+from .equations import Model
 from .integrate import Simulation, simulate
 
 STEADY = 1e-6  # the last two cycle times agree to this (relative): steady state
@@ -112,22 +114,47 @@ class Flywheel:
     cs: float
     iterations: int
     base: Cycle
+    energy: float  # the textbook's ΔE at the mean speed [J]
 
     def lines(self) -> list[str]:
         return [
-            f"  flywheel for Cs = {self.target:g}: textbook I = dE/(Cs*omega_avg^2) = {self.textbook:.6g} kg m^2 "
-            f"(dE = {self.base.energy_fluctuation:.6g} J, omega_avg = {self.base.omega_avg:.6g} rad/s without it)",
+            f"  flywheel for Cs = {self.target:g}: textbook I = dE/(Cs*omega^2) = {self.textbook:.6g} kg m^2 "
+            f"(dE = {self.energy:.6g} J at the constant speed omega = {self.base.mean_speed:.6g} rad/s)",
             f"  simulated: I = {self.inertia:.6g} kg m^2 gives Cs = {self.cs:.6g} ({self.iterations} simulations)",
         ]
 
 
+def textbook_energy(model: Model, speed: float, samples: int = 4096) -> tuple[float, float]:
+    """(ΔE [J], the mean torque [N·m]) of the textbook's constant-speed cycle: the torque the input needs to
+    turn at ``speed`` [rad/s] (Lagrange with q̈ = 0: ½·J′·ω² + V′ + the springs' and dampers' −Q − the loads'
+    −Q, loads at their t = 0 values), less its mean over the turn, integrated over the angle; ΔE is the swing
+    of that integral (Norton, eq. 11.xx: the area between the torque curve and its mean)."""
+    tab = model.tables
+    if tab.period is None:
+        raise MechanismError("the textbook's energy fluctuation needs an input that turns fully", entry="dynamics")
+    q = tab.nodes[0] + np.linspace(0.0, tab.period, samples + 1)
+    need = np.empty_like(q)
+    for i, x in enumerate(q):
+        v, d = tab.at(float(x))
+        springs = sum(k * (v[j] - r) * d[j] + c * d[j] * d[j] * speed for j, k, c, r in model._springs)
+        need[i] = 0.5 * d[0] * speed * speed + d[1] + springs - sum(w * d[j] for j, w in model.load_weights(0.0))
+    mean = float(np.trapezoid(need, q) / tab.period)
+    work = np.concatenate([[0.0], np.cumsum(0.5 * (need[1:] + need[:-1] - 2 * mean) * np.diff(q))])
+    return float(work.max() - work.min()), mean
+
+
 def flywheel_for(mech: Mechanism, cs: float, times: np.ndarray | None = None, **options: Any) -> Flywheel:
-    """The flywheel inertia [kg·m²] added on the input that brings the simulated C_s to ``cs`` (to 1e-4)."""
+    """The flywheel inertia [kg·m²] added on the input that brings the simulated C_s to ``cs`` (to 1e-4): from
+    the textbook's estimate ΔE/(C_s·ω̄²) (ΔE at constant speed: :func:`textbook_energy`), each trial started at
+    the mean speed ω̄ of the run without it (its transient is then short)."""
     if not 0 < cs < 2:
         raise MechanismError(f"--flywheel-for: Cs must be between 0 and 2, got {cs:g}", entry="flywheel")
     base_fly = (mech.dynamics.flywheel if mech.dynamics else 0.0) + options.pop("flywheel", 0.0)
-    base = cycle(simulate(mech, times, flywheel=base_fly, **options))
-    textbook = base.energy_fluctuation / (cs * base.omega_avg**2)
+    first = simulate(mech, times, flywheel=base_fly, **options)
+    base = cycle(first)
+    energy, _ = textbook_energy(first.model, base.mean_speed)
+    textbook = energy / (cs * base.mean_speed**2)
+    options["rate"] = base.mean_speed
 
     def cs_with(extra: float) -> float:
         return cycle(simulate(mech, times, flywheel=base_fly + extra, **options)).cs
@@ -141,4 +168,4 @@ def flywheel_for(mech: Mechanism, cs: float, times: np.ndarray | None = None, **
         x0, g0, x1 = x1, g1, x1 - g1 * (x1 - x0) / (g1 - g0)  # the right side is read before assigning
         got = cs_with(x1)
         n += 1
-    return Flywheel(cs, textbook, x1, got, n, base)
+    return Flywheel(cs, textbook, x1, got, n, base, energy)
