@@ -1,6 +1,7 @@
 """Notebooks: the two example notebooks in docs/ run, and every result type shows itself in a notebook.
 
-* docs/lecture_fourbar.ipynb and docs/design_study.ipynb are stored without outputs and executed here with
+* docs/lecture_fourbar.ipynb, docs/design_study.ipynb and docs/dynamics.ipynb (the flywheel example of
+  docs/dynamics.md: the textbook's ΔE by kinetostatics against the equation of motion) are stored without outputs and executed here with
   nbclient (a real kernel); each asserts its own numbers against formulas written out in its cells (Norton's
   closed form, the velocity loop, the instant centre as a line intersection, the transmission angle by the law
   of cosines, the power balance, the crank-rocker's extreme transmission angles, Monte-Carlo against the
@@ -28,8 +29,8 @@ from .conftest import MECHANISMS, ROOT
 NOTEBOOKS = sorted((ROOT / "docs").glob("*.ipynb"))
 
 
-def test_there_are_two_notebooks_stored_without_outputs() -> None:
-    assert {p.name for p in NOTEBOOKS} == {"lecture_fourbar.ipynb", "design_study.ipynb"}
+def test_the_notebooks_are_stored_without_outputs() -> None:
+    assert {p.name for p in NOTEBOOKS} == {"lecture_fourbar.ipynb", "design_study.ipynb", "dynamics.ipynb"}
     for path in NOTEBOOKS:
         nb = json.loads(path.read_text(encoding="utf-8"))
         for cell in nb["cells"]:
@@ -57,6 +58,8 @@ def test_the_notebook_runs_and_checks_its_numbers(path: Path) -> None:
     if path.stem == "lecture_fourbar":
         assert "by hand: θ3 = 20.2979°, θ4 = 57.3249°" in text and "power balance" in text
         assert 'sandbox="allow-scripts"' in html and "<b>Result</b>" in html and "<b>ForceResult</b>" in html
+    elif path.stem == "dynamics":
+        assert "ΔE = 1.6467" in text and "simulated: I = " in text
     else:
         assert "rocker swing: nominal" in text and "StudyResult(" in html
     print(f"{path.name}: {seconds:.1f} s")  # with the kernel's start; a few seconds each
