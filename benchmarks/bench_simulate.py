@@ -41,7 +41,7 @@ from vloop.model import Dynamics  # noqa: E402
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--stop", type=float, default=10.0, help="simulated time [s]")
-    p.add_argument("--rtol", type=float, default=1e-11, help="simulate's rtol = atol")
+    p.add_argument("--rtol", type=float, default=1e-12, help="simulate's rtol = atol")
     p.add_argument("--exudyn-step", type=float, default=1e-4, help="Exudyn's step h [s] (also run at h/2)")
     p.add_argument("--repeat", type=int, default=3)
     args = p.parse_args()
