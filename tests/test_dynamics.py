@@ -187,6 +187,61 @@ def test_constant_torque_on_a_pure_inertia_follows_the_energy_equation() -> None
     assert np.allclose(sim.result["l2.torque"], torque)
 
 
+def test_a_motor_line_on_a_pure_inertia_approaches_its_speed_exponentially() -> None:
+    """J constant (only the crank has mass), T = T0·(1 − ω/ω0) − τ: J·ω̇ = T0 − τ − (T0/ω0)·ω, so
+    ω(t) = ω_ss + (ω(0) − ω_ss)·e^(−t/τc), ω_ss = ω0·(1 − τ/T0), τc = J·ω0/T0; the last turn's mean speed is ω_ss."""
+    from vloop.dynamics.cycle import cycle
+
+    text = FOURBAR.replace('gravity = [0.0, -9.81]\n', "").replace(", mass = 0.2355, inertia = 2.826e-4", "")
+    text = text.replace(", mass = 0.157, inertia = 8.373333333333334e-05", "")
+    stall, speed, load = 0.01, 30.0, 0.0025
+    mech = fourbar(Dynamics(motor=(stall, speed), torque=-load, rate=0.0, **TIGHT), text)
+    t = np.linspace(0.0, 3.0, 301)
+    sim = simulate(mech, t)
+    J = INERTIA[0] + MASS[0] * (A_ / 2) ** 2
+    w_ss, tau = speed * (1 - load / stall), J * speed / stall
+    assert np.allclose(sim.result["l2.omega"], w_ss * (1 - np.exp(-t / tau)), rtol=0, atol=1e-9 * w_ss)
+    c = cycle(sim)
+    assert c.mean_speed == pytest.approx(w_ss, rel=1e-7) and c.cs < 1e-7 and c.steady
+
+
+SLIDER_INPUT = """
+name = "sc"
+units = "cm"
+gravity = [0.0, -9.81]
+[joints]
+O2 = [0.0, 0.0]
+A = [0.0, 10.0]
+B = [30.0, 0.0]
+[links]
+ground = { joints = ["O2"], ground = true }
+crank = { joints = ["O2", "A"], mass = 1.0, inertia = 0.002 }
+rod = { joints = ["A", "B"], mass = 0.5, inertia = 0.004 }
+[sliders]
+blk = { joint = "B", guide = "ground", axis = [1.0, 0.0], mass = 2.0 }
+[[drivers]]
+slider = "blk"
+v = -10.0
+[time]
+stop = 3.0
+step = 0.01
+[dynamics]
+rtol = 1e-12
+atol = 1e-12
+[[dynamics.springs]]
+between = ["B", "O2"]
+k = 200.0
+"""
+
+
+def test_a_slider_input_in_centimetres_with_a_spring_conserves_energy() -> None:
+    """The piston of a slider-crank as the input (q = s, in cm in the file, metres in the equations), a
+    200 N/m spring from the crank pivot to the piston, gravity: the energy stays (spring + gravity + kinetic)."""
+    sim = simulate(vloop.loads(SLIDER_INPUT))
+    _energy_ok(sim, "slider input")
+    assert np.ptp(sim.energy["springs"]) > 0 and sim.result["blk.s"].min() > 21.6  # swings inside its limits
+
+
 NONGRASHOF = """
 name = "ng"
 units = "m"

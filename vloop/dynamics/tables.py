@@ -121,23 +121,26 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
         s = (np.arange(RANGE_NODES + 1) + 0.5) / (RANGE_NODES + 1)
         nodes = lo + (hi - lo) * 0.5 * (1 - np.cos(math.pi * s))
     names = ("J", "V", *(n for n, _ in channels))
-    vals, d1, d2 = _sample(aug, channels, nodes, qscale, flywheel)
+    vals, d1, d2 = _sample(aug, channels, nodes, qscale, flywheel, not full)
     if full:  # the ends are the same position: the same coefficients, only the angles' whole turns differ
         d1[:, -1], d2[:, -1] = d1[:, 0], d2[:, 0]
+    else:  # the nodes the runs reached on either side of x0
+        keep = _solved_span(np.isfinite(vals[0]) & np.isfinite(d2[0]), nodes, x0)
+        nodes, vals, d1, d2 = nodes[keep], vals[:, keep], d1[:, keep], d2[:, keep]
     d2[0] = _spline_slope(nodes * qscale, d1[0], full)
     bad = ~np.isfinite(vals).all(axis=1) | ~np.isfinite(d1).all(axis=1) | ~np.isfinite(d2).all(axis=1)
     if np.any(bad):  # e.g. a linear spring between two points that coincide somewhere
         raise MechanismError(f"{mech.name}: the dynamics' {names[int(np.argmax(bad))]} is not finite over the "
                              "input's range (a spring between coinciding points?)", entry="dynamics")  # fmt: skip
     mids = 0.5 * (nodes[1:] + nodes[:-1])
-    mvals, _, _ = _sample(aug, channels, mids, qscale, flywheel)
+    mvals, _, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
     coef = np.stack([_quintic_hermite(nodes * qscale, v, a, b) for v, a, b in zip(vals, d1, d2, strict=True)])
     coef = coef.transpose(2, 0, 1)  # (intervals, channels, 6)
     half = 0.5 * np.diff(nodes * qscale)
     powers = half[:, None] ** np.arange(5, -1, -1)[None, :]
     approx = np.einsum("ick,ik->ci", coef, powers)
     scale = np.maximum(np.abs(vals).max(axis=1, keepdims=True), 1e-300)
-    err = (np.abs(approx - mvals) / scale).max(axis=0)  # per interval
+    err = np.where(np.isfinite(mvals).all(axis=0), (np.abs(approx - mvals) / scale).max(axis=0), np.inf)
     lo_i, hi_i = _trusted(err, nodes, x0, full)
     tab = Tables(
         Channels(names), nodes[lo_i : hi_i + 1] * qscale, coef[lo_i:hi_i], _derivative(coef[lo_i:hi_i]),
@@ -146,6 +149,19 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
         None if full else (lo, hi),
     )  # fmt: skip
     return tab
+
+
+def _solved_span(ok: np.ndarray, nodes: np.ndarray, x0: float) -> slice:
+    """The contiguous nodes around x0 that the runs solved (at least four)."""
+    k = int(np.clip(np.searchsorted(nodes, x0), 0, len(nodes) - 1))
+    lo, hi = k, k
+    while lo > 0 and ok[lo - 1]:
+        lo -= 1
+    while hi < len(ok) - 1 and ok[hi + 1]:
+        hi += 1
+    if hi - lo < 3 or not ok[k]:
+        raise MechanismError("the input at t = 0 is too close to a limit position for the dynamics", entry="dynamics")
+    return slice(lo, hi + 1)
 
 
 def _trusted(err: np.ndarray, nodes: np.ndarray, x0: float, full: bool) -> tuple[int, int]:
@@ -181,9 +197,18 @@ def _spline_slope(q: np.ndarray, y: np.ndarray, periodic: bool) -> np.ndarray:
     return CubicSpline(q, y, bc_type="periodic" if periodic else "not-a-knot")(q, 1)
 
 
-def _solve_at(aug: Mechanism, q: np.ndarray) -> Any:
+def _padded(res: Any, n: int) -> Any:
+    """A partial Result's columns padded with NaN to ``n`` rows."""
+    from ..result import Result
+
+    cols = {k: np.concatenate([v, np.full(n - len(v), np.nan)]) for k, v in res.columns.items()}
+    return Result(res.mechanism, res.engine, np.zeros(n), cols)
+
+
+def _solve_at(aug: Mechanism, q: np.ndarray, partial: bool) -> Any:
     """vloop's run at unit input rate through the inputs ``q`` [input units]: forwards and backwards from the
-    coordinates' input x0, so that each side is one continuous run (its columns are ∂/∂q and ∂²/∂q²)."""
+    coordinates' input x0, so that each side is one continuous run (its columns are ∂/∂q and ∂²/∂q²).
+    ``partial``: a run that stops (near a limit) gives NaN beyond its last row instead of an error."""
     from .. import solve
 
     d = aug.drivers[0]
@@ -198,19 +223,21 @@ def _solve_at(aug: Mechanism, q: np.ndarray) -> Any:
         try:
             res = solve(run, t)
         except MotionError as exc:
-            raise MotionError(f"the dynamics' tables: {exc.message}", entry="dynamics") from None
+            if not partial or exc.partial is None:
+                raise MotionError(f"the dynamics' tables: {exc.message}", entry="dynamics") from None
+            res = _padded(exc.partial, len(t))  # near a limit: the rows solved, the rest unknown (NaN)
         order = np.argsort(sign * t + x0)
         parts.append((sign, res, order))
     return parts
 
 
 def _sample(
-    aug: Mechanism, channels: list[tuple[str, Any]], q: np.ndarray, qscale: float, flywheel: float
+    aug: Mechanism, channels: list[tuple[str, Any]], q: np.ndarray, qscale: float, flywheel: float, partial: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(channels, len(q)) values, first and second derivatives in q [SI] of J, V and the channels."""
     f = length_factor(aug.units)
     cols: list[list[np.ndarray]] = [[], [], []]
-    for sign, res, order in _solve_at(aug, q):
+    for sign, res, order in _solve_at(aug, q, partial):
 
         def col(name: str, k: int, sign: float = sign, res: Any = res, order: Any = order) -> np.ndarray:
             return np.asarray(res[name], float)[order] * sign**k
