@@ -299,6 +299,8 @@ def _cli(folder: Path, *args: str) -> subprocess.CompletedProcess:
         ("[[dynamics.springs]]\nbetween = ['A', 'A']\nk = 1.0", "'between' must name two different"),
         ("[[dynamics.springs]]\njoint = 'O4'\nbetween = ['A', 'B']", "give joint = J"),
         ("torque = { t = [0.0, 1.0] }", "profile needs columns 't' and 'torque'"),
+        ("[[dynamics.springs]]\nbetween = [[1], 2]\nk = 1.0", "'between' must name two different"),
+        ("stop = 2.0", "give both 'stop' and 'step'"),
     ],
 )
 def test_bad_dynamics_input_is_one_line_and_exit_2(tmp_path: Path, capsys, section: str, says: str) -> None:
@@ -308,6 +310,16 @@ def test_bad_dynamics_input_is_one_line_and_exit_2(tmp_path: Path, capsys, secti
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_mechanism_without_inertia_is_refused_with_one_line(tmp_path: Path, capsys) -> None:
+    text = NONGRASHOF
+    for body in (", mass = 1.0, inertia = 0.75", ", mass = 1.0, inertia = 1.3", ", mass = 1.0, inertia = 1.7"):
+        text = text.replace(body, "")
+    (tmp_path / "light.toml").write_text(text)
+    assert main(["simulate", str(tmp_path / "light.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "has no inertia" in err and len(err.strip().splitlines()) == 1
 
 
 def test_two_inputs_are_refused_with_one_line(tmp_path: Path, capsys) -> None:

@@ -132,6 +132,7 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
     if np.any(bad):  # e.g. a linear spring between two points that coincide somewhere
         raise MechanismError(f"{mech.name}: the dynamics' {names[int(np.argmax(bad))]} is not finite over the "
                              "input's range (a spring between coinciding points?)", entry="dynamics")  # fmt: skip
+    _check_inertia(mech, vals[0], nodes)
     mids = 0.5 * (nodes[1:] + nodes[:-1])
     mvals, _, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
     coef = np.stack([_quintic_hermite(nodes * qscale, v, a, b) for v, a, b in zip(vals, d1, d2, strict=True)])
@@ -149,6 +150,17 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
         None if full else (lo, hi),
     )  # fmt: skip
     return tab
+
+
+def _check_inertia(mech: Mechanism, J: np.ndarray, nodes: np.ndarray) -> None:
+    """J must stay positive: a mechanism without masses (or whose only masses stop moving at some input) has
+    no equation of motion there."""
+    k = int(np.argmin(J))
+    if not J[k] > 1e-12 * max(float(J.max()), 1e-300):
+        what = "has no inertia: give its links masses and inertias, or a flywheel" if J.max() <= 0 else (
+            f"has no inertia at the input {nodes[k]:.6g} (its masses do not move there): add a flywheel"
+        )  # fmt: skip
+        raise MechanismError(f"{mech.name}: [dynamics] the mechanism {what}", entry="dynamics")
 
 
 def _solved_span(ok: np.ndarray, nodes: np.ndarray, x0: float) -> slice:

@@ -1130,7 +1130,8 @@ def _spring(d: Any, m: Mechanism, entry: str, probs: Problems) -> Spring | None:
     if "between" in d:
         ends = d["between"]
         known = set(m.joints) | set(m.points)
-        if not isinstance(ends, list) or len(ends) != 2 or ends[0] == ends[1] or not set(ends) <= known:
+        names = isinstance(ends, list) and len(ends) == 2 and all(isinstance(e, str) for e in ends)
+        if not names or ends[0] == ends[1] or not set(ends) <= known:
             probs.add(entry, f"'between' must name two different joints or points, got {show(ends)}")
             return None
         return Spring("linear", (ends[0], ends[1]), k, c, rest, None, entry)
@@ -1140,7 +1141,8 @@ def _spring(d: Any, m: Mechanism, entry: str, probs: Problems) -> Spring | None:
         probs.add(entry, f"'joint' must name a pin joining two bodies, got {show(joint)}")
         return None
     ends = d.get("links", list(at[:2]))
-    if not isinstance(ends, list) or len(ends) != 2 or ends[0] == ends[1] or not set(ends) <= set(at):
+    names = isinstance(ends, list) and len(ends) == 2 and all(isinstance(e, str) for e in ends)
+    if not names or ends[0] == ends[1] or not set(ends) <= set(at):
         probs.add(entry, f"'links' must name two different bodies at {joint} ({', '.join(at)}), got {show(ends)}")
         return None
     return Spring("rotational", (ends[0], ends[1]), k, c, rest, joint, entry)
