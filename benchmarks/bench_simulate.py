@@ -57,10 +57,14 @@ def main() -> None:
         best = min(best, time.perf_counter() - t0)
     ref = vloop.simulate(mech, times, rtol=1e-13, atol=1e-13)
     theta = sim.result["l2.theta"]
-    print(f"eight-bar, gravity, 500 N payload, motor 1000 N·m·(1 − ω/5): {args.stop:g} s, {ref.ode.nfev} evaluations "
-          f"at rtol 1e-13, θ₂ from {theta[0]:.6f} to {theta[-1]:.6f} rad")
-    print(f"vloop.simulate  rtol {args.rtol:g}: {best:.3f} s (best of {args.repeat}, {sim.ode.nfev} evaluations); "
-          f"|θ₂ − θ₂(rtol 1e-13)| ≤ {np.abs(theta - ref.result['l2.theta']).max():.2e} rad")
+    print(
+        f"eight-bar, gravity, 500 N payload, motor 1000 N·m·(1 − ω/5): {args.stop:g} s, {ref.ode.nfev} evaluations "
+        f"at rtol 1e-13, θ₂ from {theta[0]:.6f} to {theta[-1]:.6f} rad"
+    )
+    print(
+        f"vloop.simulate  rtol {args.rtol:g}: {best:.3f} s (best of {args.repeat}, {sim.ode.nfev} evaluations); "
+        f"|θ₂ − θ₂(rtol 1e-13)| ≤ {np.abs(theta - ref.result['l2.theta']).max():.2e} rad"
+    )
 
     from validators import dynamics_exudyn
 
@@ -69,8 +73,10 @@ def main() -> None:
     exu_time = time.perf_counter() - t0
     fine = dynamics_exudyn._run(mech, times, args.exudyn_step / 2)
     exact = fine["l2.theta"] + (fine["l2.theta"] - coarse["l2.theta"]) / 3
-    print(f"Exudyn  h = {args.exudyn_step:g} s: {exu_time:.3f} s per run; its own error at h "
-          f"{np.abs(coarse['l2.theta'] - exact).max():.2e} rad")
+    print(
+        f"Exudyn  h = {args.exudyn_step:g} s: {exu_time:.3f} s per run; its own error at h "
+        f"{np.abs(coarse['l2.theta'] - exact).max():.2e} rad"
+    )
     print(f"|vloop − Exudyn (Richardson, h and h/2)| ≤ {np.abs(theta - exact).max():.2e} rad")
     print(f"time ratio Exudyn / vloop: {exu_time / best:.1f}")
 

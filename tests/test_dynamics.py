@@ -192,7 +192,7 @@ def test_a_motor_line_on_a_pure_inertia_approaches_its_speed_exponentially() -> 
     ω(t) = ω_ss + (ω(0) − ω_ss)·e^(−t/τc), ω_ss = ω0·(1 − τ/T0), τc = J·ω0/T0; the last turn's mean speed is ω_ss."""
     from vloop.dynamics.cycle import cycle
 
-    text = FOURBAR.replace('gravity = [0.0, -9.81]\n', "").replace(", mass = 0.2355, inertia = 2.826e-4", "")
+    text = FOURBAR.replace("gravity = [0.0, -9.81]\n", "").replace(", mass = 0.2355, inertia = 2.826e-4", "")
     text = text.replace(", mass = 0.157, inertia = 8.373333333333334e-05", "")
     stall, speed, load = 0.01, 30.0, 0.0025
     mech = fourbar(Dynamics(motor=(stall, speed), torque=-load, rate=0.0, **TIGHT), text)
