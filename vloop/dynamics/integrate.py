@@ -163,9 +163,21 @@ def _outputs(model: Model, ode: Any, message: str) -> Simulation:
     cols[f"{d.target}.{'torque' if d.kind == 'crank' else 'force'}"] = torque
     meta = {**exact.meta, "dynamics": {"tables_error": model.tables.error, "method": model.dynamics.method}}
     result = Result(mech.name, "vloop.simulate", t, cols, dict(exact.health), meta)
-    turns = ode.t_events[0] if model.tables.period is not None and ode.t_events else np.zeros(0)
-    turns = turns[turns > 0.0]  # the start is no turn
+    turns = _whole_turns(ode, model) if model.tables.period is not None else np.zeros(0)
     return Simulation(mech, result, energy, model, np.asarray(turns, float), message, ode)
+
+
+def _whole_turns(ode: Any, model: Model) -> np.ndarray:
+    """The times [s] the input first reaches each new whole turn from its start (q − q0 = ±2π, ±4π, …): the
+    events where the count of turns changes to one not reached before (a swing back through the start is none)."""
+    q0 = initial_state(model)[0]
+    out, seen = [], {0}
+    for t, y in zip(ode.t_events[0], ode.y_events[0], strict=True):
+        k = round((y[0] - q0) / model.tables.period)
+        if k not in seen:
+            seen.add(k)
+            out.append(t)
+    return np.asarray(out, float)
 
 
 def _profile(x0: float, t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[float, Profile]:
