@@ -13,28 +13,27 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from ..files.output import atomic_write
 from ..files.writers import health_columns, write_table
-from ..result import column_units
+from ..result import column_units, write_csv
 from .integrate import ENERGY_COLUMNS, Simulation
 
 
-def write(sim: Simulation, folder: Path, fmt: str = "csv", *, plot: bool = False, html: bool = False,
-          error: str | None = None) -> list[Path]:  # fmt: skip
+def write(
+    sim: Simulation, folder: Path, fmt: str = "csv", *, plot: bool = False, html: bool = False, error: str | None = None
+) -> list[Path]:
     """Write the simulation's files into ``folder`` (see the module notes); returns their paths."""
-    import pandas as pd
-
     mech, res = sim.mechanism, sim.result
     units = column_units(["t", *res.columns], mech.units)
     units.update({c: "N·m" for c in res.columns if c.endswith(".torque")})
     units.update({c: "N" for c in res.columns if c.endswith(".force")})
     files = [
-        write_table(pd.DataFrame({"t": res.t, **res.columns}), folder / f"results.{fmt}", fmt, units),
-        write_table(pd.DataFrame(health_columns(res)), folder / f"health.{fmt}", fmt, {"t": "s"}),
-        write_table(
-            pd.DataFrame({"t": res.t, **sim.energy}), folder / f"energy.{fmt}", fmt,
-            {"t": "s", **dict.fromkeys(ENERGY_COLUMNS, "J")},
-        ),
-    ]  # fmt: skip
+        _table(folder / f"results.{fmt}", {"t": res.t, **res.columns}, units),
+        _table(folder / f"health.{fmt}", health_columns(res), {}),
+        _table(folder / f"energy.{fmt}", {"t": res.t, **sim.energy}, {"t": "s", **dict.fromkeys(ENERGY_COLUMNS, "J")}),
+    ]
     if plot and len(res):
         from ..views.plots import plot_result
 
@@ -46,6 +45,18 @@ def write(sim: Simulation, folder: Path, fmt: str = "csv", *, plot: bool = False
 
         files.append(write_view(mech, res, folder / f"{safe_folder_name(mech.name)}.html", error=error))
     return files
+
+
+def _table(path: Path, cols: dict[str, np.ndarray], units: dict[str, str]) -> Path:
+    """A table as ``vloop run`` writes its own: CSV with a header and each number the shortest text that reads
+    back to the same double, or Parquet with every column's unit in its schema."""
+    if path.suffix == ".csv":
+        with atomic_write(path, "wb") as fh:
+            write_csv(fh, list(cols), [np.asarray(c) for c in cols.values()])
+        return path
+    import pandas as pd
+
+    return write_table(pd.DataFrame(cols), path, "parquet", units)
 
 
 def energy_figure(sim: Simulation, path: Path) -> Path:
