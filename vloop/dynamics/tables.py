@@ -10,8 +10,9 @@ I·∂θ/∂q·∂²θ/∂q²). Between nodes each function is the quintic Hermi
 drivers' profile interpolant), so the integrator reads the solve's own numbers, smoothly (C²); J″ at the
 nodes comes from a cubic spline through J′ (its error enters at O(h⁵)).
 
-The table is checked against the loop solve itself at every interval's midpoint: the largest relative
-error is kept (``Tables.error``), and for an input with limits the range the integrator may use
+The table is checked against the loop solve itself at every interval's midpoint, values and slopes, each
+relative to the channel's range over the nodes: the largest error is kept (``Tables.error``), and for an
+input with limits the range the integrator may use
 (``Tables.lo``, ``Tables.hi``) ends before the first interval that fails the check (near a limit the
 coefficients grow as 1/√distance and no polynomial follows them).
 """
@@ -134,14 +135,20 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
                              "input's range (a spring between coinciding points?)", entry="dynamics")  # fmt: skip
     _check_inertia(mech, vals[0], nodes)
     mids = 0.5 * (nodes[1:] + nodes[:-1])
-    mvals, _, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
+    mvals, mslopes, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
     coef = np.stack([_quintic_hermite(nodes * qscale, v, a, b) for v, a, b in zip(vals, d1, d2, strict=True)])
     coef = coef.transpose(2, 0, 1)  # (intervals, channels, 6)
     half = 0.5 * np.diff(nodes * qscale)
     powers = half[:, None] ** np.arange(5, -1, -1)[None, :]
-    approx = np.einsum("ick,ik->ci", coef, powers)
-    scale = np.maximum(np.abs(vals).max(axis=1, keepdims=True), 1e-300)
-    err = np.where(np.isfinite(mvals).all(axis=0), (np.abs(approx - mvals) / scale).max(axis=0), np.inf)
+    span = float(nodes[-1] - nodes[0]) * qscale
+    err = np.maximum(
+        _midpoint_error(np.einsum("ick,ik->ci", coef, powers), mvals, np.ptp(vals, axis=1)),
+        _midpoint_error(
+            np.einsum("ick,ik->ci", _derivative(coef), powers[:, 1:]),
+            mslopes,
+            np.maximum(np.ptp(d1, axis=1), (np.ptp(vals, axis=1) + 1e-6 * np.abs(vals).max(axis=1)) / span),
+        ),
+    )  # fmt: skip  (a slope that does not vary, e.g. of a coordinate that stays put, is judged at its round-off)
     lo_i, hi_i = _trusted(err, nodes, x0, full)
     tab = Tables(
         Channels(names), nodes[lo_i : hi_i + 1] * qscale, coef[lo_i:hi_i], _derivative(coef[lo_i:hi_i]),
@@ -150,6 +157,13 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
         None if full else (lo, hi),
     )  # fmt: skip
     return tab
+
+
+def _midpoint_error(approx: np.ndarray, exact: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per interval, the largest error of the pieces at the midpoints relative to each channel's ``scale`` (its
+    variation over the nodes; a channel that does not vary has none to lose); inf where the run has no midpoint."""
+    rel = np.abs(approx - exact) / np.where(scale > 0, scale, np.inf)[:, None]
+    return np.where(np.isfinite(exact).all(axis=0), rel.max(axis=0), np.inf)
 
 
 def _check_inertia(mech: Mechanism, J: np.ndarray, nodes: np.ndarray) -> None:
