@@ -131,10 +131,11 @@ def _integrate(model: Model, times: np.ndarray) -> tuple[Any, str]:
         hit = 0 if len(ode.t_events[0]) else 1
         t_hit = float(ode.t_events[hit][0])
         limit = tab.limits[hit] if tab.limits else math.nan
+        mech = model.mechanism
+        where = mech.drivers[0].value_text(limit, mech.units)
         message = (
-            f"{model.mechanism.name}: the motion reaches the input's limit position "
-            f"{model.mechanism.drivers[0].symbol} = {limit:.10g} (the tables end at "
-            f"{(tab.lo, tab.hi)[hit] / model.qscale:.10g}) at t = {t_hit:.10g} s"
+            f"{mech.name}: the motion reaches the input's limit position {where} at t = {t_hit:.10g} s "
+            f"(stopped where the tables end, {(tab.lo, tab.hi)[hit] / model.qscale:.10g})"
         )
     return ode, message
 
