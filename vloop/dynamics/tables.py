@@ -35,6 +35,7 @@ from ..sweep import feasible_range
 
 TURN_NODES = 2048  # intervals per turn of a crank (the midpoint check: ~1e-12 relative on the catalog)
 RANGE_NODES = 2048  # intervals over a limited input's range (cosine-spaced: denser near the limits)
+MAX_NODES = 32768  # a crank's turn is tabulated again with 4× the nodes while its check fails, up to this
 CHECK = 1e-9  # an interval whose midpoint is off the loop solve by more than this (relative) is not used
 G_PREFIX = "_G_"  # the centres of mass, as tracer points of the augmented mechanism
 
@@ -109,19 +110,37 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
     """Tabulate J, V and ``channels`` (name, how) of a one-input mechanism over its input's range.
 
     ``how``: ("angle", a, b) for θ_a − θ_b (b the ground: θ_a), ("length", P, Q) for |PQ| [m], ("x"|"y", P)
-    for a point's coordinate [m]. ``flywheel``: inertia added on the input [kg·m², kg on a slider].
+    for a point's coordinate [m]. ``flywheel``: inertia added on the input [kg·m², kg on a slider]. A crank's
+    turn whose midpoint check exceeds CHECK is tabulated again with four times the nodes (up to MAX_NODES) while
+    that improves it.
     """
+    lo, hi, full = feasible_range(mech)
+    n = TURN_NODES if full else RANGE_NODES
+    best = _tabulate(mech, channels, flywheel, (lo, hi, full), n)
+    while full and best.error > CHECK and 4 * n <= MAX_NODES:
+        n *= 4
+        finer = _tabulate(mech, channels, flywheel, (lo, hi, full), n)
+        if finer.error >= best.error:  # round-off (J″ from the slopes over shorter intervals) wins from here
+            break
+        best = finer
+    return best
+
+
+def _tabulate(
+    mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float, span: tuple[float, float, bool], n: int
+) -> Tables:
+    """The tables on ``n`` intervals: a crank's turn from x0, or a limited input's range [lo, hi]."""
     aug = augmented(mech)
     d = mech.drivers[0]
     qscale = 1.0 if d.kind == "crank" else length_factor(mech.units)
     x0 = float(d.x0)
-    lo, hi, full = feasible_range(mech)
+    lo, hi, full = span
     if full:
-        nodes = x0 + np.linspace(0.0, 2 * math.pi, TURN_NODES + 1)
+        nodes = x0 + np.linspace(0.0, 2 * math.pi, n + 1)
     else:
-        s = (np.arange(RANGE_NODES + 1) + 0.5) / (RANGE_NODES + 1)
+        s = (np.arange(n + 1) + 0.5) / (n + 1)
         nodes = lo + (hi - lo) * 0.5 * (1 - np.cos(math.pi * s))
-    names = ("J", "V", *(n for n, _ in channels))
+    names = ("J", "V", *(name for name, _ in channels))
     vals, d1, d2 = _sample(aug, channels, nodes, qscale, flywheel, not full)
     if full:  # the ends are the same position: the same coefficients, only the angles' whole turns differ
         d1[:, -1], d2[:, -1] = d1[:, 0], d2[:, 0]
@@ -134,14 +153,29 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
         raise MechanismError(f"{mech.name}: the dynamics' {names[int(np.argmax(bad))]} is not finite over the "
                              "input's range (a spring between coinciding points?)", entry="dynamics")  # fmt: skip
     _check_inertia(mech, vals[0], nodes)
-    mids = 0.5 * (nodes[1:] + nodes[:-1])
-    mvals, mslopes, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
     coef = np.stack([_quintic_hermite(nodes * qscale, v, a, b) for v, a, b in zip(vals, d1, d2, strict=True)])
     coef = coef.transpose(2, 0, 1)  # (intervals, channels, 6)
-    half = 0.5 * np.diff(nodes * qscale)
-    powers = half[:, None] ** np.arange(5, -1, -1)[None, :]
+    err = _check(aug, channels, flywheel, nodes, qscale, (vals, d1, coef), full)
+    lo_i, hi_i = _trusted(err, nodes, x0, full)
+    return Tables(
+        Channels(names), nodes[lo_i : hi_i + 1] * qscale, coef[lo_i:hi_i], _derivative(coef[lo_i:hi_i]),
+        2 * math.pi if full else None, vals[:, -1] - vals[:, 0] if full else np.zeros(len(names)),
+        nodes[lo_i] * qscale, nodes[hi_i] * qscale, float(err[lo_i:hi_i].max()), qscale,
+        None if full else (lo, hi),
+    )  # fmt: skip
+
+
+def _check(
+    aug: Mechanism, channels: list[tuple[str, Any]], flywheel: float, nodes: np.ndarray, qscale: float,
+    tables: tuple[np.ndarray, np.ndarray, np.ndarray], full: bool,
+) -> np.ndarray:  # fmt: skip
+    """Per interval, the pieces' largest error at its midpoint against the loop solve there (values and slopes)."""
+    vals, d1, coef = tables
+    mids = 0.5 * (nodes[1:] + nodes[:-1])
+    mvals, mslopes, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
+    powers = (0.5 * np.diff(nodes * qscale))[:, None] ** np.arange(5, -1, -1)[None, :]
     span = float(nodes[-1] - nodes[0]) * qscale
-    err = np.maximum(
+    return np.maximum(
         _midpoint_error(np.einsum("ick,ik->ci", coef, powers), mvals, np.ptp(vals, axis=1)),
         _midpoint_error(
             np.einsum("ick,ik->ci", _derivative(coef), powers[:, 1:]),
@@ -149,14 +183,6 @@ def build(mech: Mechanism, channels: list[tuple[str, Any]], flywheel: float) -> 
             np.maximum(np.ptp(d1, axis=1), (np.ptp(vals, axis=1) + 1e-6 * np.abs(vals).max(axis=1)) / span),
         ),
     )  # fmt: skip  (a slope that does not vary, e.g. of a coordinate that stays put, is judged at its round-off)
-    lo_i, hi_i = _trusted(err, nodes, x0, full)
-    tab = Tables(
-        Channels(names), nodes[lo_i : hi_i + 1] * qscale, coef[lo_i:hi_i], _derivative(coef[lo_i:hi_i]),
-        2 * math.pi if full else None, vals[:, -1] - vals[:, 0] if full else np.zeros(len(names)),
-        nodes[lo_i] * qscale, nodes[hi_i] * qscale, float(err[lo_i:hi_i].max()), qscale,
-        None if full else (lo, hi),
-    )  # fmt: skip
-    return tab
 
 
 def _midpoint_error(approx: np.ndarray, exact: np.ndarray, scale: np.ndarray) -> np.ndarray:
