@@ -357,7 +357,7 @@ def test_simulate_writes_what_run_writes_plus_torque_and_energy(tmp_path: Path) 
     assert main(["run", str(tmp_path / "fb.toml"), "--out", str(tmp_path / "r")]) == 0
     sim = vloop.Result.read_csv(tmp_path / "o" / "results.csv")
     run = vloop.Result.read_csv(tmp_path / "r" / "results.csv")
-    assert list(sim.columns) == [*run.columns, "l2.torque"] and len(sim) == 301
+    assert list(sim.columns) == [*run.columns, "l2.torque"] and len(sim) == 61
     energy = (tmp_path / "o" / "energy.csv").read_text().splitlines()[0].split(",")
     assert energy == ["t", "kinetic", "gravity", "springs", "work_input", "work_loads", "work_dampers", "residual"]
     for name in ("health.csv", "energy.png", "links.png", "fourbar_textbook_dynamics.html"):
