@@ -1,6 +1,7 @@
-"""Notebooks: the two example notebooks in docs/ run, and every result type shows itself in a notebook.
+"""Notebooks: the example notebooks in docs/ run, and every result type shows itself in a notebook.
 
-* docs/lecture_fourbar.ipynb and docs/design_study.ipynb are stored without outputs and executed here by the
+* docs/lecture_fourbar.ipynb, docs/design_study.ipynb and docs/dynamics.ipynb (the flywheel example of
+  docs/dynamics.md: the textbook's ΔE by kinetostatics against the equation of motion) are stored without outputs and executed here by the
   command docs/notebooks.md gives (nbconvert, a real kernel); each asserts its own numbers against formulas
   written out in its cells (Norton's closed form, the velocity loop, the instant centre as a line intersection,
   the transmission angle by the law of cosines, the power balance, the crank-rocker's extreme transmission
@@ -33,8 +34,8 @@ from .conftest import MECHANISMS, ROOT
 NOTEBOOKS = sorted((ROOT / "docs").glob("*.ipynb"))
 
 
-def test_there_are_two_notebooks_stored_without_outputs() -> None:
-    assert {p.name for p in NOTEBOOKS} == {"lecture_fourbar.ipynb", "design_study.ipynb"}
+def test_the_three_notebooks_are_stored_without_outputs() -> None:
+    assert {p.name for p in NOTEBOOKS} == {"lecture_fourbar.ipynb", "design_study.ipynb", "dynamics.ipynb"}
     for path in NOTEBOOKS:
         nb = json.loads(path.read_text(encoding="utf-8"))
         for cell in nb["cells"]:
@@ -44,7 +45,7 @@ def test_there_are_two_notebooks_stored_without_outputs() -> None:
 
 
 def _documented_commands() -> tuple[list[str], list[str]]:
-    """The two lines of docs/notebooks.md's shell block: (run both notebooks, open the lecture)."""
+    """The two lines of docs/notebooks.md's shell block: (run the notebooks, open the lecture)."""
     page = (ROOT / "docs" / "notebooks.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```sh\n(.*?)```", page, flags=re.S)
     assert len(blocks) == 1, "docs/notebooks.md: one shell block with the two commands"
@@ -52,8 +53,8 @@ def _documented_commands() -> tuple[list[str], list[str]]:
     return run, open_
 
 
-def test_the_documented_commands_run_both_notebooks_and_their_checks(tmp_path: Path) -> None:
-    """docs/notebooks.md's first command (nbconvert, a real kernel) executes both notebooks; each asserts its
+def test_the_documented_commands_run_the_notebooks_and_their_checks(tmp_path: Path) -> None:
+    """docs/notebooks.md's first command (nbconvert, a real kernel) executes every notebook; each asserts its
     own numbers against formulas written out in its cells, so a notebook that runs is one whose numbers were
     checked. The outputs it writes hold what the cells print."""
     pytest.importorskip("nbconvert", reason="pip install -e '.[notebooks]'")
@@ -74,9 +75,11 @@ def test_the_documented_commands_run_both_notebooks_and_their_checks(tmp_path: P
         if path.stem == "lecture_fourbar":
             assert "by hand: θ3 = 20.2979°, θ4 = 57.3249°" in text and "power balance" in text
             assert 'sandbox="allow-scripts"' in html and "<b>Result</b>" in html and "<b>ForceResult</b>" in html
+        elif path.stem == "dynamics":
+            assert "ΔE = 1.6467" in text and "simulated: I = " in text
         else:
             assert "rocker swing: nominal" in text and "StudyResult(" in html
-    print(f"both notebooks: {seconds:.1f} s")  # with the kernels' start
+    print(f"the notebooks: {seconds:.1f} s")  # with the kernels' start
 
 
 def test_the_documented_front_end_is_installed() -> None:

@@ -95,6 +95,11 @@ def _where(section: str, key: str = "") -> tuple[dict, list]:
         data = copy.deepcopy(BASE)
         data["loads"] = [{"link": "rocker", "torque": 1.0}]
         return data, ["loads", 0]
+    if section in ("dynamics", "springs"):
+        data = copy.deepcopy(BASE)
+        data["links"]["coupler"]["mass"] = 1.0
+        data["dynamics"] = {"stop": 1.0, "step": 0.1, "springs": [{"joint": "O4", "k": 1.0}]}
+        return data, ["dynamics"] if section == "dynamics" else ["dynamics", "springs", 0]
     raise AssertionError(section)
 
 

@@ -3,7 +3,7 @@ defects detected, bad synthesis files refused.
 
 Independent references: the test's own four-bars (coordinates drawn here, the assembly branch by the
 test's own circle intersection), their poses and angles from the hand-derived closed form
-(validators/analytic_fourbar.py), and the closed form again on every written candidate. Tolerances: the
+(validators/analytic/fourbar.py), and the closed form again on every written candidate. Tolerances: the
 exact methods recover dimensions to 1e-9 of the four-bar's size (round-off of a 2×2 or 3×3 solve and of
 a Newton polish is ~1e-14; 1e-9 leaves room for ill-conditioned draws); optimization candidates are
 held to the error they report plus 1e-9 of the size.
@@ -382,7 +382,7 @@ def _check_passes(method: str, res: vloop.Result, row, size: float) -> None:
 @pytest.mark.parametrize("method", ["function", "motion", "path"])
 def test_written_candidates_pass_through_their_positions(written, method, tmp_path):
     """Every written mechanism file, run by `vloop run` and by the closed-form four-bar
-    (validators/analytic_fourbar.py) at the instants the table states, passes through its precision
+    (validators/analytic/fourbar.py) at the instants the table states, passes through its precision
     positions: to 1e-9 of the size for the exact methods, within its reported error (+1e-9) for the search."""
     folder, table = written[method]
     rows = table[table["file"].notna() & (table["file"] != "")]

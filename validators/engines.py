@@ -12,7 +12,7 @@ Pinocchio and Exudyn happen inside ``solve`` so that the table itself is cheap t
 
 Forces: for a mechanism with masses or loads, :meth:`Engine.run` returns one Result holding the
 kinematic columns and the engine's own force columns (vloop: :func:`vloop.forces.solve_forces`; the closed
-form: :mod:`validators.analytic_forces` where it applies; Pinocchio: inverse dynamics with the loop-closure
+form: :mod:`validators.analytic.forces` where it applies; Pinocchio: inverse dynamics with the loop-closure
 forces; Exudyn: its multipliers), so the harness compares forces with the same code and tolerances. A run
 that stops part-way keeps its forces on the samples it solved (``exc.partial``).
 """
@@ -72,7 +72,7 @@ class Vloop(Engine):
 
 
 class Analytic(Engine):
-    """The hand-derived closed forms (:mod:`validators.analytic`), forces where :mod:`analytic_forces` applies."""
+    """The hand-derived closed forms (:mod:`validators.analytic`), forces where :mod:`validators.analytic.forces` applies."""
 
     name = "analytic"
 

@@ -2,7 +2,7 @@
 the output naming convention, and the shaking force from the reported reactions.
 
 Nothing here solves anything: the engines (:mod:`validators.pinocchio_forces`,
-:mod:`validators.exudyn_forces`, :mod:`validators.analytic_forces`) compute the reactions each
+:mod:`validators.exudyn_forces`, :mod:`validators.analytic.forces`) compute the reactions each
 their own way and only *report* them through :func:`force_result`, in vloop's column names
 (docs/forces.md):
 

@@ -61,9 +61,38 @@ def validate(args: argparse.Namespace, started: float | None = None) -> int:
         written = _write(validation, summary, outset, args)
     for line in _report_lines(summary, written, ran - started, time.perf_counter() - started):
         print(line)
+    dynamics_ok = _dynamics(items, engines)
     if validation.bad_input:
         return 2
-    return 0 if validation.passed and not summary.get("nightly", {}).get("flags") else 1
+    return 0 if validation.passed and dynamics_ok and not summary.get("nightly", {}).get("flags") else 1
+
+
+def _dynamics(items: list[Any], engines: tuple[str, ...]) -> bool:
+    """The files with a [dynamics] section: vloop.simulate against Exudyn and Pinocchio (validators.dynamics_check),
+    those of the two the engines name; prints one line per engine, returns whether every comparison passed."""
+    from . import dynamics_check
+
+    chosen = tuple(
+        name
+        for name, wanted in (("exudyn-simulate", "exudyn"), ("pinocchio-simulate", "pinocchio"))
+        if any(e.startswith(wanted) for e in engines)
+    )
+    if not chosen:
+        return True
+    ok = True
+    for it in items:
+        mech = getattr(it, "mechanism", None)
+        if mech is None or mech.dynamics is None or len(mech.drivers) != 1:
+            continue
+        try:
+            rows = dynamics_check.compare(mech, engines=chosen)
+        except VloopError as exc:
+            print(f"  {mech.name}: dynamics not compared: {exc}")
+            continue
+        ok &= all(r.passed for r in rows)
+        for line in dynamics_check.lines(mech.name, rows):
+            print(line)
+    return ok
 
 
 def _check_runner(args: argparse.Namespace) -> None:

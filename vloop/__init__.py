@@ -6,7 +6,8 @@
     res.to_csv("results.csv")
     forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
 
-The teaching quantities (vloop.instant_centres, ...) and vloop.study are imported on first use.
+The teaching quantities (vloop.instant_centres, ...), vloop.study and vloop.simulate (forward dynamics) are
+imported on first use.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ __all__ = [
     "loads",
     "mechanical_advantage",
     "save",
+    "simulate",
     "solve",
     "solve_forces",
     "stroke",
@@ -58,9 +60,9 @@ _TEACHING = (
 
 
 def __getattr__(name: str) -> Any:
-    """The teaching functions, ``vloop.study`` and every submodule (``vloop.teaching.cycle`` after a plain
-    ``import vloop``), imported on first use so that ``import vloop`` stays light. Imported by name: modules
-    that import the package for vloop.solve must not look as if they depended on what is built on them."""
+    """The teaching functions, ``vloop.study``, ``vloop.simulate`` and every submodule (``vloop.teaching.cycle``
+    after a plain ``import vloop``), imported on first use so that ``import vloop`` stays light. Imported by name:
+    modules that import the package for vloop.solve must not look as if they depended on what is built on them."""
     import importlib
     import importlib.util
 
@@ -68,6 +70,8 @@ def __getattr__(name: str) -> Any:
         return getattr(importlib.import_module(".teaching", __name__), name)
     if name == "study":
         return importlib.import_module(".studies.study", __name__).study
+    if name == "simulate":
+        return importlib.import_module(".dynamics.integrate", __name__).simulate
     if name.isidentifier() and not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}"):
         return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")

@@ -225,6 +225,65 @@ def _view_page(mech: Any, result: Any, folder: Path, error: str | None = None, f
     return write_view(mech, result, folder / f"{safe_folder_name(mech.name)}.html", error=error, forces=forces)
 
 
+# ---------------------------------------------------------------- simulate
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Forward dynamics (vloop.dynamics): integrate the file's [dynamics] over its [time] rows, write results,
+    health and energy (and plots, the viewer page) as one atomic set; the cycle quantities of a crank, and the
+    flywheel for a stated Cs. A motion that reaches a limit stops there: its rows are written, exit 2."""
+    from .dynamics import report
+    from .dynamics.integrate import simulate
+    from .files.output import OutputSet
+
+    mech = _load(args)
+    if mech.dynamics is None:
+        return _fail(f"{mech.source}: [dynamics] missing: vloop simulate needs the input's loads (docs/dynamics.md)")
+    error = None
+    try:
+        sim = simulate(mech)
+    except MotionError as exc:
+        if exc.partial is None:
+            raise
+        sim, error = exc.partial, exc
+    with OutputSet(_out_folder(args, mech)) as files:
+        report.write(sim, files.stage, args.format, plot=args.plot, html=args.html, error=str(error) if error else None)
+    for line in report.summary_lines(sim):
+        print(line)
+    print("wrote " + ", ".join(str(f) for f in files.published))
+    if error is not None:
+        return _fail(f"{error} (wrote {len(sim.result)} rows)")
+    return _simulate_cycle(args, mech, sim)
+
+
+def _simulate_cycle(args: argparse.Namespace, mech: Any, sim: Any) -> int:
+    """The cycle quantities of an input that turned fully at least twice; the flywheel when asked."""
+    from .dynamics.cycle import cycle, flywheel_for
+
+    if args.flywheel_for is None and len(sim.turns) < 2:
+        return 0
+    for line in cycle(sim).lines():
+        print(line)
+    if args.flywheel_for is not None:
+        for line in flywheel_for(mech, args.flywheel_for).lines():
+            print(line)
+    return 0
+
+
+def _parser_simulate(sub: Any) -> None:
+    s = sub.add_parser("simulate", help="forward dynamics: the motion under the file's [dynamics] loads")
+    _add_file(s)
+    s.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME)")
+    s.add_argument("--plot", action="store_true", help="also write links.png, sliders.png, paths.png, energy.png")
+    s.add_argument("--html", action="store_true", help="also write the interactive viewer page NAME.html")
+    s.add_argument("--format", choices=["csv", "parquet"], default="csv", help="csv (default) or parquet tables")
+    s.add_argument(
+        "--flywheel-for", type=_type("cs"), metavar="CS",
+        help="also size the flywheel on the input that brings the coefficient of speed fluctuation to CS",
+    )  # fmt: skip
+    s.set_defaults(func=cmd_simulate)
+
+
 # ---------------------------------------------------------------- view, loops, info
 
 
@@ -638,6 +697,7 @@ def build_parser() -> argparse.ArgumentParser:
     _parser_assemble(sub)
     _parser_export(sub)
     _parser_synth(sub)
+    _parser_simulate(sub)
     return p
 
 

@@ -211,6 +211,52 @@ class Load:
 
 
 @dataclass(frozen=True)
+class Spring:
+    """A spring and/or damper of the forward dynamics.
+
+    ``kind == "rotational"``: at pin ``joint`` between bodies ``ends`` = (a, b) (b may be the ground), acting on
+    the relative angle φ = θ_a − θ_b [rad]: torque −k·(φ − rest) − c·φ̇ on a, the opposite on b.
+    ``kind == "linear"``: between joints/points ``ends`` = (P, Q), acting along their distance L [file length
+    units]: tension k·(L − rest) + c·L̇ [N] pulling P and Q together. ``rest``: φ or L at rest (None: as at t = 0).
+    Units: k in N·m/rad or N/m, c in N·m·s/rad or N·s/m (lengths in metres).
+    """
+
+    kind: str
+    ends: tuple[str, str]
+    k: float = 0.0
+    c: float = 0.0
+    rest: float | None = None
+    joint: str | None = None
+    entry: str = "dynamics.springs"
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """The forward dynamics of a one-input mechanism (the file's ``[dynamics]``, docs/dynamics.md).
+
+    The input x (the driver's θ [rad] or s [length]) starts at ``position`` with rate ``rate`` at t = 0 (None:
+    the driver's values at t = 0). Loads on the input: a constant ``torque`` [N·m, or N on a slider] or a
+    tabulated one (``torque_profile``, columns t, torque), a motor line T = stall·(1 − ẋ/no_load_speed)
+    (``motor`` = (stall, no_load_speed)), and a ``flywheel`` [kg·m², or kg on a slider] on the input; the
+    file's gravity, masses and [[loads]] act as in the force analysis. Integration: scipy's solve_ivp with
+    ``method`` at ``rtol``/``atol`` (rad and rad/s, or m and m/s), rows every ``step`` up to ``stop`` [s].
+    """
+
+    position: float | None = None
+    rate: float | None = None
+    torque: float = 0.0
+    torque_profile: LoadProfile | None = None
+    motor: tuple[float, float] | None = None
+    flywheel: float = 0.0
+    springs: tuple[Spring, ...] = ()
+    method: str = "DOP853"
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    stop: float | None = None  # the simulated rows: 0, step, … stop [s] (None: the file's [time])
+    step: float | None = None
+
+
+@dataclass(frozen=True)
 class Mechanism:
     """A planar linkage as described by its file. Immutable; engines read it."""
 
@@ -233,6 +279,8 @@ class Mechanism:
     # and ``unplaced`` joints have none (placed provisionally until vloop.authoring assembles the mechanism)
     from_dimensions: bool = False
     unplaced: tuple[str, ...] = ()
+    # forward dynamics (docs/dynamics.md): the [dynamics] section, None without one
+    dynamics: Dynamics | None = None
 
     # ----- derived views (pure functions of the description) -----
     @cached_property

@@ -23,6 +23,7 @@ from ..errors import MechanismError
 from ..model import (
     LENGTH_UNITS,
     Driver,
+    Dynamics,
     Link,
     Load,
     LoadProfile,
@@ -31,6 +32,7 @@ from ..model import (
     Point,
     Profile,
     Slider,
+    Spring,
     joint_mean,
     mobility_message,
     to_world,
@@ -141,6 +143,8 @@ def from_dict(
     times = read_time(data.get("time"), drivers, probs)
     options = read_solver(data.get("solver", {}), probs)
     dynamics = read_dynamics(data, proto, ctx, probs)
+    if "dynamics" in data:
+        dynamics["dynamics"] = read_simulation(data["dynamics"], proto, drivers, ctx, probs)
     probs.raise_if_any()
     times.flags.writeable = False
     mech = dataclasses.replace(proto, drivers=tuple(drivers), times=times, options=options, **dynamics)
@@ -1036,6 +1040,136 @@ def _load_profile(
     return Load(kind, body, None, point, LoadProfile(prof.t, values, columns, source), entry)
 
 
+# ---------------------------------------------------------------- forward dynamics
+
+INTEGRATORS = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+
+
+def read_simulation(raw: Any, m: Mechanism, drivers: list[Driver], ctx: _Context, probs: Problems) -> Dynamics | None:
+    """[dynamics]: the input's state at t = 0, its torque or motor line, a flywheel, springs, the integrator."""
+    if not isinstance(raw, dict):
+        probs.add("dynamics", "must be a table [dynamics]")
+        return None
+    check_keys(raw, "dynamics", "dynamics", probs)
+    if len(drivers) != 1:
+        probs.add("dynamics", f"forward dynamics needs one input (this mechanism has {len(drivers)} drivers)")
+    if m.units.strip().lower() not in LENGTH_UNITS:
+        probs.add("units", f"dynamics needs a length unit vloop knows ({', '.join(LENGTH_UNITS)}), got {show(m.units)}")
+    out: dict[str, Any] = {}
+    for key in ("position", "rate"):
+        out[key] = number(raw, key, "dynamics", probs)
+    out["flywheel"] = _non_negative(raw, "flywheel", "dynamics", probs)
+    if isinstance(raw.get("torque"), (dict, str)):
+        out["torque_profile"] = _load_profile(raw["torque"], "torque", "", None, "dynamics.torque", ctx, probs)
+        out["torque_profile"] = out["torque_profile"].profile if out["torque_profile"] is not None else None
+    else:
+        out["torque"] = number(raw, "torque", "dynamics", probs, 0.0)
+    out["motor"] = _motor(raw["motor"], probs) if "motor" in raw else None
+    method = raw.get("method", "DOP853")
+    if method not in INTEGRATORS:
+        probs.add("dynamics", f"method must be one of {', '.join(INTEGRATORS)}, got {show(method)}")
+    out["method"] = method
+    for key in ("rtol", "atol"):
+        v = number(raw, key, "dynamics", probs, 1e-10)
+        if v is not None and not (0 < v < 1 if key == "rtol" else v > 0):
+            probs.add("dynamics", f"{key} must be {'between 0 and 1' if key == 'rtol' else 'positive'}, got {v:g}")
+        out[key] = v
+    _simulated_rows(raw, out, probs)
+    springs = raw.get("springs", [])
+    if not isinstance(springs, list):
+        probs.add("dynamics.springs", "must be an array of tables [[dynamics.springs]]")
+        springs = []
+    out["springs"] = tuple(s for i, d in enumerate(springs) if (s := _spring(d, m, f"dynamics.springs[{i}]", probs)))
+    return Dynamics(**out)
+
+
+def _simulated_rows(raw: dict, out: dict[str, Any], probs: Problems) -> None:
+    """stop and step [s] of the simulated rows, both or neither, within the time limit."""
+    stop, step = number(raw, "stop", "dynamics", probs), number(raw, "step", "dynamics", probs)
+    if (stop is None) != (step is None):
+        probs.add("dynamics", "give both 'stop' and 'step' (the simulated rows), or neither (the file's [time])")
+    elif stop is not None and step is not None:
+        if not (stop > 0 and step > 0):
+            probs.add("dynamics", f"'stop' and 'step' must be positive, got {stop:g} and {step:g}")
+        elif (limit := _time_limit(stop / step + 1)) is not None:
+            probs.add("dynamics", limit)
+        else:
+            out.update(stop=stop, step=step)
+
+
+def _non_negative(raw: dict, key: str, entry: str, probs: Problems) -> float:
+    v = number(raw, key, entry, probs, 0.0)
+    if v is not None and v < 0:
+        probs.add(entry, f"'{key}' must not be negative, got {v:g}")
+    return v or 0.0
+
+
+def _motor(raw: Any, probs: Problems) -> tuple[float, float] | None:
+    """motor = { stall, no_load_speed }: T = stall·(1 − ω/no_load_speed), no_load_speed ≠ 0."""
+    entry = "dynamics.motor"
+    if not isinstance(raw, dict) or set(raw) != {"stall", "no_load_speed"}:
+        probs.add(entry, "must be a table { stall = T0, no_load_speed = ω0 } (N·m and rad/s)")
+        return None
+    stall, speed = number(raw, "stall", entry, probs), number(raw, "no_load_speed", entry, probs)
+    if speed == 0.0:
+        probs.add(entry, "'no_load_speed' must not be zero")
+    return None if stall is None or not speed else (stall, speed)
+
+
+def _spring(d: Any, m: Mechanism, entry: str, probs: Problems) -> Spring | None:
+    """[[dynamics.springs]]: rotational (joint, links) or linear (between), with k, c and rest."""
+    if not isinstance(d, dict):
+        probs.add(entry, "must be a table")
+        return None
+    check_keys(d, "springs", entry, probs)
+    k, c = _non_negative(d, "k", entry, probs), _non_negative(d, "c", entry, probs)
+    rest = number(d, "rest", entry, probs)
+    if ("joint" in d) == ("between" in d):
+        probs.add(entry, "give joint = J (a rotational spring at a pin) or between = [P, Q] (a linear one)")
+        return None
+    if "between" in d:
+        ends = d["between"]
+        known = set(m.joints) | set(m.points)
+        names = isinstance(ends, list) and len(ends) == 2 and all(isinstance(e, str) for e in ends)
+        if not names or ends[0] == ends[1] or not set(ends) <= known:
+            probs.add(entry, f"'between' must name two different joints or points, got {show(ends)}")
+            return None
+        return Spring("linear", (ends[0], ends[1]), k, c, rest, None, entry)
+    joint = d["joint"]
+    at = (*m.bodies_at(joint),) if isinstance(joint, str) else ()
+    if len(at) < 2:
+        probs.add(entry, f"'joint' must name a pin joining two bodies, got {show(joint)}")
+        return None
+    ends = d.get("links", list(at[:2]))
+    names = isinstance(ends, list) and len(ends) == 2 and all(isinstance(e, str) for e in ends)
+    if not names or ends[0] == ends[1] or not set(ends) <= set(at):
+        probs.add(entry, f"'links' must name two different bodies at {joint} ({', '.join(at)}), got {show(ends)}")
+        return None
+    return Spring("rotational", (ends[0], ends[1]), k, c, rest, joint, entry)
+
+
+def _simulation_to_dict(dyn: Dynamics) -> dict[str, Any]:
+    """The [dynamics] table of a Dynamics (read back to an equal one by :func:`read_simulation`)."""
+    out: dict[str, Any] = {k: getattr(dyn, k) for k in ("position", "rate") if getattr(dyn, k) is not None}
+    p = dyn.torque_profile
+    out["torque"] = {"t": p.t.tolist(), "torque": p.values[:, 0].tolist()} if p is not None else dyn.torque
+    if dyn.motor is not None:
+        out["motor"] = {"stall": dyn.motor[0], "no_load_speed": dyn.motor[1]}
+    out.update(flywheel=dyn.flywheel, method=dyn.method, rtol=dyn.rtol, atol=dyn.atol)
+    if dyn.stop is not None:
+        out.update(stop=dyn.stop, step=dyn.step)
+    springs = []
+    for s in dyn.springs:
+        entry: dict[str, Any] = (
+            {"joint": s.joint, "links": list(s.ends)} if s.kind == "rotational" else {"between": list(s.ends)}
+        )
+        entry.update(k=s.k, c=s.c, **({"rest": s.rest} if s.rest is not None else {}))
+        springs.append(entry)
+    if springs:
+        out["springs"] = springs
+    return out
+
+
 # ---------------------------------------------------------------- writing
 
 
@@ -1066,6 +1200,8 @@ def to_dict(mech: Mechanism) -> dict[str, Any]:
             if key in out["solver"]:
                 out["solver"][key] = {str(k): v for k, v in out["solver"][key].items()}
     _dynamics_to_dict(mech, out)
+    if mech.dynamics is not None:
+        out["dynamics"] = _simulation_to_dict(mech.dynamics)
     return out
 
 

@@ -182,6 +182,7 @@ OPTIONS: dict[str, Option] = {
         Option("out", folder, "a folder"),
         Option("previous", lambda v: file_path(v, "--previous"), "a summary.json"),
         Option("file", file_path, "a file"),
+        Option("cs", lambda v: real(v, "--flywheel-for", 0.0, 2.0, open_low=True), "a number above 0, at most 2"),
     )
 }
 

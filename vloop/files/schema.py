@@ -261,8 +261,71 @@ SECTIONS: tuple[Section, ...] = (
     ),
 )
 
+SECTIONS += (
+    Section(
+        "dynamics",
+        "[dynamics]",
+        "forward dynamics (`vloop simulate`): the input's state at t = 0, its loads, the integrator",
+        (
+            Key("position", "number", "the driver's value at t = 0", "rad or length", "the input at t = 0", 0.5),
+            Key("rate", "number", "the driver's rate at t = 0", "rad/s or length/s", "the input's rate at t = 0", 0.0),
+            Key(
+                "torque",
+                "number, CSV path or table",
+                "0",
+                "N·m (N on a slider)",
+                "on the input: constant, or columns t, torque",
+                1.5,
+            ),
+            Key(
+                "motor",
+                "{ stall, no_load_speed }",
+                "none",
+                "N·m, rad/s",
+                "motor line T = stall·(1 − ω/no_load_speed) on the input (N and length/s on a slider)",
+                {"stall": 2.0, "no_load_speed": 30.0},
+            ),
+            Key("flywheel", "number ≥ 0", "0", "kg·m² (kg on a slider)", "extra inertia on the input", 0.01),
+            Key(
+                "method",
+                '"DOP853" | "RK45" | "Radau" | "BDF" | "LSODA"',
+                '"DOP853"',
+                "",
+                "scipy's solve_ivp method (an implicit one for stiff springs)",
+                "Radau",
+            ),
+            Key("rtol", "0 < number < 1", "1e-10", "", "the integrator's relative tolerance", 1e-9),
+            Key("atol", "number > 0", "1e-10", "rad, rad/s (m, m/s)", "the integrator's absolute tolerance", 1e-9),
+            Key("stop", "number > 0", "[time] stop", "s", "the last simulated row (rows from t = 0)", 5.0),
+            Key("step", "number > 0", "[time] step", "s", "the rows' spacing", 0.01),
+            Key("springs", "[[dynamics.springs]]", "none", "", "springs and dampers (next table)", None),
+        ),
+    ),
+    Section(
+        "springs",
+        "[[dynamics.springs]]",
+        "a spring and/or damper: rotational at a pin (`joint`) or linear `between` two points",
+        (
+            Key("joint", "joint name", "none", "", "a rotational spring at this pin", None),
+            Key(
+                "links",
+                "[a, b]",
+                "the first two bodies at the pin",
+                "",
+                "acting on φ = θ_a − θ_b (b may be the ground)",
+                None,
+            ),
+            Key("between", "[P, Q]", "none", "", "a linear spring between two joints or points", None),
+            Key("k", "number ≥ 0", "0", "N·m/rad or N/m", "stiffness", 100.0),
+            Key("c", "number ≥ 0", "0", "N·m·s/rad or N·s/m", "damping", 0.5),
+            Key("rest", "number", "as at t = 0", "rad or length", "φ or the length at rest", 0.0),
+        ),
+    ),
+)
+
 SECTION = {s.name: s for s in SECTIONS}
 TOP_LEVEL = SECTION["file"].allowed | {"joints", "links", "sliders", "points", "drivers", "time", "solver", "loads"}
+TOP_LEVEL |= {"dynamics"}
 
 
 def markdown(sections: tuple[Section, ...] | None = None) -> str:

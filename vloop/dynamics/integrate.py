@@ -1,0 +1,230 @@
+"""Forward dynamics: integrate (q, q̇) with scipy's solve_ivp, then recover every position by the loop solve.
+
+    sim = vloop.simulate(mech)               # the file's [dynamics] and [time] rows
+    sim.result["l4.theta"], sim.energy["residual"], sim.result["l2.torque"]
+
+The rows' kinematics are vloop's run with the integrated input as a tabulated driver (x, ẋ, ẍ at every
+row), so every column, health and message is the kinematic run's. The energy table compares, at every
+row, the kinetic energy and the potentials computed from those exact kinematics with the works
+integrated along the motion: residual = (T + V) − (T₀ + V₀) − (W_input + W_loads + W_dampers).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import MechanismError, MotionError
+from ..model import Dynamics, Mechanism, Profile, length_factor
+from ..result import Result
+from .equations import Model, compile_model
+from .tables import G_PREFIX, augmented
+
+ENERGY_COLUMNS = ("kinetic", "gravity", "springs", "work_input", "work_loads", "work_dampers", "residual")
+
+
+@dataclass
+class Simulation:
+    """A simulated motion: ``result`` (every link and point, health, the input's torque column
+    ``INPUT.torque`` [N·m] or ``INPUT.force`` [N]), ``energy`` (columns of ENERGY_COLUMNS [J] over ``t``),
+    ``turns`` (times [s] at which the input has turned by a whole turn from its start, a crank's), the model,
+    and ``message``: why the run stopped early ("" if it reached the last row)."""
+
+    mechanism: Mechanism
+    result: Result
+    energy: dict[str, np.ndarray]
+    model: Model
+    turns: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    message: str = ""
+    ode: Any = None  # solve_ivp's answer (its dense output: ``ode.sol``)
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.result.t
+
+
+def simulate(
+    mech: Mechanism, times: np.ndarray | None = None, *, dynamics: Dynamics | None = None, **changes: Any
+) -> Simulation:
+    """The motion of a one-input mechanism under its loads from its state at t = 0, at ``times`` [s] ≥ 0
+    (default: [dynamics] stop and step, else the file's [time]). ``dynamics``: instead of the file's
+    [dynamics]; ``changes``: fields of it replaced (e.g. ``flywheel=0.05``, ``method="Radau"``). Raises
+    MotionError (``.partial``: the Simulation up to the stop) when the motion reaches a limit of the input."""
+    dyn = dynamics if dynamics is not None else (mech.dynamics or Dynamics())
+    dyn = dataclasses.replace(dyn, **changes) if changes else dyn
+    _check(mech)
+    times = np.asarray(_rows(mech, dyn) if times is None else times, float)
+    if len(times) == 0 or times[0] < 0 or np.any(np.diff(times) <= 0):
+        raise MechanismError(f"{mech.name}: [time] for a simulation: increasing times from t ≥ 0", entry="time")
+    model = compile_model(mech, dyn)
+    ode, message = _integrate(model, times)
+    sim = _outputs(model, ode, message)
+    if message:
+        raise MotionError(message, entry="dynamics", time=float(sim.t[-1]) if len(sim.t) else 0.0, partial=sim)
+    return sim
+
+
+def _rows(mech: Mechanism, dyn: Dynamics) -> np.ndarray:
+    """The simulated rows: 0, step, … stop of [dynamics], else the file's [time]."""
+    if dyn.stop is None or dyn.step is None:
+        return mech.times
+    from ..files.fileformat import time_grid
+
+    return time_grid(0.0, dyn.step, math.floor(dyn.stop / dyn.step + 0.5) + 1)
+
+
+def _check(mech: Mechanism) -> None:
+    """One input, known units, and some inertia: else a MechanismError naming what is missing."""
+    if len(mech.drivers) != 1:
+        raise MechanismError(
+            f"{mech.name}: forward dynamics needs one input (this mechanism has {len(mech.drivers)} drivers)",
+            entry="dynamics",
+        )
+    try:
+        length_factor(mech.units)
+    except KeyError:
+        raise MechanismError(
+            f"{mech.name}: dynamics needs a known length unit, got {mech.units!r}", entry="units"
+        ) from None
+
+
+def initial_state(model: Model) -> tuple[float, float]:
+    """(q0, q̇0) [SI]: the [dynamics] position and rate, else the driver's at t = 0."""
+    d, dyn = model.mechanism.drivers[0], model.dynamics
+    x = dyn.position if dyn.position is not None else d.x0
+    v = dyn.rate if dyn.rate is not None else d.v0
+    return float(x) * model.qscale, float(v) * model.qscale
+
+
+def _integrate(model: Model, times: np.ndarray) -> tuple[Any, str]:
+    """solve_ivp over [0, last row], the rows as t_eval; a limited input stops at the end of its tables."""
+    from scipy.integrate import solve_ivp
+
+    tab, dyn = model.tables, model.dynamics
+    q0, v0 = initial_state(model)
+    if tab.period is None and not tab.lo < q0 < tab.hi:
+        raise MechanismError(
+            f"{model.mechanism.name}: the input at t = 0 ({q0 / model.qscale:.10g}) is outside its range "
+            f"[{tab.lo / model.qscale:.10g}, {tab.hi / model.qscale:.10g}] (limit positions)",
+            entry="dynamics.position",
+        )
+    events = []
+    if tab.period is None:
+        lower, upper = (lambda t, y: y[0] - tab.lo), (lambda t, y: tab.hi - y[0])
+        for e in (lower, upper):
+            e.terminal = True  # type: ignore[attr-defined]
+        events = [lower, upper]
+    else:
+        events = [lambda t, y: math.sin(0.5 * (y[0] - q0))]  # a whole turn from the start (and back)
+    ode = solve_ivp(
+        model.rhs, (0.0, float(times[-1])), [q0, v0, 0.0, 0.0, 0.0], method=dyn.method, t_eval=times,
+        rtol=dyn.rtol, atol=[dyn.atol, dyn.atol, np.inf, np.inf, np.inf], events=events, dense_output=True,
+    )  # fmt: skip
+    if ode.status < 0:
+        raise MotionError(f"{model.mechanism.name}: the integrator failed: {ode.message}", entry="dynamics")
+    message = ""
+    if ode.status == 1:
+        hit = 0 if len(ode.t_events[0]) else 1
+        t_hit = float(ode.t_events[hit][0])
+        limit = tab.limits[hit] if tab.limits else math.nan
+        mech = model.mechanism
+        where = mech.drivers[0].value_text(limit, mech.units)
+        message = (
+            f"{mech.name}: the motion reaches the input's limit position {where} at t = {t_hit:.10g} s "
+            f"(stopped where the tables end, {(tab.lo, tab.hi)[hit] / model.qscale:.10g})"
+        )
+    return ode, message
+
+
+def _outputs(model: Model, ode: Any, message: str) -> Simulation:
+    """The rows' exact kinematics (the loop solve with the integrated input), the input's torque, the energy."""
+    from .. import solve
+
+    mech, qs = model.mechanism, model.qscale
+    t, y = ode.t, ode.y
+    qdd = np.array([model.rhs(ti, yi)[1] for ti, yi in zip(t, y.T, strict=True)]).reshape(-1)
+    d = mech.drivers[0]
+    aug = augmented(mech)
+    if len(t) == 0:
+        result = Result(mech.name, "vloop.simulate", t, {})
+        return Simulation(mech, result, {k: np.zeros(0) for k in ENERGY_COLUMNS}, model, message=message, ode=ode)
+    lead, profile = _profile(float(d.x0), t, y[0] / qs, y[1] / qs, qdd / qs)
+    run = dataclasses.replace(aug, drivers=(dataclasses.replace(d, profile=profile),), times=t + lead, dynamics=None)
+    try:
+        exact = solve(run, t + lead)
+    except MotionError as exc:
+        raise MotionError(f"{exc.message} (the simulated motion)", entry="dynamics", time=exc.time) from None
+    energy = _energy(model, exact, y)
+    torque = np.array([model.input_torque(ti, yi) for ti, yi in zip(t, y[1], strict=True)])
+    cols = {k: v for k, v in exact.columns.items() if not k.startswith(G_PREFIX)}
+    cols[f"{d.target}.{'torque' if d.kind == 'crank' else 'force'}"] = torque
+    meta = {**exact.meta, "dynamics": {"tables_error": model.tables.error, "method": model.dynamics.method}}
+    result = Result(mech.name, "vloop.simulate", t, cols, dict(exact.health), meta)
+    turns = _whole_turns(ode, model) if model.tables.period is not None else np.zeros(0)
+    return Simulation(mech, result, energy, model, np.asarray(turns, float), message, ode)
+
+
+def _whole_turns(ode: Any, model: Model) -> np.ndarray:
+    """The times [s] the input first reaches each new whole turn from its start (q − q0 = ±2π, ±4π, …): the
+    events where the count of turns changes to one not reached before (a swing back through the start is none)."""
+    q0 = initial_state(model)[0]
+    out, seen = [], {0}
+    for t, y in zip(ode.t_events[0], ode.y_events[0], strict=True):
+        k = round((y[0] - q0) / model.tables.period)
+        if k not in seen:
+            seen.add(k)
+            out.append(t)
+    return np.asarray(out, float)
+
+
+def _profile(x0: float, t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[float, Profile]:
+    """The integrated input as a driver's table (x, ẋ, ẍ at every row) and the rows' delay in it: a run
+    starting away from the coordinates' input x0 is led in from x0 (at rest) to its first row, as a late
+    start is, over 1 s or the time its initial rate would take, so that the t = 0 assembly is the file's."""
+    if abs(x[0] - x0) <= 1e-12 * max(1.0, abs(x0)):
+        return 0.0, Profile(t, x, v, a, source="simulate")
+    lead = 1.0 if v[0] == 0 else min(1.0, abs(x[0] - x0) / abs(v[0]))
+    z = np.zeros(1)
+    return lead, Profile(
+        np.concatenate([z, t + lead]),
+        np.concatenate([[x0], x]),
+        np.concatenate([z, v]),
+        np.concatenate([z, a]),
+        source="simulate",
+    )
+
+
+def _energy(model: Model, exact: Result, y: np.ndarray) -> dict[str, np.ndarray]:
+    """Kinetic energy and potentials from the exact kinematics; the works from the integration [J]."""
+    mech = model.mechanism
+    f = length_factor(mech.units)
+    g = mech.gravity or (0.0, 0.0)
+    kinetic = 0.5 * model.dynamics.flywheel * y[1] ** 2
+    gravity = np.zeros_like(kinetic)
+    for b, mp in mech.masses.items():
+        p = G_PREFIX + b
+        if f"{p}.x" not in exact.columns:
+            continue
+        vx, vy = exact[f"{p}.vx"] * f, exact[f"{p}.vy"] * f
+        kinetic = kinetic + 0.5 * mp.mass * (vx * vx + vy * vy) + 0.5 * mp.inertia * exact[f"{b}.omega"] ** 2
+        gravity = gravity - mp.mass * (g[0] * exact[f"{p}.x"] + g[1] * exact[f"{p}.y"]) * f
+    springs = np.zeros_like(kinetic)
+    for i, s in enumerate(model.dynamics.springs):
+        springs = springs + 0.5 * s.k * (_stretch(mech, exact, s, f) - model.rest[i]) ** 2
+    works = y[2] + y[3] + y[4]
+    total = kinetic + gravity + springs
+    residual = total - total[0] - works
+    return dict(zip(ENERGY_COLUMNS, (kinetic, gravity, springs, y[2], y[3], y[4], residual), strict=True))
+
+
+def _stretch(mech: Mechanism, exact: Result, s: Any, f: float) -> np.ndarray:
+    """A spring's relative angle θ_a − θ_b [rad] or length |PQ| [m] from the exact kinematics."""
+    if s.kind == "rotational":
+        a, b = (exact[f"{n}.theta"] if n != mech.ground else 0.0 for n in s.ends)
+        return np.asarray(a - b, float)
+    p, q = s.ends
+    return np.hypot(exact[f"{p}.x"] - exact[f"{q}.x"], exact[f"{p}.y"] - exact[f"{q}.y"]) * f
