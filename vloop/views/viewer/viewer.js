@@ -511,6 +511,7 @@
     };
     V.svg.addEventListener("wheel", (ev) => {
       ev.preventDefault();
+      if (!V.box) return;
       const [px, py] = toWorld(ev), f = Math.exp(Math.max(-0.5, Math.min(0.5, ev.deltaY * 0.0015)));
       const [x, y, w, h] = V.box;
       setBox([px - (px - x) * f, py - (py - y) * f, w * f, h * f]);
@@ -518,6 +519,7 @@
     }, { passive: false });
     let drag = null;
     V.svg.addEventListener("pointerdown", (ev) => {
+      if (!V.box) return;
       drag = { x: ev.clientX, y: ev.clientY, box: V.box.slice() };
       V.svg.setPointerCapture(ev.pointerId);
       V.svg.classList.add("dragging");
@@ -531,7 +533,7 @@
     const end = () => { drag = null; V.svg.classList.remove("dragging"); };
     V.svg.addEventListener("pointerup", end);
     V.svg.addEventListener("pointercancel", end);
-    V.svg.addEventListener("dblclick", fit);
+    V.svg.addEventListener("dblclick", () => D && fit());
     $("fit").addEventListener("click", fit);
   }
 
