@@ -1,0 +1,157 @@
+"""The studio's session without a browser: a drawing made by messages runs as the catalog's file does, a drag past a
+limit stops at the limit and says so, locks hold, undo/redo restore, files stay inside the folder.
+
+References: mechanisms/fourbar_textbook_example.toml (a = 40, b = 120, c = 80, d = 100 mm, θ₂(0) = 40°, ω₂ = 25
+rad/s, α₂ = 15 rad/s², 0.5 s at 2.5 ms). A drag moves one joint and the others stay: dragging O4 along +x to
+(d, 0) makes the ground d and the rocker c(d) = |B − (d, 0)| with B where it is; the crank stops turning fully
+when its far position (θ₂ = π) stretches O4–A past b + c: d + a = b + c(d) (solved here by brentq).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import vloop
+from vloop.studio.session import Session
+
+from .conftest import MECHANISMS
+
+TEXTBOOK = MECHANISMS / "fourbar_textbook_example.toml"
+
+
+def ok(reply: dict) -> dict:
+    assert reply["ok"], reply
+    return reply
+
+
+def draw_textbook(s: Session) -> None:
+    """The textbook four-bar from nothing: rough clicks, then typed coordinates, lengths, driver and time."""
+    ok(s.handle({"op": "add_joint", "x": 1.0, "y": -2.0, "ground": True, "name": "O2"}))
+    ok(s.handle({"op": "add_joint", "x": 97.0, "y": 3.0, "ground": True, "name": "O4"}))
+    ok(s.handle({"op": "add_joint", "x": 28.0, "y": 27.0, "name": "A"}))
+    ok(s.handle({"op": "add_joint", "x": 140.0, "y": 70.0, "name": "B"}))
+    for joints in (["O2", "A"], ["A", "B"], ["O4", "B"]):
+        ok(s.handle({"op": "add_link", "joints": joints}))
+    ok(s.handle({"op": "set_joint", "joint": "O2", "x": 0, "y": 0}))
+    ok(s.handle({"op": "set_joint", "joint": "O4", "x": 100, "y": 0}))
+    ok(s.handle({"op": "set_meta", "name": "fourbar_textbook_example", "units": "mm"}))
+    ok(s.handle({"op": "set_driver", "link": "l2", "omega": 25, "alpha": 15, "theta0": math.radians(40)}))
+    for link, length in (("l2", 40), ("l3", 120), ("l4", 80)):
+        ok(s.handle({"op": "set_length", "link": link, "length": length}))
+    ok(s.handle({"op": "set_time", "start": 0, "stop": 0.5, "step": 0.0025}))
+
+
+def assert_same_run(a: vloop.Result, b: vloop.Result, rtol: float = 1e-12) -> None:
+    """Every column equal within rtol of that column's peak (round-off of the same closed forms)."""
+    assert np.array_equal(a.t, b.t)
+    assert set(a.columns) == set(b.columns)
+    for k, col in a.columns.items():
+        scale = max(np.abs(col).max(), np.abs(b.columns[k]).max(), 1e-300)
+        assert np.abs(col - b.columns[k]).max() <= rtol * scale, k
+
+
+def test_a_drawing_made_by_messages_runs_as_the_catalog_file(tmp_path: Path) -> None:
+    s = Session(tmp_path)
+    draw_textbook(s)
+    info = s.frame.info
+    assert info["mobility"] == {"L": 4, "J": 4, "M": 1, "drivers": 1}
+    assert info["grashof"][0]["class"] == "Grashof crank-rocker"
+    assert info["transmission"][0]["dyad"] == "B"
+    ok(s.handle({"op": "save", "path": "drawn.toml"}))
+    saved = vloop.load(tmp_path / "drawn.toml")
+    assert_same_run(vloop.solve(saved), vloop.solve(vloop.load(TEXTBOOK)))
+    assert vloop.dumps(vloop.load(tmp_path / "drawn.toml")) == vloop.dumps(saved)  # loading it back: the same
+
+
+def test_branch_names_come_from_the_loop_text(tmp_path: Path) -> None:
+    """The studio names a branch as `vloop info` does (vloop.method.loops.branch_name at the t = 0 assembly)."""
+    from vloop.method.loops import branch_name
+
+    s = Session(tmp_path)
+    ok(s.handle({"op": "open", "catalog": "fourbar_crank_rocker_crossed"}))
+    system = vloop.compile(vloop.load(MECHANISMS / "fourbar_crank_rocker_crossed.toml"))
+    assert s.frame.info["loops"][0]["branch"] == branch_name(system, system.q0, system.loops[0])
+
+
+def test_a_drag_past_a_limit_stops_there_and_says_so(tmp_path: Path) -> None:
+    """The drag to d = 250 stops within 2⁻¹² of the move (150 mm · 2⁻¹² = 0.04 mm) below the limit d* where
+    d + a = b + c(d) (d* = 147.47 mm), and the reply says why."""
+    from scipy.optimize import brentq
+
+    s = Session(tmp_path)
+    ok(s.handle({"op": "open", "catalog": "fourbar_textbook_example"}))
+    r = ok(s.handle({"op": "drag", "joint": "O4", "x": 250.0, "y": 0.0, "gesture": 1}))
+    x = s.doc["joints"]["O4"][0]
+    bx, by = 143.18998821048504, 67.33962368753009
+    limit = brentq(lambda d: d + 40 - 120 - math.hypot(d - bx, by), 100, 250, xtol=1e-12)
+    assert limit - 150 / 2**12 <= x <= limit, (x, limit)
+    assert "O4 stopped at" in r["state"]["limit"] and "limit" in r["state"]["limit"]
+    assert s.frame.error is None  # what is shown runs
+    ok(s.handle({"op": "undo"}))
+    assert s.doc["joints"]["O4"] == [100.0, 0.0]
+    ok(s.handle({"op": "redo"}))
+    assert s.doc["joints"]["O4"][0] == x
+
+
+def test_a_drag_restates_lengths_and_one_gesture_is_one_undo(tmp_path: Path) -> None:
+    s = Session(tmp_path)
+    ok(s.handle({"op": "open", "catalog": "fourbar_textbook_example"}))
+    for k in range(5):
+        ok(s.handle({"op": "drag", "joint": "B", "x": 140.0 + k, "y": 70.0, "gesture": 7}))
+    b, a, o4 = (s.frame.mech.joints[j] for j in ("B", "A", "O4"))
+    assert s.doc["links"]["l3"]["length"] == pytest.approx(math.dist(a, b), rel=1e-12)
+    assert s.doc["links"]["l4"]["length"] == pytest.approx(math.dist(o4, b), rel=1e-12)
+    assert len(s.undo) == 2  # the open, then the one gesture
+    ok(s.handle({"op": "undo"}))
+    assert s.doc["joints"]["B"] == pytest.approx([143.18998821048504, 67.33962368753009], rel=1e-12)
+
+
+def test_locks_hold(tmp_path: Path) -> None:
+    s = Session(tmp_path)
+    ok(s.handle({"op": "open", "catalog": "fourbar_textbook_example"}))
+    ok(s.handle({"op": "lock", "kind": "joints", "name": "O4"}))
+    r = s.handle({"op": "drag", "joint": "O4", "x": 110, "y": 0})
+    assert not r["ok"] and "locked" in r["error"]
+    ok(s.handle({"op": "lock", "kind": "links", "name": "l4"}))
+    ok(s.handle({"op": "drag", "joint": "B", "x": 150, "y": 90, "gesture": 1}))
+    assert math.dist(s.frame.mech.joints["B"], (100, 0)) == pytest.approx(80, rel=1e-12)  # B on the rocker's circle
+    r = s.handle({"op": "set_length", "link": "l4", "length": 70})
+    assert not r["ok"] and "locked" in r["error"]
+
+
+def test_files_stay_inside_the_folder(tmp_path: Path) -> None:
+    root = tmp_path / "work"
+    root.mkdir()
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (root / "out").symlink_to(outside)
+    (root / "link.toml").symlink_to(TEXTBOOK)
+    s = Session(root)
+    ok(s.handle({"op": "open", "catalog": "fourbar_textbook_example"}))
+    for path in ("../x.toml", "/tmp/x.toml", "out/x.toml", "link.toml", "a/../../x.toml", "x.py", "", "\x00.toml"):
+        r = s.handle({"op": "save", "path": path})
+        assert not r["ok"], path
+        r = s.handle({"op": "open", "path": path})
+        assert not r["ok"], path
+    for fmt in ("svg", "dxf"):
+        assert not s.handle({"op": "export", "format": fmt, "path": f"out/x.{fmt}"})["ok"]
+    assert list(outside.iterdir()) == []
+    ok(s.handle({"op": "export", "format": "svg", "path": "x.svg"}))
+    assert (root / "x.svg").read_text().lstrip().startswith("<?xml")
+    assert sorted(os.listdir(root)) == ["link.toml", "out", "x.svg"]
+    assert "link.toml" not in ok(s.handle({"op": "files"}))["files"]
+
+
+def test_malformed_messages_get_an_error_reply(tmp_path: Path) -> None:
+    s = Session(tmp_path)
+    for msg in (None, 3, [], {}, {"op": 5}, {"op": "nope"}, {"op": "drag"}, {"op": "add_joint", "x": "a"},
+                {"op": "add_joint", "x": float("nan"), "y": 0}, {"op": "add_link", "joints": "AB"},
+                {"op": "set_time", "start": 1, "stop": 0, "step": 1}, {"op": "take", "index": 3},
+                {"op": "targets", "points": [[1, 2, 3, 4]]}, {"op": "validate"}):  # fmt: skip
+        r = s.handle(msg)
+        assert r["ok"] is False and isinstance(r["error"], str) and r["error"], msg
