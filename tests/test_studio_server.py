@@ -67,7 +67,7 @@ def test_the_socket_needs_the_token_and_origin(served) -> None:
 
 
 def test_paths_out_of_the_folder_are_refused(served) -> None:
-    client, root, outside = served
+    client, _, outside = served
     with client.websocket_connect(f"/ws?token={TOKEN}", headers=HOST) as ws:
         for path in ("../x.toml", str(outside / "x.toml"), "escape/x.toml", "escape/../../x.toml"):
             for op in ("save", "open"):
