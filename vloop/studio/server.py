@@ -190,3 +190,31 @@ def serve(target: str | Path | None, *, port: int = 0, browser: bool = True, ech
         threading.Timer(0.5, webbrowser.open, args=(url,)).start()
     server.run(sockets=[sock])
     return 0
+
+
+class Background:
+    """The studio served from a thread of this process (tests, benchmarks, a notebook): ``.url`` (with its token),
+    ``.stop()``."""
+
+    def __init__(self, session: Session, port: int = 0) -> None:
+        import socket as sockets
+        import threading
+
+        import uvicorn
+
+        self.token = secrets.token_urlsafe(24)
+        self.sock = sockets.socket(sockets.AF_INET, sockets.SOCK_STREAM)
+        self.sock.bind(("127.0.0.1", port))
+        self.port = self.sock.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}/?token={self.token}"
+        config = uvicorn.Config(app(session, self.token, self.port), log_level="warning", ws_max_size=MAX_MESSAGE)
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
+        self.thread.start()
+        while not self.server.started and self.thread.is_alive():
+            self.thread.join(0.02)
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(10)
+        self.sock.close()

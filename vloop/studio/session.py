@@ -345,12 +345,11 @@ def _targets(s: Session, msg: dict) -> dict:
 
 
 def _take_candidate(s: Session, msg: dict) -> dict:
-    from vloop.mechanism import to_dict
-
+    """A synthesis candidate (its mechanism file's structure, kept from the search) taken into the editor."""
     k = msg.get("index")
     if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k < len(s.candidates):
         raise MessageError(f"take: no candidate {str(k)[:20]} (there are {len(s.candidates)})")
-    s._accept(to_dict(s.candidates[k].mechanism))
+    s._accept(copy.deepcopy(s.candidates[k]))
     return s.state()
 
 

@@ -329,7 +329,7 @@
     const form = (id, fn) => $(id).addEventListener("submit", (e) => { e.preventDefault(); fn(e.target.elements, e.submitter); });
     const num = (el) => (el.value.trim() === "" ? null : Number(el.value));
     form("f-joint", (f) => send("set_joint", { joint: f.name.value, x: num(f.x), y: num(f.y) }));
-    form("f-length", (f) => send("set_length", { link: f.link.value, length: num(f.length) }));
+    form("f-length", (f) => send("set_length", { link: f.link.value, length: num(f.namedItem("length")) })); // f.length: the count
     form("f-driver", (f) => send("set_driver", { link: f.link.value, omega: num(f.omega), alpha: num(f.alpha) || 0,
       ...(num(f.theta0) === null ? {} : { theta0: num(f.theta0) * Math.PI / 180 }) }));
     form("f-time", (f) => send("set_time", { start: num(f.start), stop: num(f.stop), step: num(f.step) }));
