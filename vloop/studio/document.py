@@ -29,6 +29,19 @@ def empty(units: str = "mm", name: str = "drawing") -> dict[str, Any]:
             "time": dict(DEFAULT_TIME)}  # fmt: skip
 
 
+EDITED = ("joints", "links", "drivers", "time")  # the sections edits change; the rest is shared between versions
+
+
+def edited(doc: dict) -> dict:
+    """A new version of ``doc`` whose editable sections are copies (the others, never edited, are shared: an
+    opened file's long time list or profiles are not copied at every drag)."""
+    out = dict(doc)
+    for key in EDITED:
+        if key in out:
+            out[key] = copy.deepcopy(out[key])
+    return out
+
+
 def number(value: Any, what: str, *, positive: bool = False) -> float:
     """A finite float (EditError naming ``what`` otherwise)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -58,7 +71,7 @@ def fresh(existing: Any, prefix: str, start: int = 1) -> str:
 
 def add_joint(doc: dict, x: Any, y: Any, *, ground: bool = False, name: Any = None) -> tuple[dict, str]:
     """A joint at (x, y); ``ground``: a ground pivot (joined to the ground link)."""
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     taken = set(out["joints"]) | set(out["links"]) | set(out.get("sliders", {}))
     name = name_of(name, "joint name") if name is not None else fresh(taken, "O" if ground else "J")
     if name in taken:
@@ -73,7 +86,7 @@ def add_link(doc: dict, joints: Any, *, name: Any = None) -> tuple[dict, str]:
     """A binary link (two joints) or a plate (three): its length or sides stated from the coordinates."""
     if not isinstance(joints, list) or len(joints) not in (2, 3) or len(set(map(str, joints))) != len(joints):
         raise EditError("a link joins 2 (binary) or 3 (plate) different joints")
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     for j in joints:
         if j not in out["joints"]:
             raise EditError(f"a link's joint {str(j)[:40]!r}: no such joint")
@@ -106,7 +119,7 @@ def restate(doc: dict, link: str) -> None:
 
 def move_joint(doc: dict, joint: str, x: float, y: float) -> dict:
     """The joint moved to (x, y) at t = 0; the links through it restate their dimensions, the driver its θ₀."""
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     if joint not in out["joints"]:
         raise EditError(f"joint {str(joint)[:40]!r}: no such joint")
     out["joints"][joint] = [number(x, f"{joint}.x"), number(y, f"{joint}.y")]
@@ -128,7 +141,7 @@ def driver_angle(doc: dict, driver: dict) -> float:
 
 def set_length(doc: dict, link: Any, value: Any) -> dict:
     """A binary link's length (the joints are placed again by the t = 0 assembly)."""
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     lk = out["links"].get(link)
     if lk is None or lk.get("ground") or len(lk["joints"]) != 2:
         raise EditError(f"link {str(link)[:40]!r}: no moving binary link of that name")
@@ -138,7 +151,7 @@ def set_length(doc: dict, link: Any, value: Any) -> dict:
 
 def set_driver(doc: dict, link: Any, omega: Any, alpha: Any = 0.0, theta0: Any = None) -> dict:
     """The input: link ``link`` turned about its ground pivot, θ(t) = θ₀ + ω·t + α·t²/2 [rad, rad/s, rad/s²]."""
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     lk = out["links"].get(link)
     if lk is None or lk.get("ground"):
         raise EditError(f"driver: no moving link {str(link)[:40]!r}")
@@ -158,7 +171,7 @@ def set_driver(doc: dict, link: Any, omega: Any, alpha: Any = 0.0, theta0: Any =
 
 
 def set_time(doc: dict, start: Any, stop: Any, step: Any) -> dict:
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     t0, t1, dt = number(start, "time.start"), number(stop, "time.stop"), number(step, "time.step", positive=True)
     if not t1 > t0 or (t1 - t0) / dt > 1_000_000:
         raise EditError("time: stop must follow start, with at most 1,000,000 steps")
@@ -167,7 +180,7 @@ def set_time(doc: dict, start: Any, stop: Any, step: Any) -> dict:
 
 
 def set_meta(doc: dict, name: Any = None, title: Any = None, units: Any = None) -> dict:
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     if name is not None:
         out["name"] = name_of(name, "name")
     if title is not None:
@@ -183,7 +196,7 @@ def set_meta(doc: dict, name: Any = None, title: Any = None, units: Any = None) 
 
 def delete(doc: dict, name: Any) -> dict:
     """A joint (with the links through it) or a link removed."""
-    out = copy.deepcopy(doc)
+    out = edited(doc)
     if name in out["joints"]:
         del out["joints"][name]
         gone = [n for n, lk in out["links"].items() if name in lk["joints"] and not lk.get("ground")]
@@ -198,6 +211,17 @@ def delete(doc: dict, name: Any) -> dict:
     return out
 
 
-def file_dict(doc: dict) -> dict:
-    """The document as a mechanism file's structure (empty sections left out, drawing-only keys dropped)."""
-    return {k: copy.deepcopy(v) for k, v in doc.items() if v not in ("", [], {})}
+def file_dict(doc: dict, *, drawn: bool = False) -> dict:
+    """The document as a mechanism file's structure (empty sections left out). ``drawn``: its coordinates are the
+    assembly (a drag restated every length from them), so the file is read from the coordinates alone — the links'
+    lengths, plates' sides and the driver's θ₀ are what the coordinates give — and vloop's t = 0 assembly is not run
+    again for a drawing that is already closed."""
+    out = {k: v for k, v in edited(doc).items() if v not in ("", [], {})}
+    if drawn:
+        for lk in out["links"].values():
+            for key in ("length", "sides", "angle"):
+                lk.pop(key, None)
+        for d in out.get("drivers", []):
+            if "link" in d and "pivot" in d:
+                d.pop("theta0", None)
+    return out

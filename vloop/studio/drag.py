@@ -29,11 +29,17 @@ def drag(s: Session, msg: dict) -> dict[str, Any]:
     s.gesture = gesture if isinstance(gesture, int | str) else None
     running = s.frame.mech is not None and s.frame.error is None
     doc = docs.move_joint(s.doc, joint, x, y)
-    frame = s._frame(doc)
+    frame = s._frame(doc, drawn=_closed(s))
     if _runs(frame) or not running:
         s._accept(doc, frame, history=new_gesture)
         return s.state()
     return _to_limit(s, joint, (x, y), frame, new_gesture)
+
+
+def _closed(s: Session) -> bool:
+    """Whether the drawing's coordinates are its assembly (a mechanism runs), so a moved joint needs no new t = 0
+    assembly: every link's dimensions are restated from the coordinates."""
+    return s.frame.mech is not None and s.frame.draft is None
 
 
 def _runs(frame: Frame) -> bool:
@@ -67,7 +73,7 @@ def _to_limit(s: Session, joint: str, target: tuple[float, float], failed: Frame
     for _ in range(LIMIT_STEPS):
         mid = ((good[0] + bad[0]) / 2, (good[1] + bad[1]) / 2)
         doc = docs.move_joint(s.doc, joint, *mid)
-        frame = s._frame(doc)
+        frame = s._frame(doc, drawn=_closed(s))
         if _runs(frame):
             good, best = mid, (doc, frame)
         else:

@@ -100,14 +100,15 @@ class Session:
 
     # ------------------------------------------------------------------ solving a document
 
-    def _frame(self, doc: dict) -> Frame:
-        """The document as vloop reads it, solved over the displayed samples (a draft or a stop said in the frame)."""
+    def _frame(self, doc: dict, *, drawn: bool = False) -> Frame:
+        """The document as vloop reads it, solved over the displayed samples (a draft or a stop said in the frame);
+        ``drawn``: read from its coordinates alone (:func:`document.file_dict`)."""
         import vloop
         from vloop.compiler import compile_system
         from vloop.core.solver import solve
 
         try:
-            mech = vloop.from_dict(docs.file_dict(doc), source="studio")
+            mech = vloop.from_dict(docs.file_dict(doc, drawn=drawn), source="studio")
             system = compile_system(mech)
         except VloopError as exc:
             return Frame(draft=str(exc).splitlines()[0])
@@ -135,7 +136,7 @@ class Session:
             self.redo = []
         self.frame = frame if frame is not None else self._frame(doc)
         if self.frame.mech is not None:  # the drawing shows the assembly vloop made (closed to round-off)
-            doc = copy.deepcopy(doc)
+            doc = docs.edited(doc)
             for j in doc["joints"]:
                 if j in self.frame.mech.joints:
                     doc["joints"][j] = [float(v) for v in self.frame.mech.joints[j]]
