@@ -3,8 +3,9 @@
     python benchmarks/bench_studio.py                 # textbook four-bar and eight-bar, 360 samples, 40 drags each
     python benchmarks/bench_studio.py --drags 80 --no-validate
 
-For each mechanism the studio is served from this process (vloop.studio.server.Background) and opened in headless
-Chromium (Debian's). A joint is dragged by real pointer events, one at a time: each round trip runs from the
+For each mechanism the studio is served by ``vloop studio FOLDER --no-browser`` in its own process (as a person
+runs it) and opened in headless Chromium (Debian's). A joint is dragged by real pointer events, one at a time: each
+round trip runs from the
 ``pointermove`` handler (performance.now() in the page) through the WebSocket, the session's solve of every
 displayed sample (vloop's core) and the viewer's redraw, to the next animation frame after the new drawing — the
 frame the person sees. Reported: median, 95th percentile and their ratio, against the issue's targets (median ≤ 30 ms
@@ -18,7 +19,10 @@ must stay under 100 ms.
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -29,7 +33,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vloop.studio.server import Background  # noqa: E402
 from vloop.studio.session import Session  # noqa: E402
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -56,7 +59,10 @@ def session_baseline(name: str, joint: str, centre: tuple, radius: float, n: int
 
 
 def screen(page, x: float, y: float) -> tuple[float, float]:
-    js = "([x, y]) => { const p = new DOMPoint(x, -y).matrixTransform(document.getElementById('view').getScreenCTM()); return [p.x, p.y]; }"
+    js = (
+        "([x, y]) => { const p = new DOMPoint(x, -y)"
+        ".matrixTransform(document.getElementById('view').getScreenCTM()); return [p.x, p.y]; }"
+    )
     return tuple(page.evaluate(js, [x, y]))
 
 
@@ -77,7 +83,8 @@ def drags(page, joint: str, centre: tuple, radius: float, n: int) -> list[float]
 def during_validation(page, joint: str, centre: tuple, radius: float) -> tuple[float, int, str]:
     """Start a validation, keep dragging until its verdict shows; the longest frame interval [ms] and frame count."""
     page.evaluate("""() => { window.gaps = []; let last = performance.now();
-        const tick = (now) => { window.gaps.push(now - last); last = now; if (!window.stopGaps) requestAnimationFrame(tick); };
+        const tick = (now) => {
+          window.gaps.push(now - last); last = now; if (!window.stopGaps) requestAnimationFrame(tick); };
         window.stopGaps = false; requestAnimationFrame(tick); }""")
     page.click("#s-validate")
     page.mouse.move(*screen(page, *centre))
@@ -95,12 +102,23 @@ def during_validation(page, joint: str, centre: tuple, radius: float) -> tuple[f
     return max(gaps), len(gaps), page.locator("#s-verdict").inner_text().splitlines()[0]
 
 
+def serve(folder: str) -> tuple[subprocess.Popen, str]:
+    """``vloop studio FOLDER --no-browser`` as its own process (as a person runs it); its printed address."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "vloop.cli", "studio", folder, "--no-browser"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
+    for line in proc.stdout:
+        if "?token=" in line:
+            return proc, line.strip()
+    raise RuntimeError("vloop studio printed no address")
+
+
 def run(name: str, args: argparse.Namespace, browser) -> None:
     joint, centre, radius, target = CASES[name]
     base = session_baseline(name, joint, centre, radius, args.drags)
-    served = Background(Session(tempfile.mkdtemp(prefix="vloop-bench-")))
+    proc, url = serve(tempfile.mkdtemp(prefix="vloop-bench-"))
     page = browser.new_page(viewport={"width": 1400, "height": 1000})
-    page.goto(served.url)
+    page.goto(url)
     page.wait_for_selector("body[data-studio-ready]", state="attached", timeout=30_000)
     page.select_option("#f-catalog [name=catalog]", name)
     before = page.evaluate("document.body.dataset.studioReady")
@@ -115,12 +133,19 @@ def run(name: str, args: argparse.Namespace, browser) -> None:
     print(f"  round trip  median {med:6.1f} ms (target ≤ {target:.0f}: {'ok' if med <= target else 'OVER'}), "
           f"p95 {p95:6.1f} ms, p95/median {p95 / med:.2f} ({'ok' if p95 <= 2 * med else 'OVER'} ≤ 2)")  # fmt: skip
     print(f"  baseline    Session.handle median {bmed:6.1f} ms (same process): round trip / baseline {med / bmed:.2f}")
+    replies = page.evaluate("vloopStudio.stats.replies.slice()")[-args.drags :]
+    loads = np.array(page.evaluate("vloopStudio.stats.loads.slice()")[-args.drags :])
+    print(
+        f"  where       reply in {statistics.median(replies):.1f} ms (socket + session); page's redraw median "
+        f"[decode, scene, plots, numbers, draw] = {np.round(np.median(loads, axis=0), 1).tolist()} ms"
+    )
     if args.validate:
         worst, frames, verdict = during_validation(page, joint, centre, radius)
         print(f"  validation  {verdict!r}; {frames} frames, longest {worst:.1f} ms "
               f"({'ok' if worst <= 100 else 'OVER'} ≤ 100)")  # fmt: skip
     page.close()
-    served.stop()
+    proc.send_signal(signal.SIGINT)  # Ctrl-C: the server stops cleanly
+    proc.wait(30)
 
 
 def main() -> None:

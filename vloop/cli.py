@@ -739,6 +739,9 @@ def cmd_studio(args: argparse.Namespace) -> int:
         return serve(target, port=args.port, browser=not args.no_browser)
     except ValueError as exc:
         return _fail(str(exc))
+    except KeyboardInterrupt:  # Ctrl-C: the server has closed its socket and workers
+        print("vloop studio: stopped", file=sys.stderr)
+        return 0
 
 
 def _parser_loops(sub: Any) -> None:

@@ -7,7 +7,7 @@
   const $ = (id) => document.getElementById(id);
   const VW = () => window.vloopViewer;
   const ST = { tool: "drag", state: null, picked: [], pending: new Map(), next: 1, dragging: null, inflight: false,
-    queued: null, gesture: 0, stats: { drags: [], frames: [] }, candidates: [] };
+    queued: null, gesture: 0, stats: { drags: [], frames: [], replies: [], loads: [] }, candidates: [] };
 
   // ------------------------------------------------------------------ transport
 
@@ -31,6 +31,7 @@
     });
   }
   function receive(reply) {
+    if (reply.op === "drag" && ST.sentAt) ST.stats.replies.push(performance.now() - ST.sentAt);
     const done = ST.pending.get(reply.id);
     if (reply.started) { status(`${reply.op}: running…`); return; }
     if (done) ST.pending.delete(reply.id);
@@ -61,6 +62,7 @@
     if (state.payload) {
       const keep = !!VW().data && ST.keepView;
       await VW().load(state.payload, { keepView: keep, index: ST.dragging && ST.dragging.crank ? VW().index : 0 });
+      ST.stats.loads.push(VW().stats.load);
       ST.keepView = true;
     } else drawDraft(state.doc);
     drawHandles();
@@ -205,6 +207,7 @@
     const q = ST.queued;
     ST.queued = null;
     ST.inflight = true;
+    ST.sentAt = performance.now();
     await send("drag", { joint: q.joint, x: q.x, y: q.y, gesture: q.gesture });
     requestAnimationFrame(() => { ST.stats.drags.push(performance.now() - q.t0); });
     ST.inflight = false;
@@ -241,6 +244,10 @@
     if (keep && names.includes(before)) sel.value = before;
   }
   function fillForms(doc) {
+    // the lists change only when joints or links do: a drag rebuilds nothing here
+    const key = JSON.stringify([Object.keys(doc.joints), Object.keys(doc.links), doc.drivers, doc.name, doc.units]);
+    if (key === ST.formsKey) return;
+    ST.formsKey = key;
     const moving = Object.entries(doc.links).filter(([, l]) => !l.ground);
     options($("f-joint").elements.name, Object.keys(doc.joints), true);
     options($("f-length").elements.link, moving.filter(([, l]) => l.joints.length === 2).map(([n]) => n), true);
@@ -257,6 +264,9 @@
   }
 
   function showInfo(state) {
+    const key = JSON.stringify([state.info, state.error]);
+    if (key === ST.infoKey) return;
+    ST.infoKey = key;
     const box = $("s-info");
     box.replaceChildren();
     const item = (key, text, cls) => { const s = document.createElement("span"); s.dataset.info = key; if (cls) s.className = cls; s.textContent = text; box.append(s); };
