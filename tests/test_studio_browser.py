@@ -160,7 +160,7 @@ def test_draw_drag_the_crank_save_and_run_as_the_textbook(studio) -> None:
     page.screenshot(path=str(folder / "crank.png"))
     page.fill("#f-file [name=path]", "drawn.toml")
     page.click("#f-file button[name=save]")
-    page.wait_for_function("document.body.dataset.studioStatus.startsWith('saved')")
+    page.wait_for_function("() => document.body.dataset.studioStatus.startsWith('saved')")
     drawn, book = vloop.solve(vloop.load(folder / "drawn.toml")), vloop.solve(vloop.load(TEXTBOOK))
     assert np.array_equal(drawn.t, book.t)
     for col, ref in book.columns.items():
