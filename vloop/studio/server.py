@@ -21,6 +21,7 @@ from typing import Any
 
 from .page import render
 from .session import SLOW, Session
+from .work import lower_priority
 
 MAX_MESSAGE = 1 << 20  # bytes of one WebSocket message
 
@@ -149,7 +150,9 @@ def _pool(pools: dict, op: str) -> Any:
     if op not in pools:
         if op == "synthesize":
             ctx = multiprocessing.get_context("spawn")
-            pools[op] = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+            pools[op] = concurrent.futures.ProcessPoolExecutor(
+                max_workers=1, mp_context=ctx, initializer=lower_priority
+            )
         else:
             pools[op] = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     return pools[op]

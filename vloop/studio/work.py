@@ -17,6 +17,8 @@ from typing import Any
 from . import document as docs
 from .session import MessageError, Session
 
+# the child lowers its own priority first (no preexec_fn: this runs in a thread), then is `vloop validate`
+CHILD = "import os, sys; hasattr(os, 'nice') and os.nice(10); from vloop.cli import main; sys.exit(main(sys.argv[1:]))"
 VALIDATE_TIMEOUT = 600.0  # s: the engines' budgets end well before (a four-bar takes ~5 s)
 MAX_TARGETS = 8
 
@@ -109,6 +111,12 @@ def _path(c: Any) -> list[list[float]]:
 # ---------------------------------------------------------------- validation
 
 
+def lower_priority() -> None:
+    """Run below the page's own work: a validation or a search yields the processor to dragging (POSIX nice 10)."""
+    if hasattr(os, "nice"):
+        os.nice(10)
+
+
 def validate(text: str, name: str) -> dict[str, Any]:
     """``vloop validate`` on the drawing in a child process (its own temporary folder): the verdict and each
     engine's status and worst comparison."""
@@ -117,9 +125,10 @@ def validate(text: str, name: str) -> dict[str, Any]:
         path.write_text(text, encoding="utf-8")
         out = Path(tmp) / "validation"
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+        args = ["validate", str(path), "--out", str(out), "--no-report"]
         proc = subprocess.run(
-            [sys.executable, "-m", "vloop.cli", "validate", str(path), "--out", str(out), "--no-report"],
-            capture_output=True, text=True, timeout=VALIDATE_TIMEOUT, env=env, cwd=tmp,
+            [sys.executable, "-c", CHILD, *args], capture_output=True, text=True, timeout=VALIDATE_TIMEOUT, env=env,
+            cwd=tmp,
         )  # fmt: skip
         summary = out / "summary.json"
         if not summary.is_file():
