@@ -181,6 +181,7 @@ def serve(target: str | Path | None, *, port: int = 0, browser: bool = True, ech
     sock = sockets.socket(sockets.AF_INET, sockets.SOCK_STREAM)
     sock.setsockopt(sockets.SOL_SOCKET, sockets.SO_REUSEADDR, 1)
     sock.bind(("127.0.0.1", port))
+    sock.listen(128)  # connections wait for the server from now on: the printed address answers at once
     port = sock.getsockname()[1]
     url = f"http://127.0.0.1:{port}/?token={token}"
     echo(f"vloop studio on {folder}\n  {url}\n(Ctrl-C stops it)", flush=True)
