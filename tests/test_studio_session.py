@@ -155,3 +155,24 @@ def test_malformed_messages_get_an_error_reply(tmp_path: Path) -> None:
                 {"op": "targets", "points": [[1, 2, 3, 4]]}, {"op": "validate"}):  # fmt: skip
         r = s.handle(msg)
         assert r["ok"] is False and isinstance(r["error"], str) and r["error"], msg
+
+
+def test_a_function_generator_taken_into_the_editor_meets_f(tmp_path: Path) -> None:
+    """y = log10(x), x in [1, 2], input 0.5 → 2.0 rad, output 4.0 → 5.5 rad: at the three Chebyshev points
+    x_k = 1.5 − 0.5·cos((2k − 1)π/6) the taken linkage, driven from θ₂ = 0.5 rad at 1 rad/s, has its rocker at
+    θ_out(x_k) = 4.0 + 1.5·log10(x_k)/log10(2) (Freudenstein's θ₄; vloop's rocker θ runs O4→B, π from it)."""
+    s = Session(tmp_path)
+    msg = {"op": "synthesize", "kind": "function", "expr": "log10(x)", "x_range": [1, 2], "input_range": [0.5, 2.0],
+           "output_range": [4.0, 5.5], "count": 1}  # fmt: skip
+    r = ok(s.finish(msg, s.job(msg)()))
+    assert len(r["candidates"]) == 1
+    ok(s.handle({"op": "take", "index": 0}))
+    mech = s.frame.mech
+    xk = 1.5 - 0.5 * np.cos((2 * np.arange(1, 4) - 1) * np.pi / 6)
+    t_in, t_out = 0.5 + 1.5 * (xk - 1), 4.0 + 1.5 * np.log10(xk) / np.log10(2)
+    drv = mech.drivers[0]
+    res = vloop.solve(mech, (t_in - drv.x0) / drv.v0)
+    gap = np.mod(res.link("rocker").theta - t_out, 2 * np.pi) - np.pi
+    assert np.abs(gap).max() <= 1e-9, gap
+    with pytest.raises(vloop.VloopError, match=r"synthesize\.expr"):
+        s.job({**msg, "expr": "__import__('os')"})

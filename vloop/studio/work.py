@@ -47,41 +47,66 @@ def finish(s: Session, msg: dict, answer: Any) -> dict[str, Any]:
 
 
 def _synthesis_job(s: Session, msg: dict) -> Callable[[], Any]:
+    """``kind``: "path" (``points`` [[x, y], ...], 3 to 8), "motion" (``points`` [[x, y, angle], ...], 2 to 5 poses)
+    or "function" (``expr`` f(x), ``x_range``, ``input_range`` and ``output_range`` [rad])."""
     kind = msg.get("kind", "path")
-    points = msg.get("points", s.targets)
-    if kind not in ("path", "motion") or not isinstance(points, list) or not 2 <= len(points) <= MAX_TARGETS:
-        raise MessageError(f"synthesize: kind 'path' or 'motion' and 2 to {MAX_TARGETS} target points")
-    width = 3 if kind == "motion" else 2
-    pts = [[docs.number(v, "target") for v in p] for p in points if isinstance(p, list) and len(p) == width]
-    if len(pts) != len(points):
-        raise MessageError(f"synthesize: each target is {'[x, y, angle]' if width == 3 else '[x, y]'}")
-    if kind == "path" and len(pts) < 3:
-        raise MessageError("synthesize: a path takes 3 or more points")
     count = msg.get("count", 3)
     if not isinstance(count, int) or isinstance(count, bool) or not 1 <= count <= 8:
         raise MessageError("synthesize: count from 1 to 8")
+    units, seed = s.doc.get("units", "m"), int(msg.get("seed", 0)) % 2**31
+    if kind == "function":
+        expr = msg.get("expr")
+        if not isinstance(expr, str) or not 0 < len(expr) <= 200:
+            raise MessageError("synthesize: a function f(x) as text, e.g. log10(x)")
+        from vloop.synthesis.expression import parse
+
+        parse(expr, entry="synthesize.expr")  # refused here, in one line, before any worker starts (never executed)
+        ranges = [_pair(msg.get(k), k) for k in ("x_range", "input_range", "output_range")]
+        return functools.partial(synthesize, "function", [expr, *ranges], count, seed, units)
+    if kind not in ("path", "motion"):
+        raise MessageError("synthesize: kind 'path', 'motion' or 'function'")
+    points, width = msg.get("points", s.targets), 3 if kind == "motion" else 2
+    if not isinstance(points, list) or not (3 if kind == "path" else 2) <= len(points) <= MAX_TARGETS:
+        raise MessageError(f"synthesize: {'3' if kind == 'path' else '2'} to {MAX_TARGETS} targets")
+    pts = [[docs.number(v, "target") for v in p] for p in points if isinstance(p, list) and len(p) == width]
+    if len(pts) != len(points):
+        raise MessageError(f"synthesize: each target is {'[x, y, angle]' if width == 3 else '[x, y]'}")
     s.targets = pts
-    return functools.partial(synthesize, kind, pts, count, int(msg.get("seed", 0)) % 2**31, s.doc.get("units", "m"))
+    return functools.partial(synthesize, kind, pts, count, seed, units)
+
+
+def _pair(value: Any, what: str) -> list[float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise MessageError(f"synthesize: {what} is [from, to]")
+    a, b = (docs.number(v, what) for v in value)
+    if a == b:
+        raise MessageError(f"synthesize: {what} must not be empty")
+    return [a, b]
 
 
 def synthesize(kind: str, points: list, count: int, seed: int, units: str) -> dict[str, Any]:
-    """Candidates through ``points`` (path) or ``poses`` (motion): each as a mechanism file's structure, its
-    error [fraction of the targets' size], defects and its tracer's path over the displayed turn."""
+    """Candidates through ``points`` (path), ``poses`` (motion), or generating f (function: ``points`` is [expr,
+    x_range, input_range, output_range]): each as a mechanism file's structure, its error [fraction of the
+    targets' size], defects and its tracer's path over the displayed turn."""
     import vloop.synthesis as syn
     from vloop.mechanism import to_dict
 
     if kind == "path":
         found = syn.path(points, linkage="fourbar", count=count, seed=seed, units=units, name="candidate")
-    else:
+    elif kind == "motion":
         found = syn.motion(points, count=count, units=units, name="candidate")
+    else:
+        expr, x_range, input_range, output_range = points
+        found = syn.function(expr, x_range=tuple(x_range), input_range=tuple(input_range),
+                             output_range=tuple(output_range), units=units, name="candidate")  # fmt: skip
     out = []
-    for c in found:
+    for c in list(found)[:count]:
         out.append({
             "name": c.name, "topology": c.topology, "error": float(c.error), "solution": bool(c.solution),
             "grashof": c.grashof, "defects": list(c.defects), "min_transmission": _num(c.min_transmission),
             "tracer": c.tracer, "path": _path(c),
         })  # fmt: skip
-    return {"candidates": out, "mechanisms": [to_dict(c.mechanism) for c in found]}
+    return {"candidates": out, "mechanisms": [to_dict(c.mechanism) for c in list(found)[:count]]}
 
 
 def _num(x: Any) -> float | None:

@@ -351,9 +351,17 @@
       else send("save", { path: f.path.value }).then((r) => r.ok && status(`saved ${r.path}`));
     });
     form("f-catalog", (f, by) => { ST.keepView = false; ST.box = null; ST.candidates = []; send(by && by.value === "new" ? "new" : "open", by && by.value === "new" ? { units: $("f-meta").elements.units.value } : { catalog: f.catalog.value }); });
+    $("f-synth").elements.kind.addEventListener("change", (e) => { $("f-synth").dataset.kind = e.target.value; });
     form("f-synth", (f, by) => {
       if (by && by.value === "clear") { ST.candidates = []; $("s-candidates").replaceChildren(); send("targets", { points: [] }); return; }
-      send("synthesize", { kind: "path", points: ST.state.targets, count: num(f.count) || 3 });
+      const kind = f.kind.value, count = num(f.count) || 3, rad = (el) => num(el) * Math.PI / 180;
+      if (kind === "function") {
+        send("synthesize", { kind, count, expr: f.expr.value, x_range: [num(f.x0), num(f.x1)],
+          input_range: [rad(f.i0), rad(f.i1)], output_range: [rad(f.o0), rad(f.o1)] });
+      } else if (kind === "motion") {
+        const angles = f.angles.value.split(",").map((a) => Number(a) * Math.PI / 180);
+        send("synthesize", { kind, count, points: (ST.state.targets || []).map((p, k) => [p[0], p[1], angles[k]]) });
+      } else send("synthesize", { kind, count, points: ST.state.targets });
     });
     $("s-view").addEventListener("click", (e) => {
       e.preventDefault();
