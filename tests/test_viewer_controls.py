@@ -30,6 +30,17 @@ def textbook_page(tmp_path_factory) -> tuple[Path, vloop.Mechanism, vloop.Result
     return write_view(mech, res, tmp_path_factory.mktemp("controls") / "textbook.html"), mech, res
 
 
+@pytest.fixture(scope="module")
+def light_page(browser, textbook_page):  # noqa: F811
+    """One light page for the checks that only read it (a page per test costs a second each)."""
+    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = ctx.new_page()
+    page.goto(textbook_page[0].resolve().as_uri())
+    page.wait_for_selector("body[data-ready]", state="attached", timeout=20_000)
+    yield page
+    ctx.close()
+
+
 def _rgb(text: str) -> tuple[float, ...]:
     return tuple(float(v) for v in re.findall(r"[\d.]+", text)[:3])
 
@@ -78,12 +89,12 @@ def test_the_controls_fit_in_a_notebook_frame(browser, textbook_page, tmp_path: 
     ctx.close()
 
 
-def test_a_cranks_angle_is_plotted_wrapped(open_page, textbook_page) -> None:  # noqa: F811
+def test_a_cranks_angle_is_plotted_wrapped(light_page, textbook_page) -> None:
     """The crank's θ runs 0.70 → 15.1 rad; drawn wrapped, every θ curve spans the plot's height, and the tooltip
     still reads the unwrapped value."""
-    path, _, res = textbook_page
+    _, _, res = textbook_page
     assert res["l2.theta"].max() - res["l2.theta"].min() > 2 * math.pi
-    page = open_page(path).page
+    page = light_page
     plot = page.locator('[data-plot="Links:theta"]')
     assert "wrapped" in plot.locator("text.ylabel").text_content()
     labels = [float(t) for t in plot.locator("text.tick").all_text_contents() if re.fullmatch(r"-?[\d.]+", t)]
@@ -93,11 +104,11 @@ def test_a_cranks_angle_is_plotted_wrapped(open_page, textbook_page) -> None:  #
     assert d.count("M") >= 3  # one piece per turn: the seam is not drawn across the plot
 
 
-def test_default_speed_follows_the_fastest_link(open_page, textbook_page) -> None:  # noqa: F811
+def test_default_speed_follows_the_fastest_link(light_page, textbook_page) -> None:
     """At most half a turn per second by default: the crank speeds up from 25 to 32.5 rad/s (5.17 turns/s at 1×), so
     0.05× (0.26 turns/s; 0.1× would be 0.52)."""
-    path, _, res = textbook_page
-    page = open_page(path).page
+    _, _, res = textbook_page
+    page = light_page
     speed = page.evaluate("vloopViewer.speed")
     turns = max(abs(res[f"{n}.omega"]).max() for n in ("l2", "l3", "l4")) / (2 * math.pi)
     assert turns == pytest.approx(32.5 / (2 * math.pi), rel=1e-9)
