@@ -29,7 +29,8 @@ def empty(units: str = "mm", name: str = "drawing") -> dict[str, Any]:
             "time": dict(DEFAULT_TIME)}  # fmt: skip
 
 
-EDITED = ("joints", "links", "drivers", "time")  # the sections edits change; the rest is shared between versions
+# the sections edits change; the rest is shared between versions
+EDITED = ("joints", "links", "sliders", "drivers", "time")
 
 
 def edited(doc: dict) -> dict:
@@ -102,6 +103,37 @@ def add_link(doc: dict, joints: Any, *, name: Any = None) -> tuple[dict, str]:
     return out, name
 
 
+def add_slider(doc: dict, joint: Any, angle: Any = 0.0, *, name: Any = None) -> tuple[dict, str]:
+    """A slider block at ``joint`` on a ground guide through it, its axis at ``angle`` [rad] from +x."""
+    out = edited(doc)
+    if joint not in out["joints"]:
+        raise EditError(f"slider: no joint {str(joint)[:40]!r}")
+    if joint in out["links"][ground_name(out)]["joints"]:
+        raise EditError(f"slider: {joint} is a ground pivot; a slider carries a moving joint")
+    if any(sl["joint"] == joint for sl in out.get("sliders", {}).values()):
+        raise EditError(f"slider: {joint} already slides")
+    taken = set(out["joints"]) | set(out["links"]) | set(out.get("sliders", {}))
+    name = name_of(name, "slider name") if name is not None else fresh(taken, "l", 2)
+    if name in taken:
+        raise EditError(f"slider {name}: the name is taken")
+    a = number(angle, "slider angle")
+    axis = [math.cos(a), math.sin(a)]
+    out.setdefault("sliders", {})[name] = {"joint": joint, "guide": ground_name(out), "axis": axis}
+    restate_slider(out, name)
+    return out, name
+
+
+def restate_slider(doc: dict, name: str) -> None:
+    """A ground slider's ``offset`` (its line's signed distance from the origin, left of the axis positive) from its
+    joint's coordinates, in place."""
+    sl = doc["sliders"][name]
+    if sl["guide"] != ground_name(doc) or "axis" not in sl:
+        return
+    (ux, uy), (x, y) = sl["axis"], doc["joints"][sl["joint"]]
+    n = math.hypot(ux, uy)
+    sl["offset"] = (ux * y - uy * x) / n
+
+
 def restate(doc: dict, link: str) -> None:
     """A moving link's length (binary) or sides and angle (plate) from the coordinates, in place."""
     lk = doc["links"][link]
@@ -126,6 +158,9 @@ def move_joint(doc: dict, joint: str, x: float, y: float) -> dict:
     for name, lk in out["links"].items():
         if joint in lk["joints"]:
             restate(out, name)
+    for name, sl in out.get("sliders", {}).items():
+        if sl["joint"] == joint:
+            restate_slider(out, name)
     for d in out["drivers"]:
         d["theta0"] = driver_angle(out, d)
     return out
@@ -201,12 +236,17 @@ def delete(doc: dict, name: Any) -> dict:
         del out["joints"][name]
         gone = [n for n, lk in out["links"].items() if name in lk["joints"] and not lk.get("ground")]
         out["links"][ground_name(out)]["joints"] = [j for j in out["links"][ground_name(out)]["joints"] if j != name]
+    elif name in out.get("sliders", {}):
+        del out["sliders"][name]
+        gone = []
     elif name in out["links"] and not out["links"][name].get("ground"):
         gone = [name]
     else:
         raise EditError(f"delete: no joint or moving link {str(name)[:40]!r}")
     for n in gone:
         del out["links"][n]
+    for n in [n for n, sl in out.get("sliders", {}).items() if sl["joint"] not in out["joints"]]:
+        del out["sliders"][n]
     out["drivers"] = [d for d in out["drivers"] if d["link"] in out["links"] and d["pivot"] in out["joints"]]
     return out
 
@@ -221,6 +261,9 @@ def file_dict(doc: dict, *, drawn: bool = False) -> dict:
         for lk in out["links"].values():
             for key in ("length", "sides", "angle"):
                 lk.pop(key, None)
+        for sl in out.get("sliders", {}).values():
+            if "axis" in sl:
+                sl.pop("offset", None)
         for d in out.get("drivers", []):
             if "link" in d and "pivot" in d:
                 d.pop("theta0", None)

@@ -229,6 +229,11 @@ def _add_link(s: Session, msg: dict) -> dict:
     return {**s._edit(doc), "name": name}
 
 
+def _add_slider(s: Session, msg: dict) -> dict:
+    doc, name = docs.add_slider(s.doc, msg.get("joint"), msg.get("angle", 0.0), name=msg.get("name"))
+    return {**s._edit(doc), "name": name}
+
+
 def _set_driver(s: Session, msg: dict) -> dict:
     return s._edit(docs.set_driver(s.doc, msg.get("link"), msg.get("omega", 2 * math.pi), msg.get("alpha", 0.0),
                                    msg.get("theta0")))  # fmt: skip
@@ -360,6 +365,7 @@ def _worker_only(s: Session, msg: dict) -> dict:
 
 OPS: dict[str, Callable[[Session, dict], dict]] = {
     "state": _state, "new": _new, "open": _open, "files": _files, "add_joint": _add_joint, "add_link": _add_link,
+    "add_slider": _add_slider,
     "set_driver": _set_driver, "set_length": _set_length, "set_joint": _set_joint, "set_time": _set_time,
     "set_meta": _set_meta, "delete": _delete, "lock": _lock, "undo": _undo, "redo": _redo, "drag": _drag,
     "save": _save, "export": _export, "page": _page, "targets": _targets, "take": _take_candidate,

@@ -165,6 +165,7 @@
 
   function handleDown(ev, name) {
     if (ST.tool === "link" || ST.tool === "plate") { ev.stopPropagation(); return pick(name); }
+    if (ST.tool === "slider") { ev.stopPropagation(); return send("add_slider", { joint: name, angle: Number($("s-axis").value || 0) * Math.PI / 180 }); }
     if (ST.tool === "lock") { ev.stopPropagation(); return send("lock", { kind: "joints", name, on: !ST.state.locks.joints.includes(name) }); }
     if (ST.tool === "delete") { ev.stopPropagation(); return send("delete", { name }); }
     if (ST.tool !== "drag") return;
