@@ -215,3 +215,15 @@ def test_a_candidate_from_clicked_points_passes_through_them(studio) -> None:
         assert near <= 0.01 * size + chord, (x, y, near, chord)
     assert page.locator("path[data-target]").count() == len(TARGETS)
     page.screenshot(path=str(folder / "taken.png"))
+
+
+@pytest.mark.slow  # a validation: ~6 s of engines in a child process
+def test_check_shows_the_validation_verdict(studio) -> None:
+    page, _ = studio
+    page.select_option("#f-catalog [name=catalog]", "fourbar_textbook_example")
+    act(page, lambda: page.click("#f-catalog button:not([name])"))
+    page.click("#s-validate")
+    page.locator("#s-verdict [data-verdict]").wait_for(state="visible", timeout=300_000)
+    assert page.locator("#s-verdict [data-verdict]").get_attribute("data-verdict") == "pass"
+    engines = set(page.locator("#s-verdict [data-engine]").evaluate_all("es => es.map((e) => e.dataset.engine)"))
+    assert {"pinocchio", "exudyn-kinematic", "analytic"} <= engines

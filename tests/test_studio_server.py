@@ -139,3 +139,11 @@ def test_malformed_frames(served) -> None:
             assert json.loads(ws.receive_text())["ok"] is False
         ws.send_text('{"op": "state"}')
         assert json.loads(ws.receive_text())["ok"]
+
+
+def test_the_viewer_page_is_the_runs_page(served) -> None:
+    """/view: the run as `vloop view` writes it (every sample of the file's grid), behind the same token."""
+    client, _, _ = served
+    assert client.get("/view", headers=HOST).status_code == 403
+    page = client.get(f"/view?token={TOKEN}", headers=HOST)
+    assert page.status_code == 200 and 'id="vloop-data"' in page.text and '"samples":201' in page.text

@@ -199,3 +199,15 @@ def test_a_slider_crank_drawn_by_messages_runs_as_the_catalog_file(tmp_path: Pat
     ok(s.handle({"op": "save", "path": "slider.toml"}))
     assert_same_run(vloop.solve(vloop.load(tmp_path / "slider.toml")),
                     vloop.solve(vloop.load(MECHANISMS / "slider_crank_offset.toml")))  # fmt: skip
+
+
+def test_exports_are_the_export_commands_files(tmp_path: Path) -> None:
+    """SVG and PDF of the drawing at the displayed sample, DXF parts (with ezdxf): each file a real one of its kind."""
+    s = Session(tmp_path)
+    ok(s.handle({"op": "open", "catalog": "fourbar_textbook_example"}))
+    ok(s.handle({"op": "export", "format": "pdf", "path": "m.pdf", "sample": 100}))
+    assert (tmp_path / "m.pdf").read_bytes().startswith(b"%PDF")
+    assert not s.handle({"op": "export", "format": "pdf", "path": "m.pdf", "sample": 360})["ok"]
+    pytest.importorskip("ezdxf", reason="the export extra is not installed")
+    ok(s.handle({"op": "export", "format": "dxf", "path": "m.dxf"}))
+    assert "SECTION" in (tmp_path / "m.dxf").read_text()
