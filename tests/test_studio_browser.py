@@ -158,6 +158,10 @@ def test_draw_drag_the_crank_save_and_run_as_the_textbook(studio) -> None:
     ax, ay = (float(page.locator('circle[data-joint="J1"]').get_attribute(a)) for a in ("cx", "cy"))
     assert math.hypot(ax - 40 * math.cos(th), -ay - 40 * math.sin(th)) < 1e-9 * 40
     page.screenshot(path=str(folder / "crank.png"))
+    tool(page, "lock")
+    act(page, lambda: page.click('g[data-body="l4"]'))
+    assert page.evaluate("vloopStudio.state.locks.links") == ["l4"]
+    assert page.locator('g[data-body="l4"][data-locked]').count() == 1
     page.fill("#f-file [name=path]", "drawn.toml")
     page.click("#f-file button[name=save]")
     page.wait_for_function("() => document.body.dataset.studioStatus.startsWith('saved')")

@@ -142,6 +142,7 @@
       c.addEventListener("pointerdown", (ev) => handleDown(ev, name));
     }
     drawCandidatePaths(g);
+    for (const b of v.querySelectorAll("g[data-body]")) b.toggleAttribute("data-locked", ST.state.locks.links.includes(b.dataset.body));
   }
 
   function drawCandidatePaths(g) {
@@ -219,6 +220,13 @@
 
   function click(ev) {
     if (ST.dragging || ev.target.closest(".s-handle")) return;
+    // the viewer captures the pointer for panning, so the click's target is the drawing: ask what is under it
+    const hit = document.elementFromPoint(ev.clientX, ev.clientY);
+    const body = hit && hit.closest("[data-body]");
+    if (ST.tool === "lock" && body) {
+      const name = body.dataset.body;
+      return send("lock", { kind: "links", name, on: !ST.state.locks.links.includes(name) });
+    }
     const [x, y] = world(ev);
     if (ST.tool === "pivot" || ST.tool === "joint") send("add_joint", { x, y, ground: ST.tool === "pivot" });
     else if (ST.tool === "target") {
