@@ -134,10 +134,14 @@ def run(name: str, args: argparse.Namespace, browser) -> None:
           f"p95 {p95:6.1f} ms, p95/median {p95 / med:.2f} ({'ok' if p95 <= 2 * med else 'OVER'} ≤ 2)")  # fmt: skip
     print(f"  baseline    Session.handle median {bmed:6.1f} ms (same process): round trip / baseline {med / bmed:.2f}")
     replies = page.evaluate("vloopStudio.stats.replies.slice()")[-args.drags :]
+    server = page.evaluate("vloopStudio.stats.server.slice()")[-args.drags :]
+    later = page.evaluate("vloopStudio.stats.later.slice()")[-args.drags :]
     loads = np.array(page.evaluate("vloopStudio.stats.loads.slice()")[-args.drags :])
     print(
-        f"  where       reply in {statistics.median(replies):.1f} ms (socket + session); page's redraw median "
-        f"[decode, scene, plots, numbers, draw] = {np.round(np.median(loads, axis=0), 1).tolist()} ms"
+        f"  where       reply in {statistics.median(replies):.1f} ms (session {statistics.median(server):.1f} ms "
+        "in the server, the rest socket and JSON); page's redraw median "
+        f"[decode, scene, plots, numbers, draw] = {np.round(np.median(loads, axis=0), 1).tolist()} ms, then plots "
+        f"and numbers after the frame {statistics.median(later):.1f} ms"
     )
     if args.validate:
         worst, frames, verdict = during_validation(page, joint, centre, radius)

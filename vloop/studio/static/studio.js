@@ -7,7 +7,7 @@
   const $ = (id) => document.getElementById(id);
   const VW = () => window.vloopViewer;
   const ST = { tool: "drag", state: null, picked: [], pending: new Map(), next: 1, dragging: null, inflight: false,
-    queued: null, gesture: 0, stats: { drags: [], frames: [], replies: [], loads: [] }, candidates: [] };
+    queued: null, gesture: 0, stats: { drags: [], frames: [], replies: [], server: [], loads: [], later: [] }, candidates: [] };
 
   // ------------------------------------------------------------------ transport
 
@@ -31,7 +31,7 @@
     });
   }
   function receive(reply) {
-    if (reply.op === "drag" && ST.sentAt) ST.stats.replies.push(performance.now() - ST.sentAt);
+    if (reply.op === "drag" && ST.sentAt) { ST.stats.replies.push(performance.now() - ST.sentAt); ST.stats.server.push(reply.ms); }
     const done = ST.pending.get(reply.id);
     if (reply.started) { status(`${reply.op}: running…`); return; }
     if (done) ST.pending.delete(reply.id);
@@ -182,7 +182,7 @@
     const d = ST.dragging;
     if (!d) return;
     ev.stopPropagation();
-    const t0 = performance.now();
+    const t0 = ev.timeStamp; // when the pointer moved (performance.now()'s clock): waiting for the page counts too
     const [x, y] = world(ev);
     if (d.crank) return turnCrank(d.crank, x, y, t0);
     ST.queued = { joint: d.name, x, y, gesture: d.gesture, t0 };
@@ -211,7 +211,7 @@
     ST.inflight = true;
     ST.sentAt = performance.now();
     await send("drag", { joint: q.joint, x: q.x, y: q.y, gesture: q.gesture });
-    requestAnimationFrame(() => { ST.stats.drags.push(performance.now() - q.t0); });
+    requestAnimationFrame(() => { ST.stats.drags.push(performance.now() - q.t0); ST.stats.later.push(VW().stats.later || 0); });
     ST.inflight = false;
     pump();
   }

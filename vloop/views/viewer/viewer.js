@@ -1078,8 +1078,7 @@
     for (const p of plots) {
       for (const sr of p.spec.series) { sr.values = C[sr.col]; if (sr.plot) sr.plot = wrapped(sr.values); sr.scale = scaleOf(sr.col); }
     }
-    const width = $("plots").clientWidth;
-    plots.forEach((p) => p.render(width));
+    later();
     ms.push(performance.now());
     for (const c of cells) c.values = C[c.col];
     $("error").hidden = true;
@@ -1089,9 +1088,25 @@
     const start = Math.max(0, Math.min(N - 1, opts.index !== undefined ? opts.index : D.error ? N - 1 : 0));
     S.i = start;
     if (opts.keepView && V.box) setBox(V.box); else fit();
-    setIndex(start);
+    setIndex(start, true);
     ms.push(performance.now());
     S.stats.load = ms.slice(1).map((t, k) => t - ms[k]);
+  }
+
+  // While new data streams in (a drag), the drawing is redrawn at once and the plots and numbers just after the
+  // frame is shown, at most once per frame: the mechanism under the pointer never waits for the plots.
+  let pendingPlots = false;
+  function later() {
+    if (pendingPlots) return;
+    pendingPlots = true;
+    requestAnimationFrame(() => setTimeout(() => {
+      pendingPlots = false;
+      const t0 = performance.now();
+      const width = $("plots").clientWidth;
+      plots.forEach((p) => { p.render(width); p.setCursor(S.i); });
+      updateNumbers(S.i);
+      S.stats.later = performance.now() - t0;
+    }, 0));
   }
 
   // Draw ``data`` (the page's payload). ``opts.keepView``: keep the zoom and pan (a drag redraws under the pointer);
