@@ -144,6 +144,9 @@ def test_malformed_frames(served) -> None:
 def test_the_viewer_page_is_the_runs_page(served) -> None:
     """/view: the run as `vloop view` writes it (every sample of the file's grid), behind the same token."""
     client, _, _ = served
+    with client.websocket_connect(f"/ws?token={TOKEN}", headers=HOST) as ws:  # the random messages may have left any
+        ws.send_text(json.dumps({"op": "open", "catalog": "fourbar_textbook_example"}))
+        assert json.loads(ws.receive_text())["ok"]
     assert client.get("/view", headers=HOST).status_code == 403
     page = client.get(f"/view?token={TOKEN}", headers=HOST)
     assert page.status_code == 200 and 'id="vloop-data"' in page.text and '"samples":201' in page.text

@@ -118,7 +118,11 @@ async def _answer(ws: Any, text: str, session: Session, lock: asyncio.Lock, pool
         started = time.perf_counter()
         reply = session.handle(msg)
         reply["ms"] = 1e3 * (time.perf_counter() - started)  # the session's time, for the page's own timing
-    await ws.send_text(json.dumps(reply, allow_nan=False, default=str))
+    try:
+        text = json.dumps(reply, allow_nan=False, default=str)
+    except ValueError:  # a number that JSON cannot carry: said, never sent as NaN
+        text = json.dumps({"id": reply.get("id"), "op": reply.get("op"), "ok": False, "error": "a non-finite number"})
+    await ws.send_text(text)
 
 
 async def _slow(ws: Any, msg: dict, session: Session, lock: asyncio.Lock, pools: dict) -> None:

@@ -88,6 +88,9 @@ class Session:
             return {"id": ident, "op": op, "ok": False, "error": str(exc).splitlines()[0][:500]}
         except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
             return {"id": ident, "op": op, "ok": False, "error": f"malformed {op} message ({type(exc).__name__})"}
+        except Exception as exc:  # a fault of vloop's, not the message's: said as such, the session goes on
+            what = f"{type(exc).__name__}: {str(exc).splitlines()[0][:300] if str(exc) else ''}"
+            return {"id": ident, "op": op, "ok": False, "error": f"internal error in {op} ({what}): please report it"}
         return {"id": ident, "op": op, "ok": True, **reply}
 
     def state(self, **extra: Any) -> dict[str, Any]:
