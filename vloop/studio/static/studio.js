@@ -268,6 +268,12 @@
       if (drv.theta0 !== undefined) f.theta0.value = String(drv.theta0 * 180 / Math.PI);
       f.omega.value = String(drv.omega); f.alpha.value = String(drv.alpha || 0);
     }
+    const tf = $("f-time").elements, tm = doc.time || {};
+    if (document.activeElement.form !== $("f-time")) {
+      const ts = tm.times;
+      const [t0, t1, dt] = ts ? [ts[0], ts[ts.length - 1], ts.length > 1 ? ts[1] - ts[0] : 0] : [tm.start || 0, tm.stop, tm.step];
+      tf.start.value = String(t0); if (t1 !== undefined) tf.stop.value = String(t1); if (dt) tf.step.value = String(dt);
+    }
     const m = $("f-meta").elements;
     if (document.activeElement.form !== $("f-meta")) { m.name.value = doc.name || ""; m.units.value = doc.units || "m"; }
   }
@@ -347,6 +353,16 @@
     });
     const form = (id, fn) => $(id).addEventListener("submit", (e) => { e.preventDefault(); fn(e.target.elements, e.submitter); });
     const num = (el) => (el.value.trim() === "" ? null : Number(el.value));
+    const showJoint = () => {
+      const f = $("f-joint").elements, p = ST.state && ST.state.doc.joints[f.name.value];
+      if (p) { f.x.value = String(p[0]); f.y.value = String(p[1]); }
+    };
+    $("f-joint").elements.name.addEventListener("change", showJoint);
+    const showLength = () => {
+      const f = $("f-length").elements, lk = ST.state && ST.state.doc.links[f.link.value];
+      if (lk && lk.length !== undefined) f.namedItem("length").value = String(lk.length);
+    };
+    $("f-length").elements.link.addEventListener("change", showLength);
     form("f-joint", (f) => send("set_joint", { joint: f.name.value, x: num(f.x), y: num(f.y) }));
     form("f-length", (f) => send("set_length", { link: f.link.value, length: num(f.namedItem("length")) })); // f.length: the count
     form("f-driver", (f) => send("set_driver", { link: f.link.value, omega: num(f.omega), alpha: num(f.alpha) || 0,
