@@ -25,6 +25,9 @@ from .session import SLOW, Session
 from .work import lower_priority
 
 MAX_MESSAGE = 1 << 20  # bytes of one WebSocket message
+# no per-message deflate: a frame's columns are float64 in base64 (deflate takes longer than sending them on the
+# loopback interface, and a drag's reply is replaced a moment later)
+UVICORN = {"log_level": "warning", "ws_max_size": MAX_MESSAGE, "ws_per_message_deflate": False}
 
 
 def _allowed_hosts(port: int) -> set[str]:
@@ -192,7 +195,7 @@ def serve(target: str | Path | None, *, port: int = 0, browser: bool = True, ech
     port = sock.getsockname()[1]
     url = f"http://127.0.0.1:{port}/?token={token}"
     echo(f"vloop studio on {folder}\n  {url}\n(Ctrl-C stops it)", flush=True)
-    config = uvicorn.Config(app(session, token, port), log_level="warning", ws_max_size=MAX_MESSAGE, lifespan="on")
+    config = uvicorn.Config(app(session, token, port), lifespan="on", **UVICORN)
     server = uvicorn.Server(config)
     if browser:
         import threading
@@ -218,7 +221,7 @@ class Background:
         self.sock.bind(("127.0.0.1", port))
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}/?token={self.token}"
-        config = uvicorn.Config(app(session, self.token, self.port), log_level="warning", ws_max_size=MAX_MESSAGE)
+        config = uvicorn.Config(app(session, self.token, self.port), **UVICORN)
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
         self.thread.start()
