@@ -29,8 +29,8 @@ def empty(units: str = "mm", name: str = "drawing") -> dict[str, Any]:
             "time": dict(DEFAULT_TIME)}  # fmt: skip
 
 
-# the sections edits change; the rest is shared between versions
-EDITED = ("joints", "links", "sliders", "drivers", "time")
+# the sections edits change in place; the rest is shared between versions ([time] is only ever replaced whole)
+EDITED = ("joints", "links", "sliders", "drivers")
 
 
 def edited(doc: dict) -> dict:
