@@ -18,7 +18,7 @@ from . import document as docs
 from .session import MessageError, Session
 
 # the child lowers its own priority first (no preexec_fn: this runs in a thread), then is `vloop validate`
-CHILD = "import os, sys; hasattr(os, 'nice') and os.nice(10); from vloop.cli import main; sys.exit(main(sys.argv[1:]))"
+CHILD = "import os, sys; hasattr(os, 'nice') and os.nice(19); from vloop.cli import main; sys.exit(main(sys.argv[1:]))"
 VALIDATE_TIMEOUT = 600.0  # s: the engines' budgets end well before (a four-bar takes ~5 s)
 MAX_TARGETS = 8
 
@@ -137,9 +137,9 @@ def _path(c: Any) -> list[list[float]]:
 
 
 def lower_priority() -> None:
-    """Run below the page's own work: a validation or a search yields the processor to dragging (POSIX nice 10)."""
+    """Run below the page's own work: a validation or a search yields the processor to dragging (nice 19)."""
     if hasattr(os, "nice"):
-        os.nice(10)
+        os.nice(19)
 
 
 def validate(text: str, name: str) -> dict[str, Any]:
