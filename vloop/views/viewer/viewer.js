@@ -807,6 +807,10 @@
   }
 
   function watchSizes() {
+    let scrolled = false;
+    const onScroll = () => { if (!scrolled) { scrolled = true; requestAnimationFrame(() => { scrolled = false; catchUp(); }); } };
+    addEventListener("scroll", onScroll, { passive: true });
+    $("plots").addEventListener("scroll", onScroll, { passive: true });
     // rebuild the plots only when their column changes width; the drawing when its box changes size
     let pending = false, plotWidth = $("plots").clientWidth;
     const observer = new ResizeObserver(() => {
@@ -1095,18 +1099,25 @@
 
   // While new data streams in (a drag), the drawing is redrawn at once and the plots and numbers just after the
   // frame is shown, at most once per frame: the mechanism under the pointer never waits for the plots.
+  // What is scrolled out of view is brought up to date when it comes back into view.
   let pendingPlots = false;
+  const onScreen = (el) => { const r = el.getBoundingClientRect(); return r.bottom > 0 && r.top < innerHeight && r.height > 0; };
   function later() {
     if (pendingPlots) return;
     pendingPlots = true;
     requestAnimationFrame(() => setTimeout(() => {
       pendingPlots = false;
       const t0 = performance.now();
-      const width = $("plots").clientWidth;
-      plots.forEach((p) => { p.render(width); p.setCursor(S.i); });
-      updateNumbers(S.i);
+      for (const p of plots) p.stale = true;
+      S.numbersStale = true;
+      catchUp();
       S.stats.later = performance.now() - t0;
     }, 0));
+  }
+  function catchUp() {
+    const width = $("plots").clientWidth;
+    for (const p of plots) if (p.stale && onScreen(p.host)) { p.stale = false; p.render(width); p.setCursor(S.i); }
+    if (S.numbersStale && onScreen($("numbers"))) { S.numbersStale = false; updateNumbers(S.i); }
   }
 
   // Draw ``data`` (the page's payload). ``opts.keepView``: keep the zoom and pan (a drag redraws under the pointer);
