@@ -121,11 +121,20 @@ async def _answer(ws: Any, text: str, session: Session, lock: asyncio.Lock, pool
         started = time.perf_counter()
         reply = session.handle(msg)
         reply["ms"] = 1e3 * (time.perf_counter() - started)  # the session's time, for the page's own timing
+    await _send(ws, reply)
+
+
+async def _send(ws: Any, reply: dict) -> None:
+    """A reply as JSON; one that JSON cannot carry (a non-finite number) is said, never sent as NaN; a page that has
+    gone away is let go."""
     try:
         text = json.dumps(reply, allow_nan=False, default=str)
-    except ValueError:  # a number that JSON cannot carry: said, never sent as NaN
+    except ValueError:
         text = json.dumps({"id": reply.get("id"), "op": reply.get("op"), "ok": False, "error": "a non-finite number"})
-    await ws.send_text(text)
+    try:
+        await ws.send_text(text)
+    except (RuntimeError, OSError):  # the socket closed meanwhile (a reload, a closed tab)
+        return
 
 
 async def _slow(ws: Any, msg: dict, session: Session, lock: asyncio.Lock, pools: dict) -> None:
@@ -149,10 +158,7 @@ async def _slow(ws: Any, msg: dict, session: Session, lock: asyncio.Lock, pools:
         reply = {"id": msg.get("id"), "op": op, "ok": False, "error": f"{op} failed: {str(exc)[:400]}"}
     finally:
         pools["busy"].discard(op)
-    try:
-        await ws.send_text(json.dumps(reply, allow_nan=False, default=str))
-    except RuntimeError:
-        pass
+    await _send(ws, reply)
 
 
 def _pool(pools: dict, op: str) -> Any:
