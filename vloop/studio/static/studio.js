@@ -396,6 +396,7 @@
 
   async function start() {
     wire();
+    if (window.vloopStudioTransport) $("s-view").hidden = true; // a notebook has no server page to open
     const files = await send("files");
     if (files.ok) {
       options($("f-catalog").elements.catalog, files.catalog);
