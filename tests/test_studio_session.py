@@ -211,3 +211,31 @@ def test_exports_are_the_export_commands_files(tmp_path: Path) -> None:
     pytest.importorskip("ezdxf", reason="the export extra is not installed")
     ok(s.handle({"op": "export", "format": "dxf", "path": "m.dxf"}))
     assert "SECTION" in (tmp_path / "m.dxf").read_text()
+
+
+def test_a_watt_six_bar_with_a_plate_drawn_by_messages_runs_as_the_catalog_file(tmp_path: Path) -> None:
+    """mechanisms/sixbar_watt2.toml: the ternary rocker l4 typed as sides O4B = 4, O4C = 3 and the angle B–O4–C =
+    −130°, the other lengths typed, the pins clicked within 0.3 m of the catalog's drawing (which picks the branches);
+    the same run to 1e-12 of each column's peak."""
+    s = Session(tmp_path)
+    ok(s.handle({"op": "set_meta", "units": "m", "name": "sixbar_watt2"}))
+    for name, x, y in (("O2", 0, 0), ("O4", 5, 0), ("O6", 12, -4)):
+        ok(s.handle({"op": "add_joint", "x": x, "y": y, "ground": True, "name": name}))
+    for name, x, y in (("A", 1.9, 0.8), ("B", 7.1, 3.5), ("C", 5.6, -2.7), ("D", 9.5, -1.2)):
+        ok(s.handle({"op": "add_joint", "x": x, "y": y, "name": name}))
+    for joints in (["O2", "A"], ["A", "B"], ["O4", "B", "C"], ["C", "D"], ["O6", "D"]):
+        ok(s.handle({"op": "add_link", "joints": joints}))
+    assert list(s.doc["links"]) == ["ground", "l2", "l3", "l4", "l5", "l6"]
+    ok(s.handle({"op": "set_time", "start": 0, "stop": 4, "step": 0.02}))
+    ok(s.handle({"op": "set_driver", "link": "l2", "omega": 2, "alpha": 0.5, "theta0": math.radians(30)}))
+    ok(s.handle({"op": "set_sides", "link": "l4", "sides": [4, 3], "angle": math.radians(-130)}))
+    for link, length in (("l2", 2), ("l3", 6), ("l5", 4), ("l6", 4)):
+        ok(s.handle({"op": "set_length", "link": link, "length": length}))
+    from vloop.method.loops import branch_name  # the names `vloop info` prints for the catalog's file
+
+    system = vloop.compile(vloop.load(MECHANISMS / "sixbar_watt2.toml"))
+    names = [branch_name(system, system.q0, lp) for lp in system.loops]
+    assert s.frame.error is None and [lp["branch"] for lp in s.frame.info["loops"]] == names
+    ok(s.handle({"op": "save", "path": "watt.toml"}))
+    assert_same_run(vloop.solve(vloop.load(tmp_path / "watt.toml")),
+                    vloop.solve(vloop.load(MECHANISMS / "sixbar_watt2.toml")))  # fmt: skip

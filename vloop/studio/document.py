@@ -184,6 +184,21 @@ def set_length(doc: dict, link: Any, value: Any) -> dict:
     return out
 
 
+def set_sides(doc: dict, link: Any, sides: Any, angle: Any) -> dict:
+    """A plate's two sides from its first joint, |J0J1| and |J0J2|, and the angle J1–J0–J2 [rad, CCW]: its joints are
+    placed again by the t = 0 assembly."""
+    out = edited(doc)
+    lk = out["links"].get(link)
+    if lk is None or lk.get("ground") or len(lk["joints"]) != 3:
+        raise EditError(f"link {str(link)[:40]!r}: no plate (three joints) of that name")
+    if not isinstance(sides, list) or len(sides) != 2:
+        raise EditError(f"{link}.sides: two lengths, |J0J1| and |J0J2|")
+    lk["sides"] = [number(v, f"{link}.sides", positive=True) for v in sides]
+    lk["angle"] = number(angle, f"{link}.angle")
+    lk.pop("length", None)
+    return out
+
+
 def set_driver(doc: dict, link: Any, omega: Any, alpha: Any = 0.0, theta0: Any = None) -> dict:
     """The input: link ``link`` turned about its ground pivot, θ(t) = θ₀ + ω·t + α·t²/2 [rad, rad/s, rad/s²]."""
     out = edited(doc)

@@ -248,6 +248,12 @@ def _set_length(s: Session, msg: dict) -> dict:
     return s._edit(docs.set_length(s.doc, msg.get("link"), msg.get("length")))
 
 
+def _set_sides(s: Session, msg: dict) -> dict:
+    if msg.get("link") in s.locks["links"]:
+        raise MessageError(f"link {msg['link']} is locked: its sides stay")
+    return s._edit(docs.set_sides(s.doc, msg.get("link"), msg.get("sides"), msg.get("angle")))
+
+
 def _set_joint(s: Session, msg: dict) -> dict:
     """Typed coordinates of a joint (what a drag does, to the exact numbers)."""
     return _drag(s, {**msg, "gesture": object()})
@@ -368,8 +374,8 @@ def _worker_only(s: Session, msg: dict) -> dict:
 
 OPS: dict[str, Callable[[Session, dict], dict]] = {
     "state": _state, "new": _new, "open": _open, "files": _files, "add_joint": _add_joint, "add_link": _add_link,
-    "add_slider": _add_slider,
-    "set_driver": _set_driver, "set_length": _set_length, "set_joint": _set_joint, "set_time": _set_time,
+    "add_slider": _add_slider, "set_driver": _set_driver, "set_length": _set_length, "set_sides": _set_sides,
+    "set_joint": _set_joint, "set_time": _set_time,
     "set_meta": _set_meta, "delete": _delete, "lock": _lock, "undo": _undo, "redo": _redo, "drag": _drag,
     "save": _save, "export": _export, "page": _page, "targets": _targets, "take": _take_candidate,
     "synthesize": _worker_only, "validate": _worker_only,

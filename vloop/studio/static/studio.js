@@ -261,6 +261,8 @@
     options($("f-joint").elements.name, Object.keys(doc.joints), true);
     options($("f-length").elements.link, moving.filter(([, l]) => l.joints.length === 2).map(([n]) => n), true);
     options($("f-driver").elements.link, moving.map(([n]) => n), true);
+    options($("f-plate").elements.link, moving.filter(([, l]) => l.joints.length === 3).map(([n]) => n), true);
+    $("f-plate").hidden = !moving.some(([, l]) => l.joints.length === 3);
     const drv = (doc.drivers || [])[0];
     const f = $("f-driver").elements;
     if (drv && document.activeElement.form !== $("f-driver")) {
@@ -367,6 +369,7 @@
     form("f-length", (f) => send("set_length", { link: f.link.value, length: num(f.namedItem("length")) })); // f.length: the count
     form("f-driver", (f) => send("set_driver", { link: f.link.value, omega: num(f.omega), alpha: num(f.alpha) || 0,
       ...(num(f.theta0) === null ? {} : { theta0: num(f.theta0) * Math.PI / 180 }) }));
+    form("f-plate", (f) => send("set_sides", { link: f.link.value, sides: [num(f.a), num(f.b)], angle: num(f.angle) * Math.PI / 180 }));
     form("f-time", (f) => send("set_time", { start: num(f.start), stop: num(f.stop), step: num(f.step) }));
     form("f-meta", (f) => send("set_meta", { name: f.name.value, units: f.units.value }));
     form("f-file", (f, by) => {
