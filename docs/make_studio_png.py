@@ -50,9 +50,12 @@ def main() -> None:
         page.screenshot(path=str(ROOT / "docs" / "studio_drag.png"))
         page.mouse.move(*screen(page, 100, 0))
         page.mouse.down()
-        for x in (120, 150, 180):
+        for x in (120, 150, 180, 220, 260, 300):
             settled(page, lambda x=x: page.mouse.move(*screen(page, x, 0)))
         page.mouse.up()
+        page.locator("#s-limit").wait_for(state="visible")
+        page.click("#fit")
+        page.evaluate("window.scrollTo(0, 0)")
         page.screenshot(path=str(ROOT / "docs" / "studio_limit.png"))
         settled(page, lambda: page.click("#f-catalog button[name=new]"))
         page.click('.s-tool[data-tool="target"]')
