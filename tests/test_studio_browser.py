@@ -231,3 +231,18 @@ def test_check_shows_the_validation_verdict(studio) -> None:
     assert page.locator("#s-verdict [data-verdict]").get_attribute("data-verdict") == "pass"
     engines = set(page.locator("#s-verdict [data-engine]").evaluate_all("es => es.map((e) => e.dataset.engine)"))
     assert {"pinocchio", "exudyn-kinematic", "analytic"} <= engines
+
+
+@pytest.mark.slow  # a synthesis in a fresh worker process
+def test_a_function_generator_designed_in_the_page_is_taken_into_the_editor(studio) -> None:
+    """The design form's function task (y = log10(x), its default ranges): one candidate, taken, drawn and described
+    as a four-bar (mobility 1, one loop)."""
+    page, _ = studio
+    page.select_option("#f-synth [name=kind]", "function")
+    assert page.locator("#f-synth [name=expr]").is_visible() and page.locator("#f-synth [name=angles]").is_hidden()
+    page.fill("#f-synth [name=count]", "1")
+    page.click("#f-synth button:not([name])")
+    page.wait_for_selector(".cand [data-take]", timeout=120_000)
+    act(page, lambda: page.click('[data-take="0"]'))
+    assert page.locator("circle[data-handle]").count() == 4 and page.locator("g[data-body]").count() == 3
+    assert "M = 3(4−1) − 2·4 = 1" in page.locator("#s-info").inner_text()
