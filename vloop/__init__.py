@@ -6,8 +6,8 @@
     res.to_csv("results.csv")
     forces = vloop.solve_forces(mech, res)  # with masses/loads in the file: torques, reactions [N, N·m]
 
-The teaching quantities (vloop.instant_centres, ...), vloop.study and vloop.simulate (forward dynamics) are
-imported on first use.
+The teaching quantities (vloop.instant_centres, ...), vloop.study, vloop.simulate (forward dynamics) and
+vloop.studio (the editor inline in a notebook: ``vloop.studio(mech)``) are imported on first use.
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ __all__ = [
     "solve",
     "solve_forces",
     "stroke",
+    "studio",
     "study",
     "time_ratio",
     "transmission_angles",
@@ -72,6 +73,8 @@ def __getattr__(name: str) -> Any:
         return importlib.import_module(".studies.study", __name__).study
     if name == "simulate":
         return importlib.import_module(".dynamics.integrate", __name__).simulate
+    if name == "studio":  # the package, callable: vloop.studio(mech) opens the notebook widget
+        return importlib.import_module(".studio", __name__)
     if name.isidentifier() and not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}"):
         return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'vloop' has no attribute {name!r}")

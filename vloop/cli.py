@@ -689,6 +689,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     _parser_run(sub)
     _parser_view(sub)
+    _parser_studio(sub)
     _parser_loops(sub)
     _parser_validate(sub)
     _parser_corpus(sub)
@@ -768,6 +769,44 @@ def _parser_view(sub: Any) -> None:
     vw.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME); the page is NAME.html")
     vw.add_argument("--open", action="store_true", help="open the page in the default web browser")
     vw.set_defaults(func=cmd_view)
+
+
+def _parser_studio(sub: Any) -> None:
+    st = sub.add_parser("studio", help="draw, drag and design a linkage in the browser (a local web app)")
+    st.add_argument("target", nargs="?", help="a mechanism file to open, or the folder to work in (default: here)")
+    st.add_argument("--port", type=_studio_port, default=0, help="port on 127.0.0.1 (default: a free one)")
+    st.add_argument("--no-browser", action="store_true", help="print the address; do not open a browser")
+    st.set_defaults(func=cmd_studio)
+
+
+def _studio_port(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"a port number from 0 to 65535, got {text!r}")
+    return port
+
+
+def cmd_studio(args: argparse.Namespace) -> int:
+    """Serve the studio on 127.0.0.1 until Ctrl-C (files only inside the folder it starts on)."""
+    from pathlib import Path
+
+    target = Path(args.target) if args.target else Path.cwd()
+    if not target.exists():
+        return _fail(f"{args.target}: no such file or folder")
+    try:
+        from .studio.server import serve
+    except ImportError as exc:
+        return _fail(f"vloop studio needs its extra: pip install 'vloop[studio]' ({exc.name} is missing)")
+    try:
+        return serve(target, port=args.port, browser=not args.no_browser)
+    except ValueError as exc:
+        return _fail(str(exc))
+    except KeyboardInterrupt:  # Ctrl-C: the server has closed its socket and workers
+        print("vloop studio: stopped", file=sys.stderr)
+        return 0
 
 
 def _parser_loops(sub: Any) -> None:

@@ -154,11 +154,14 @@ def build_payload(
     error: str | None = None,
     system: Any = None,
     targets: Any = None,
+    deflate: bool = True,
 ) -> dict[str, Any]:
     """Everything the page draws, as plain JSON-ready data (see the module docstring).
 
     Lengths in the file's units, angles in rad (CCW from +x), time in s, forces in N and N·m. ``targets``: a
     synthesis's precision positions, drawn as numbered crosses: ``(x, y)`` points or ``(x, y, angle)`` poses.
+    ``deflate=False``: the columns as plain little-endian float64 in base64 (a live host on this machine: no
+    time spent compressing a frame that is replaced a moment later).
     """
     from ..compiler import compile_system
 
@@ -179,7 +182,7 @@ def build_payload(
         "error": error or None,
         "samples": matrix.shape[1],
         "thinned": thinned,
-        "data": {"columns": names, "encoding": "f64le-shuffle-deflate-base64", "data": _pack(matrix)},
+        "data": _data_block(names, matrix, deflate),
         "bodies": [_body(mech, b, slots) for b in bodies.values()],
         "joints": _joints(mech),
         "labels": _label_directions(mech, result),
@@ -222,8 +225,6 @@ def _targets(mech: Mechanism, targets: Any) -> list[dict[str, float]]:
     return out
 
 
-
-
 def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], np.ndarray]:
     """Every column the page shows, checked finite: t, the Result's, health, forces (``force:NAME``)."""
     names = ["t", *result.columns]
@@ -250,6 +251,13 @@ def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], n
     return names, matrix
 
 
+def _data_block(names: list[str], matrix: np.ndarray, deflate: bool) -> dict[str, Any]:
+    if deflate:
+        return {"columns": names, "encoding": "f64le-shuffle-deflate-base64", "data": _pack(matrix)}
+    raw = np.ascontiguousarray(matrix, dtype="<f8").tobytes()
+    return {"columns": names, "encoding": "f64le-base64", "data": base64.b64encode(raw).decode("ascii")}
+
+
 def _pack(matrix: np.ndarray) -> str:
     """float64 little-endian, column after column, byte-shuffled (byte k of every value together), deflated."""
     raw = np.ascontiguousarray(matrix, dtype="<f8").view(np.uint8).reshape(-1, 8)
@@ -258,6 +266,10 @@ def _pack(matrix: np.ndarray) -> str:
 
 def unpack(data: dict[str, Any]) -> dict[str, np.ndarray]:
     """The inverse of the page's data encoding (for tests and tools): column name → float64 array."""
+    if data.get("encoding") == "f64le-base64":
+        values = np.frombuffer(base64.b64decode(data["data"]), "<f8")
+        n = len(values) // max(len(data["columns"]), 1)
+        return {name: values[k * n : (k + 1) * n] for k, name in enumerate(data["columns"])}
     raw = np.frombuffer(zlib.decompress(base64.b64decode(data["data"])), np.uint8)
     values = raw.reshape(8, -1).T.copy().view("<f8").ravel()
     n = len(values) // max(len(data["columns"]), 1)
@@ -489,7 +501,7 @@ class InlineView:
     """A viewer page for a notebook's output cell: Jupyter shows ``_repr_html_``, an iframe that holds the page in
     ``srcdoc`` and is sandboxed to scripts only (an opaque origin: no network, no access to the notebook)."""
 
-    def __init__(self, page: str, height: int = 720) -> None:
+    def __init__(self, page: str, height: int = 860) -> None:
         self.page = page
         self.height = height
 
@@ -501,7 +513,7 @@ class InlineView:
 
 
 def inline(
-    mech: Mechanism, result: Result | None = None, *, forces: Any = None, error: str | None = None, height: int = 720
+    mech: Mechanism, result: Result | None = None, *, forces: Any = None, error: str | None = None, height: int = 860
 ) -> InlineView:
     """The interactive viewer of a run, inline in a notebook (``vloop.views.view.inline(mech, res)`` as a cell's last
     line). Without ``result`` the file's motion is solved (a stopped motion shows its last instant and message).

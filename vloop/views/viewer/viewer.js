@@ -8,11 +8,15 @@
   const PALETTE = ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "var(--fg)"]; // Okabe–Ito
   const LOOP_COLORS = ["#E69F00", "#56B4E9", "#009E73", "#CC79A7", "#0072B2", "#D55E00", "var(--fg)"];
   const DASHES = ["", "7 4", "2 3", "9 3 2 3"];
-  const D = JSON.parse(document.getElementById("vloop-data").textContent);
+  // the page's data; a host that edits the mechanism (the studio) hands a new one to vloopViewer.load
+  const dataTag = document.getElementById("vloop-data");
+  let D = dataTag && dataTag.textContent.trim() ? JSON.parse(dataTag.textContent) : null;
   const $ = (id) => document.getElementById(id);
-  const U = D.units;
+  let U = D ? D.units : "";
+  const SPEEDS = [0.01, 0.02, 0.05, 0.1, 0.25, 0.5, 1, 2, 5];
+  const GAINS = [0.25, 0.5, 1, 2, 4, 8];
   const S = {
-    i: 0, playing: false, clock: 0, last: null, speed: 1, repeat: true, zoomed: false,
+    i: 0, playing: false, clock: 0, last: null, speed: 1, repeat: true, zoomed: false, gain: 1, wired: false,
     over: { loops: true, vel: false, acc: false, paths: false, forces: false, labels: true },
     hiddenLoops: new Set(), numbersAt: 0, stats: { frames: 0, drawMs: new Float64Array(600), k: 0 },
   };
@@ -125,6 +129,7 @@
     const bin = atob(block.data);
     const bytes = new Uint8Array(bin.length);
     for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+    if (block.encoding === "f64le-base64") return columnsOf(new Float64Array(bytes.buffer), block.columns); // a live host's frames: no deflate
     const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("deflate"));
     const shuffled = new Uint8Array(await new Response(stream).arrayBuffer());
     const count = shuffled.length >> 3;
@@ -133,10 +138,12 @@
       const off = b * count;
       for (let k = 0; k < count; k++) raw[8 * k + b] = shuffled[off + k];
     }
-    const values = new Float64Array(raw.buffer);
-    const n = count / block.columns.length;
+    return columnsOf(new Float64Array(raw.buffer), block.columns);
+  }
+  function columnsOf(values, names) {
+    const n = values.length / names.length;
     const cols = {};
-    block.columns.forEach((name, k) => { cols[name] = values.subarray(k * n, (k + 1) * n); });
+    names.forEach((name, k) => { cols[name] = values.subarray(k * n, (k + 1) * n); });
     return cols;
   }
   const X = (p, i) => C[p + ".x"][i];
@@ -332,9 +339,10 @@
     // the longest arrow of the run is a quarter of the mechanism's size
     const peak = (list, a, b) => Math.max(0, ...list.map((e) => (e.fx ? maxNorm(e.fx, e.fy) : maxNorm(C[e.point + a], C[e.point + b]))));
     const vmax = peak(V.vel, ".vx", ".vy"), amax = peak(V.acc, ".ax", ".ay"), fmax = peak(V.forces);
-    V.kv = vmax > 0 ? 0.25 * D.scale / vmax : 1;
-    V.ka = amax > 0 ? 0.25 * D.scale / amax : 1;
-    V.kf = fmax > 0 ? 0.25 * D.scale / fmax : 1;
+    // S.gain: the reader's arrow scale (the select beside the overlays), the same for every kind
+    V.kv = S.gain * (vmax > 0 ? 0.25 * D.scale / vmax : 1);
+    V.ka = S.gain * (amax > 0 ? 0.25 * D.scale / amax : 1);
+    V.kf = S.gain * (fmax > 0 ? 0.25 * D.scale / fmax : 1);
     V.peaks = { vel: vmax, acc: amax, forces: fmax };
   }
 
@@ -503,6 +511,7 @@
     };
     V.svg.addEventListener("wheel", (ev) => {
       ev.preventDefault();
+      if (!V.box) return;
       const [px, py] = toWorld(ev), f = Math.exp(Math.max(-0.5, Math.min(0.5, ev.deltaY * 0.0015)));
       const [x, y, w, h] = V.box;
       setBox([px - (px - x) * f, py - (py - y) * f, w * f, h * f]);
@@ -510,6 +519,7 @@
     }, { passive: false });
     let drag = null;
     V.svg.addEventListener("pointerdown", (ev) => {
+      if (!V.box) return;
       drag = { x: ev.clientX, y: ev.clientY, box: V.box.slice() };
       V.svg.setPointerCapture(ev.pointerId);
       V.svg.classList.add("dragging");
@@ -523,7 +533,7 @@
     const end = () => { drag = null; V.svg.classList.remove("dragging"); };
     V.svg.addEventListener("pointerup", end);
     V.svg.addEventListener("pointercancel", end);
-    V.svg.addEventListener("dblclick", fit);
+    V.svg.addEventListener("dblclick", () => D && fit());
     $("fit").addEventListener("click", fit);
   }
 
@@ -560,9 +570,10 @@
     html("summary", {}, panel, "vector loops: show / hide each loop, what each letter stands for");
     const line = html("div", { class: "plot-legend" }, panel);
     V.loops.forEach((L) => {
-      const b = html("button", { type: "button", "aria-pressed": "true", "data-loop-toggle": L.lp.number }, line);
+      const b = html("button", { type: "button", "aria-pressed": String(!S.hiddenLoops.has(L.lp.number)), "data-loop-toggle": L.lp.number }, line);
       html("span", { class: "swl" }, b).style.borderColor = L.color;
       b.append(`loop ${L.lp.number} (${L.lp.label})`);
+      if (S.hiddenLoops.has(L.lp.number)) { L.g.setAttribute("display", "none"); box.querySelector(`[data-loop="${L.lp.number}"]`).hidden = true; }
       b.addEventListener("click", () => {
         const n = L.lp.number, hide = !S.hiddenLoops.has(n);
         if (hide) S.hiddenLoops.add(n); else S.hiddenLoops.delete(n);
@@ -589,7 +600,7 @@
     return out.map((v) => [v, label(v)]);
   }
 
-  function curvePath(values, sx, sy) {
+  function curvePath(values, sx, sy, wrap) {
     // every sample when they fit; otherwise first/min/max/last per pixel column (drawing only)
     const n = values.length;
     const idx = [];
@@ -606,12 +617,16 @@
       }
       flush();
     }
-    let d = "";
-    for (const i of idx) d += (d ? "L" : "M") + sx(T[i]).toFixed(2) + " " + sy(values[i]).toFixed(2);
+    let d = "", prev = null;
+    for (const i of idx) {
+      const jump = wrap && prev !== null && Math.abs(values[i] - values[prev]) > Math.PI; // a wrapped angle's seam
+      d += (d && !jump ? "L" : "M") + sx(T[i]).toFixed(2) + " " + sy(values[i]).toFixed(2);
+      prev = i;
+    }
     return d;
   }
 
-  const plots = [];
+  let plots = [];
 
   class Plot {
     constructor(host, spec) {
@@ -624,8 +639,10 @@
       this.svg.addEventListener("click", (ev) => { pause(); setIndex(this.indexAt(ev)); });
     }
     visible() { return this.spec.series.filter((s) => !s.group.hidden.has(s.name)); }
-    render() {
-      const fs = fontScale(), W = this.host.clientWidth;
+    render(width) {
+      // width: the plots' column, measured once for every plot (reading it per plot would lay the page out again
+      // after each one)
+      const fs = fontScale(), W = width || this.host.clientWidth;
       if (!W) return;
       const H = Math.round(150 * (0.5 + 0.5 * fs));
       const m = { l: 62 * fs, r: 10, t: 20 * fs, b: 22 * fs };
@@ -635,7 +652,8 @@
       this.svg.replaceChildren();
       const series = this.visible();
       let lo = Infinity, hi = -Infinity;
-      for (const s of series) for (let i = 0; i < N; i++) { lo = Math.min(lo, s.values[i]); hi = Math.max(hi, s.values[i]); }
+      const vals = (s) => s.plot || s.values;
+      for (const s of series) { const v = vals(s); for (let i = 0; i < N; i++) { lo = Math.min(lo, v[i]); hi = Math.max(hi, v[i]); } }
       if (!isFinite(lo)) { lo = -1; hi = 1; }
       if (hi - lo <= 1e-12 * Math.max(1, Math.abs(hi))) { const c = (hi + lo) / 2, d = Math.max(Math.abs(c) * 0.1, 1e-9); lo = c - d; hi = c + d; }
       const pad = 0.06 * (hi - lo); lo -= pad; hi += pad;
@@ -657,10 +675,10 @@
       svg("text", { class: "ylabel", x: m.l + 4, y: 2, "dominant-baseline": "hanging", "font-size": font * 1.1 }, this.svg).textContent = `${this.spec.title} [${this.spec.unit}]`;
       svg("text", { class: "tick", x: W - m.r, y: 2, "text-anchor": "end", "dominant-baseline": "hanging", "font-size": font }, this.svg).textContent = "t [s]";
       for (const s of series) {
-        const p = svg("path", { class: "curve", d: curvePath(s.values, sx, sy), "data-series": s.name }, this.svg);
+        const p = svg("path", { class: "curve", d: curvePath(vals(s), sx, sy, this.spec.wrap), "data-series": s.name }, this.svg);
         p.style.stroke = s.style.color;
         if (s.style.dash) p.setAttribute("stroke-dasharray", s.style.dash);
-        if (N === 1) svg("circle", { cx: sx(T[0]), cy: sy(s.values[0]), r: 3.5 * fs }, this.svg).style.fill = s.style.color;
+        if (N === 1) svg("circle", { cx: sx(T[0]), cy: sy(vals(s)[0]), r: 3.5 * fs }, this.svg).style.fill = s.style.color;
       }
       this.hoverLine = svg("line", { class: "hover", y1: m.t, y2: H - m.b, visibility: "hidden" }, this.svg);
       // the cursor is an HTML element moved by a transform: moving it repaints no curve
@@ -729,19 +747,20 @@
     if (!names.length) return;
     const host = html("div", { class: "plot-group", "data-group": title }, $("plots"));
     html("h2", {}, host, title);
-    const group = { hidden: new Set(), plots: [] };
+    S.hiddenSeries = S.hiddenSeries || {};
+    const group = { hidden: (S.hiddenSeries[title] = S.hiddenSeries[title] || new Set()), plots: [] };
     const legend = html("div", { class: "plot-legend" }, host);
     const on = coincident(names, quantities);
     const label = (n) => n.label || n;
     // a series lying on an earlier one is dashed over it, so both show
     const style = (k) => (k in on ? { color: seriesStyle(k).color, dash: DASHES[1 + (Object.keys(on).indexOf(String(k)) % (DASHES.length - 1))] } : seriesStyle(k));
-    const series = (q) => names.map((n, k) => {
+    const series = (q, wrap) => names.map((n, k) => {
       const col = n.column || `${n}.${q}`;
-      return { name: label(n), values: C[col], scale: scaleOf(col), style: style(k), group };
+      return { name: label(n), col, values: C[col], plot: wrap ? wrapped(C[col]) : null, scale: scaleOf(col), style: style(k), group };
     });
     names.forEach((n, k) => {
       const name = label(n);
-      const b = html("button", { type: "button", "aria-pressed": "true", "data-series-toggle": name }, legend);
+      const b = html("button", { type: "button", "aria-pressed": String(!group.hidden.has(name)), "data-series-toggle": name }, legend);
       const sw = html("span", { class: "swl" }, b);
       sw.style.borderColor = style(k).color;
       if (k in on) { sw.style.borderTopStyle = "dashed"; b.dataset.coincides = label(names[on[k]]); }
@@ -754,22 +773,44 @@
       });
     });
     if (names.length === 1) legend.hidden = true;
-    for (const [q, symbol, unit] of quantities) {
-      const p = new Plot(host, { key: `${title}:${q}`, title: symbol, unit, series: series(q) });
+    for (const [q, symbol, unit, wrapAngles] of quantities) {
+      // a crank's θ grows by 2π a turn and would squash every other curve: angles that travel more than a
+      // turn are drawn wrapped to (−π, π] (the tooltip and the numbers keep the unwrapped value)
+      const wrap = wrapAngles && names.some((n) => span(C[n.column || `${n}.${q}`]) > 2 * Math.PI);
+      const p = new Plot(host, { key: `${title}:${q}`, title: wrap ? `${symbol} (wrapped to ±π)` : symbol, unit, series: series(q, wrap), wrap });
       group.plots.push(p);
       plots.push(p);
     }
   }
 
+  function span(v) {
+    let lo = Infinity, hi = -Infinity;
+    for (const x of v) { if (x < lo) lo = x; if (x > hi) hi = x; }
+    return hi - lo;
+  }
+  function wrapped(v) {
+    const out = new Float64Array(v.length);
+    for (let i = 0; i < v.length; i++) out[i] = v[i] - 2 * Math.PI * Math.round(v[i] / (2 * Math.PI));
+    return out;
+  }
+
   function buildPlots() {
-    plotGroup("Links", D.links, [["theta", "θ", "rad"], ["omega", "ω", "rad/s"], ["alpha", "α", "rad/s²"]]);
+    plotGroup("Links", D.links, [["theta", "θ", "rad", true], ["omega", "ω", "rad/s"], ["alpha", "α", "rad/s²"]]);
     plotGroup("Sliders", D.slider_names, [["s", "s", U], ["v", "v", `${U}/s`], ["a", "a", `${U}/s²`]]);
     const F = D.forces;
     if (F) {
       for (const d of F.drivers) plotGroup(d.label, [{ label: d.column, column: "force:" + d.column }], [["", d.column.endsWith(".torque") ? "τ" : "F", d.unit]]);
       if (F.shaking.length) plotGroup("Shaking force", F.shaking.map((c) => ({ label: c, column: "force:" + c })), [["", "F", "N"]]);
     }
-    plots.forEach((p) => p.render());
+    const width = $("plots").clientWidth;
+    plots.forEach((p) => p.render(width));
+  }
+
+  function watchSizes() {
+    let scrolled = false;
+    const onScroll = () => { if (!scrolled) { scrolled = true; requestAnimationFrame(() => { scrolled = false; catchUp(); }); } };
+    addEventListener("scroll", onScroll, { passive: true });
+    $("plots").addEventListener("scroll", onScroll, { passive: true });
     // rebuild the plots only when their column changes width; the drawing when its box changes size
     let pending = false, plotWidth = $("plots").clientWidth;
     const observer = new ResizeObserver(() => {
@@ -788,7 +829,7 @@
 
   // ------------------------------------------------------------------ numbers panel
 
-  const cells = [];
+  let cells = [];
   function table(parent, caption, head, rows) {
     const wrap = html("div", { class: "table-wrap" }, parent);
     const t = html("table", {}, wrap);
@@ -804,7 +845,7 @@
         const td = html("td", { class: "num", "data-col": col }, r);
         f = f || ((x) => x);
         const health = col.startsWith("health."), scale = scaleOf(col) * Math.abs(f(1));
-        cells.push({ td, values: C[col], f, format: health ? fmtHealth : (x) => fmtScaled(x, scale) });
+        cells.push({ td, col, values: C[col], f, format: health ? fmtHealth : (x) => fmtScaled(x, scale) });
         widths[k] = Math.max(widths[k] || 0, health ? 9 : scaledWidth(scale));
       });
       if (unit !== undefined) html("td", {}, r, unit);
@@ -912,21 +953,24 @@
 
   function wireControls() {
     const slider = $("time");
-    slider.max = String(N - 1);
     slider.addEventListener("input", () => { pause(); setIndex(+slider.value); });
     $("play").addEventListener("click", () => (S.playing ? pause() : play()));
     $("prev").addEventListener("click", () => { pause(); setIndex(S.i - 1); });
     $("next").addEventListener("click", () => { pause(); setIndex(S.i + 1); });
-    $("speed").addEventListener("change", (e) => { S.speed = +e.target.value; });
+    $("speed").addEventListener("change", (e) => { S.speed = +e.target.value; S.speedChosen = true; });
+    $("arrow-scale").addEventListener("change", (e) => {
+      S.gain = +e.target.value;
+      computeArrowScales();
+      if (!S.zoomed && (S.over.vel || S.over.acc || S.over.forces)) fit();
+      draw(S.i);
+      drawScaleLegend();
+    });
     $("repeat").addEventListener("click", (e) => { S.repeat = !S.repeat; e.currentTarget.setAttribute("aria-pressed", String(S.repeat)); });
     $("copy").addEventListener("click", copyValues);
     for (const b of document.querySelectorAll("[data-overlay]")) {
       const key = b.dataset.overlay;
-      b.setAttribute("aria-pressed", String(S.over[key]));
-      V.layers[key].setAttribute("display", S.over[key] ? "inline" : "none");
       b.addEventListener("click", () => setOverlay(key, !S.over[key]));
     }
-    if (D.forces && D.forces.arrows.length) document.querySelector('[data-overlay="forces"]').hidden = false;
     document.addEventListener("keydown", (e) => {
       const tag = e.target.tagName;
       if (tag === "SELECT" || tag === "TEXTAREA" || (tag === "INPUT" && e.target.type !== "range")) return;
@@ -980,19 +1024,33 @@
     return i === N - 1 ? D.thinned.of : i * D.thinned.every + 1;
   }
 
-  async function main() {
-    if (typeof DecompressionStream === "undefined") throw new Error("this browser has no DecompressionStream: use a current Firefox, Chrome, Edge or Safari");
-    C = await decode(D.data);
-    T = C.t;
-    N = T.length;
-    buildScene();
-    buildLoopLegend();
-    wireControls();
-    wireView();
-    buildPlots();
-    buildNumbers();
-    $("loop-legend").hidden = !S.over.loops || !V.loops.length;
-    const start = D.error ? N - 1 : 0;
+  // the run's fastest link turns at most half a turn per second at the default speed (a textbook four-bar
+  // at 25 rad/s would otherwise turn 4 times a second): the largest listed speed that keeps to it
+  function defaultSpeed() {
+    let w = 0;
+    for (const n of D.links) { const v = C[n + ".omega"]; for (let i = 0; i < N; i++) w = Math.max(w, Math.abs(v[i])); }
+    const turns = w / (2 * Math.PI);
+    const fit = SPEEDS.filter((v) => v <= 1 && v * turns <= 0.5);
+    return fit.length ? fit[fit.length - 1] : SPEEDS[0];
+  }
+
+  // what a new page's data replaces: every element built from the previous data
+  function reset() {
+    V.svg.replaceChildren();
+    Object.assign(V, { layers: {}, bodies: [], pins: [], labels: [], linkLabels: [], loops: [], vel: [], acc: [], forces: [] });
+    SCALES = null;
+    plots = [];
+    cells = [];
+    $("plots").replaceChildren();
+    $("numbers-body").replaceChildren();
+    $("loop-legend").replaceChildren();
+    const details = $("loop-details");
+    if (details) details.remove();
+    $("error").hidden = true;
+    $("note").hidden = true;
+  }
+
+  function showMessages() {
     if (D.error) {
       const box = $("error");
       box.hidden = false;
@@ -1003,17 +1061,115 @@
       note.hidden = false;
       note.textContent = `This page carries ${D.thinned.shown.toLocaleString()} of the run's ${D.thinned.of.toLocaleString()} samples (one in every ${D.thinned.every}, and the last), to keep the page small; each value shown is that sample's exact value. vloop run writes every sample.`;
     }
+  }
+
+  let layout = null;
+  const layoutOf = (d) => JSON.stringify([d.data.columns, d.links, d.slider_names, d.points, d.loops.length, !!d.forces]);
+
+  function refresh(opts, ms) {
+    V.svg.replaceChildren();
+    Object.assign(V, { layers: {}, bodies: [], pins: [], labels: [], linkLabels: [], loops: [], vel: [], acc: [], forces: [] });
+    SCALES = null;
+    const details = $("loop-details");
+    const open = details && details.open;
+    if (details) details.remove();
+    buildScene();
+    buildLoopLegend();
+    if (open) $("loop-details").open = true;
+    for (const key in S.over) V.layers[key].setAttribute("display", S.over[key] ? "inline" : "none");
+    $("time").max = String(N - 1);
+    ms.push(performance.now());
+    for (const p of plots) {
+      for (const sr of p.spec.series) { sr.values = C[sr.col]; if (sr.plot) sr.plot = wrapped(sr.values); sr.scale = scaleOf(sr.col); }
+    }
+    later();
+    ms.push(performance.now());
+    for (const c of cells) c.values = C[c.col];
+    $("error").hidden = true;
+    $("note").hidden = true;
+    showMessages();
+    ms.push(performance.now());
+    const start = Math.max(0, Math.min(N - 1, opts.index !== undefined ? opts.index : D.error ? N - 1 : 0));
     S.i = start;
-    fit();
+    if (opts.keepView && V.box) setBox(V.box); else fit();
+    setIndex(start, true);
+    ms.push(performance.now());
+    S.stats.load = ms.slice(1).map((t, k) => t - ms[k]);
+  }
+
+  // While new data streams in (a drag), the drawing is redrawn at once and the plots and numbers just after the
+  // frame is shown, at most once per frame: the mechanism under the pointer never waits for the plots.
+  // What is scrolled out of view is brought up to date when it comes back into view.
+  let pendingPlots = false;
+  const onScreen = (el) => { const r = el.getBoundingClientRect(); return r.bottom > 0 && r.top < innerHeight && r.height > 0; };
+  function later() {
+    if (pendingPlots) return;
+    pendingPlots = true;
+    requestAnimationFrame(() => setTimeout(() => {
+      pendingPlots = false;
+      const t0 = performance.now();
+      for (const p of plots) p.stale = true;
+      S.numbersStale = true;
+      catchUp();
+      S.stats.later = performance.now() - t0;
+    }, 0));
+  }
+  function catchUp() {
+    const width = $("plots").clientWidth;
+    for (const p of plots) if (p.stale && onScreen(p.host)) { p.stale = false; p.render(width); p.setCursor(S.i); }
+    if (S.numbersStale && onScreen($("numbers"))) { S.numbersStale = false; updateNumbers(S.i); }
+  }
+
+  // Draw ``data`` (the page's payload). ``opts.keepView``: keep the zoom and pan (a drag redraws under the pointer);
+  // ``opts.index``: the sample to show (default: the first, or the last before a stop).
+  async function load(data, opts = {}) {
+    if (typeof DecompressionStream === "undefined") throw new Error("this browser has no DecompressionStream: use a current Firefox, Chrome, Edge or Safari");
+    const ms = [performance.now()];
+    const cols = await decode(data.data);
+    D = data;
+    U = D.units;
+    C = cols;
+    T = C.t;
+    N = T.length;
+    ms.push(performance.now());
+    // a drag's new data with the same columns: the plots and tables stay, fed the new numbers
+    const same = layout === layoutOf(D);
+    layout = layoutOf(D);
+    if (same && plots.length) return refresh(opts, ms);
+    reset();
+    buildScene();
+    buildLoopLegend();
+    if (!S.wired) { wireControls(); wireView(); }
+    for (const key in S.over) V.layers[key].setAttribute("display", S.over[key] ? "inline" : "none");
+    document.querySelector('[data-overlay="forces"]').hidden = !(D.forces && D.forces.arrows.length);
+    $("time").max = String(N - 1);
+    ms.push(performance.now());
+    buildPlots();
+    if (!S.wired) watchSizes();
+    S.wired = true;
+    ms.push(performance.now());
+    buildNumbers();
+    $("loop-legend").hidden = !S.over.loops || !V.loops.length;
+    if (!S.speedChosen) { S.speed = defaultSpeed(); $("speed").value = String(S.speed); }
+    showMessages();
+    ms.push(performance.now());
+    const start = Math.max(0, Math.min(N - 1, opts.index !== undefined ? opts.index : D.error ? N - 1 : 0));
+    S.i = start;
+    if (opts.keepView && V.box) setBox(V.box); else fit();
     setIndex(start);
+    ms.push(performance.now());
+    // where a load's time goes [ms]: decode, scene, plots, numbers, first draw (read by the studio's benchmark)
+    S.stats.load = ms.slice(1).map((t, k) => t - ms[k]);
     window.vloopViewer.ready = true;
     document.body.dataset.ready = "1";
   }
 
-  window.vloopViewer = { ready: false, stats: S.stats, setIndex: (i) => setIndex(i), play, pause, setOverlay,
+  window.vloopViewer = { ready: false, stats: S.stats, setIndex: (i) => setIndex(i), play, pause, setOverlay, load, fit,
     get index() { return S.i; }, get playing() { return S.playing; }, get unitsPerPixel() { return V.upp; },
+    get speed() { return S.speed; }, get samples() { return N; }, get data() { return D; }, column: (name) => C[name],
+    toWorld: (clientX, clientY) => { const p = new DOMPoint(clientX, clientY).matrixTransform(V.svg.getScreenCTM().inverse()); return [p.x, -p.y]; },
     scales: () => ({ vel: V.kv, acc: V.ka, forces: V.kf }) };
-  main().catch((err) => {
+  if (D) load(D).catch((err) => {
     const box = $("error");
     box.hidden = false;
     box.textContent = `The viewer could not start: ${err && err.message ? err.message : err}`;
