@@ -72,7 +72,7 @@ class Vloop(Engine):
 
 
 class Analytic(Engine):
-    """The hand-derived closed forms (:mod:`validators.analytic`), forces where :mod:`validators.analytic.forces` applies."""
+    """The hand-derived closed forms (:mod:`validators.analytic`), forces where its `forces` module applies."""
 
     name = "analytic"
 
