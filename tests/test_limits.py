@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -58,3 +59,53 @@ def test_cli_writes_the_rows_before_the_failure(tmp_path, capsys):
     assert rows.shape[0] == 173
     assert np.all(np.isfinite(rows))
     assert rows[-1, 0] == pytest.approx(1.72)
+
+
+# ---------------------------------------------------------------- limits located at the discriminant's root
+#
+# The triple rocker of fourbar_nongrashof_past_limit.toml (a = 3, b = 4, c = 4.5, d = 6, O2 at the origin, O4 on
+# +x), by hand (law of cosines):
+# - the input's limits: |A − O4| = b + c, cos θ_lim = (a² + d² − (b + c)²)/(2·a·d): θ = ±θ_lim;
+# - the rocker there points from O4 to A (A–B–O4 collinear, B between): θ4 = π ∓ γ with
+#   cos γ = (d² + (b + c)² − a²)/(2·d·(b + c)) (the angle at O4 of the triangle O2–O4–A);
+# - the rocker's dead centre inside the range (crank and coupler stretched, |O2B| = a + b): θ4 = π − ρ with
+#   cos ρ = (d² + c² − (a + b)²)/(2·d·c); the rocker swings from π − ρ to π + γ: swing = γ + ρ;
+# - the transmission angle at a limit (coupler and rocker collinear) is 0.
+A_, B_, C_, D_ = 3.0, 4.0, 4.5, 6.0
+THETA_LIM = math.acos((A_**2 + D_**2 - (B_ + C_) ** 2) / (2 * A_ * D_))
+GAMMA = math.acos((D_**2 + (B_ + C_) ** 2 - A_**2) / (2 * D_ * (B_ + C_)))
+RHO = math.acos((D_**2 + C_**2 - (A_ + B_) ** 2) / (2 * D_ * C_))
+
+
+@pytest.mark.parametrize("stop,step", [(3.0, 0.01), (2000.0, 0.5)])
+def test_a_limit_is_located_to_round_off_however_long_the_run(stop, step):
+    """The limit is the root of the dyad's discriminant, not a bisection to a fraction of the run's input range
+    (2000 s at 0.8 rad/s: 1e-12 of 1600 rad was 2.3e-10 rad): θ_lim to 4 ulps, its time θ_lim − π/3 over ω."""
+    mech = vloop.load(PATH)
+    mech = dataclasses.replace(mech, times=np.arange(0.0, stop + step / 2, step))
+    with pytest.raises(vloop.MotionError) as info:
+        vloop.solve(mech)
+    err = info.value
+    assert abs(err.limit_value[0] - THETA_LIM) <= 4 * np.spacing(THETA_LIM)
+    assert err.limit_time == pytest.approx((THETA_LIM - math.pi / 3) / 0.8, rel=4e-16, abs=0)
+
+
+def test_a_triple_rockers_swing_and_toggles_to_round_off():
+    """The input cycle (vloop.teaching): range ±θ_lim, the rocker's swing γ + ρ and its angles at both limits,
+    each to 1e-12 relative of the hand values above; the transmission angle at each toggle 0 to 1e-12 rad — and so
+    is each single branch at the located limit (the bisection left it √Δx off: 3.9e-6 rad)."""
+    from vloop.teaching import input_cycle
+
+    mech = vloop.load(PATH)
+    cyc = input_cycle.cycle(mech)
+    assert cyc.lower == pytest.approx(-THETA_LIM, rel=1e-12, abs=0)
+    assert cyc.upper == pytest.approx(THETA_LIM, rel=1e-12, abs=0)
+    assert cyc.outputs["l4"].travel == pytest.approx(GAMMA + RHO, rel=1e-12, abs=0)
+    assert [t.folded for t in cyc.toggles] == [pytest.approx(0.0, abs=1e-12)] * 2
+    walks, _, _, _ = input_cycle._walks(mech, 720)
+    for walk in walks:
+        at = walk.solve(np.array([walk.end]), rtol=math.inf)  # one branch, at the limit the solver located
+        assert at["l2.theta"][0] == pytest.approx(walk.sense * THETA_LIM, rel=1e-12, abs=0)
+        assert at["l4.theta"][0] == pytest.approx(math.pi - walk.sense * GAMMA, rel=1e-12, abs=0)
+        mu = math.remainder(at["l3.theta"][0] - at["l4.theta"][0], math.pi)  # coupler ∥ rocker: 0 (mod π)
+        assert abs(mu) <= 1e-12
