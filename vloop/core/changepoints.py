@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import MechanismError
 from ..method.loops import LoopSystem
-from .accuracy import EPS, ILL_FRACTION, error_bound
+from .accuracy import EPS, error_bound
 from .context import ChangePoint, Failure, Inputs, Run, Solved, change_point_choices, impose_drivers, input_units
 from .data import Probe, State
 from .dyads import closed_form, dyad_health, dyad_rates, jacobian_columns
@@ -433,15 +433,16 @@ STENCIL_COND = 100.0  # ... and of the time from the change point at which the c
 
 
 def near_change_point(run: Run, i: int, t: np.ndarray, cond: np.ndarray) -> np.ndarray:
-    """Rows next to a change point whose direct rates may be less accurate than interpolated ones: their
-    accelerations' bound ρ·cond³·ε above the level where a sample is flagged ill-conditioned (ρ: the round-off
-    the block's known part carries, :func:`roundoff_factor`). :func:`rates_across` keeps the better of the two.
+    """Rows next to a change point whose rates the direct solve cannot deliver to ``rtol``: their accelerations'
+    bound ρ·cond³·ε above it (ρ: the round-off the block's known part carries, :func:`roundoff_factor`).
+    :func:`rates_across` keeps the better of theirs and the interpolated ones; rows merely ill-conditioned (within
+    rtol, above its flag level) keep their direct rates, flagged in health.
     """
     near = np.zeros(len(t), bool)
     events = run.events.get(i, ())
     if not events or not run.check:
         return near
-    refused = roundoff_factor(run, i) * error_bound(cond) > ILL_FRACTION * run.rtol
+    refused = roundoff_factor(run, i) * error_bound(cond) > run.rtol
     for ev in events:
         reach = 4.0 * time_to_move(run, ev.time, math.inf, STENCIL_INPUT)
         near |= refused & (np.abs(t - ev.time) < reach)
