@@ -109,3 +109,46 @@ def test_a_triple_rockers_swing_and_toggles_to_round_off():
         assert at["l4.theta"][0] == pytest.approx(math.pi - walk.sense * GAMMA, rel=1e-12, abs=0)
         mu = math.remainder(at["l3.theta"][0] - at["l4.theta"][0], math.pi)  # coupler ∥ rocker: 0 (mod π)
         assert abs(mu) <= 1e-12
+
+
+FOLDED = """
+name = "folded_toggle"
+units = "m"
+[joints]
+O2 = [0.0, 0.0]
+A = [-2.0, 0.0]
+B = [{bx!r}, {by!r}]
+O4 = [4.5, 0.0]
+[links]
+ground = {{ joints = ["O2", "O4"], ground = true }}
+crank = {{ joints = ["O2", "A"], length = 2.0 }}
+coupler = {{ joints = ["A", "B"], length = 6.0 }}
+rocker = {{ joints = ["O4", "B"], length = 3.0 }}
+[[drivers]]
+link = "crank"
+pivot = "O2"
+omega = -1.0
+[time]
+start = 0.0
+stop = 3.0
+step = 0.01
+"""
+
+
+def test_a_folded_toggle_is_located_to_round_off():
+    """Another triple rocker (a = 2, b = 6, c = 3, d = 4.5: s + l = 8 > 7.5) whose input stops where coupler and
+    rocker fold, |A − O4| = b − c = 3 (b + c = 9 is out of reach): by hand, cos θ_lim = (a² + d² − 3²)/(2·a·d),
+    and there B lies on the line A→O4 beyond O4, so the rocker points along O4 − A: θ4 = −γ with
+    cos γ = (d² + 3² − a²)/(2·d·3). Driven from θ = π clockwise, the run stops at θ_lim (4 ulps); the configuration
+    at the located limit has θ4 = −γ and the coupler along the rocker to 1e-12."""
+    p = (36.0 - 9.0 + 6.5**2) / (2 * 6.5)  # B's foot along A→O4 at θ = π (|A − O4| = 6.5), its height √(b² − p²)
+    mech = vloop.loads(FOLDED.format(bx=-2.0 + p, by=math.sqrt(36.0 - p * p)))
+    lim = math.acos((2.0**2 + 4.5**2 - 3.0**2) / (2 * 2.0 * 4.5))
+    gamma = math.acos((4.5**2 + 3.0**2 - 2.0**2) / (2 * 4.5 * 3.0))
+    with pytest.raises(vloop.MotionError) as info:
+        vloop.solve(mech)
+    err = info.value
+    assert abs(err.limit_value[0] - lim) <= 4 * np.spacing(lim)
+    at = vloop.solve(mech, np.array([0.0, err.limit_time]), rtol=math.inf)
+    assert at["rocker.theta"][1] == pytest.approx(-gamma, rel=1e-12, abs=0)
+    assert abs(math.remainder(at["coupler.theta"][1] - at["rocker.theta"][1], math.pi)) <= 1e-12
