@@ -103,7 +103,7 @@ def _discriminant_root(run: Run, base: State, lo: float, hi: float) -> float | N
     def h_at(t: float) -> float | None:  # h at t, None where the run does not close there
         got, _ = _probe_at(run, base, lo, t)
         h = float(got.discs[i][1]) if len(got.discs) > i and len(got.discs[i]) > 1 else math.nan
-        return h if got.n_ok == 2 else min(h, 0.0) if h < 0 else None
+        return h if got.n_ok == 2 or h < 0 else None
 
     a, b, ha, hb = lo, hi, h_at(lo), float(solved.discs[i][1])
     if ha is None or ha < 0:
