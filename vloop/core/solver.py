@@ -96,8 +96,8 @@ def _discriminant_root(run: Run, base: State, lo: float, hi: float) -> float | N
     plans = block_plans(run.system)
     if solved.failure is None or solved.failure.loop is None:
         return None
-    i = next(n for n, p in enumerate(plans) if p.block.loops[0] == solved.failure.loop)
-    if plans[i].block.kind == "newton" or len(solved.discs) <= i or solved.discs[i][1] >= 0:
+    i = next((n for n, p in enumerate(plans) if solved.failure.loop in p.block.loops), None)
+    if i is None or plans[i].block.kind == "newton" or len(solved.discs) <= i or solved.discs[i][1] >= 0:
         return None
 
     def h_at(t: float) -> float | None:  # h at t, None where the run does not close there
