@@ -7,7 +7,7 @@ Baselines, run here in the same process so the ratios are meaningful on a noisy 
 (a) the paper's method: scipy.optimize.fsolve per time step for the positions (Eq. 6),
     then per step for the velocities (Eq. 4) and accelerations (Eq. 5), warm-started
     with the previous step's solution as the paper does;
-(b) the hand-derived closed form, vectorized in numpy (validators/analytic_eightbar.py).
+(b) the hand-derived closed form, vectorized in numpy (validators/analytic/eightbar.py).
 vloop is timed on a compiled LoopSystem (compiling — graph, loops, assembly — is
 a one-off per mechanism and is reported on its own line). Times are the best of
 ``--repeat`` runs (the minimum is the least noisy estimate of the cost).

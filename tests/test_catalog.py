@@ -2,7 +2,7 @@
 
 * Every catalog file is documented, assembles at t = 0 as written, runs with ``vloop run``,
   keeps every link rigid (ternary links included) and matches its hand-derived closed form
-  (validators/analytic_*.py) within 1e-9 of each quantity's peak (measured: ~1e-14).
+  (validators/analytic/*.py) within 1e-9 of each quantity's peak (measured: ~1e-14).
 * The textbook four-bar's t = 0 values are worked out here by hand.
 * Whitworth and inverted slider-crank time ratios: closed form vs the geometric formula.
 * The five-bar's mobility 2, the Jansen pair's six loops, the rocking non-Grashof input.
@@ -31,7 +31,7 @@ from vloop.compare import assert_histories_close
 
 MECH = Path(__file__).resolve().parents[1] / "mechanisms"
 
-# catalog file -> the closed form that must be picked for it (validators/analytic_<NAME>)
+# catalog file -> the closed form that must be picked for it (validators/analytic/<NAME>.py)
 CATALOG = {
     "fourbar_textbook_example": "fourbar",
     "inverted_slider_crank": "inverted_slider_crank",

@@ -16,6 +16,7 @@ Every reference here is derived by hand from the geometry, not from vloop's loop
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -249,7 +250,7 @@ def test_bad_change_point_option(tmp_path):
 )
 def test_corpus_change_points_found_by_the_nightly(index, why):
     """Seed 2026 of the generated corpus (vloop corpus): both once missed a change point and jumped
-    branches silently; the velocity-continuous closed form (validators/analytic_changepoint.py) is the
+    branches silently; the velocity-continuous closed form (validators/analytic/changepoint.py) is the
     reference, and Pinocchio (which passes a change point on its predicted path) agrees too."""
     from validators import analytic, corpus, pinocchio
 
@@ -260,3 +261,197 @@ def test_corpus_change_points_found_by_the_nightly(index, why):
     if index == 515:
         pytest.importorskip("pinocchio")
         assert_histories_close(pinocchio.solve(mech), res, rtol=1e-9, floor=1e-9, min_columns=15)
+
+
+@pytest.mark.parametrize(
+    "index,why",
+    [
+        (
+            138,
+            "a kite whose ground chord, summed from pivots far from the origin, left a 1e-15 gap at its change point",
+        ),
+        (7626, "a kite: the rates at the sample 0.014 rad from its change point were off by 2.8e-9"),
+        (7642, "a change-point four-bar: the rates 0.011 rad from its change point were off by 2.6e-9"),
+    ],
+)
+def test_corpus_seed_9191_through_its_change_points(index, why):
+    """Seed 9191 of the generated corpus, where vloop was the odd one out: it runs through every change point
+    (the first stopped at one, "a limit position"), on the closed form continued through them
+    (validators/analytic/changepoint.py) to 1e-9 (the validation's tolerance)."""
+    from validators import analytic, corpus
+
+    mech = corpus.draw_item(9191, index).item.mechanism
+    res = vloop.solve(mech)
+    assert len(res.t) == len(mech.times) and res.meta["change_points"], why
+    assert_histories_close(res, analytic.solve(mech), rtol=1e-9, floor=1e-9, min_columns=15)
+
+
+# ---------------------------------------------------------------- beside a change point, every generated family
+#
+# The reference is the four-bar's closed form (law of cosines for B: its foot p = (b² − c² + f²)/(2f) along A→O4 and
+# its height σ·√(b² − p²); ω3, ω4 and α3, α4 from the loop's velocity and acceleration equations, two real
+# equations each), evaluated in 60-digit decimal arithmetic on the linkage the file states: its stated crank,
+# coupler and rocker lengths, O2 and the ground's direction from its coordinates, and the ground length that makes
+# s + l = p + q exact (the coordinates give it to within an ulp; beside a change point that ulp moves the
+# velocities by ε·cond², so the float closed form — validators/analytic/changepoint.py — is itself off by up to
+# 1e-4 at 1e-6 rad and cannot be evaluated at 1e-9 rad). The branch σ (which side of A→O4 B is on, flipped at each
+# change point: the velocity-continuous motion) and the change angles are the validators'
+# (analytic_changepoint.branch_signs, change_angles).
+
+DIGITS = 60
+
+
+def _cos_sin(x: float) -> tuple:
+    from decimal import Decimal, localcontext
+
+    with localcontext() as ctx:
+        ctx.prec = DIGITS + 10
+        pi = Decimal(
+            "3.14159265358979323846264338327950288419716939937510582097494459230781640628620899862803482534211706798"
+        )
+        x = Decimal(x)
+        x -= 2 * pi * (x / (2 * pi)).to_integral_value()
+        c = s = Decimal(0)
+        term, n = Decimal(1), 0
+        while abs(term) > Decimal(10) ** -(DIGITS + 5):
+            if n % 4 == 0:
+                c += term
+            elif n % 4 == 1:
+                s += term
+            elif n % 4 == 2:
+                c -= term
+            else:
+                s -= term
+            n += 1
+            term = term * x / n
+        return +c, +s
+
+
+def _fourbar_hp(geometry: dict, sigma: int, theta: float, omega: float, alpha: float) -> dict[str, float]:
+    """The four-bar at crank angle θ (ω, α): B, the coupler's and rocker's ω, α and B's velocity and acceleration."""
+    from decimal import Decimal, localcontext
+
+    with localcontext() as ctx:
+        ctx.prec = DIGITS
+        a, b, c, O2, O4 = (geometry[k] for k in ("a", "b", "c", "O2", "O4"))
+        ca, sa = _cos_sin(theta)
+        w2, al2 = Decimal(omega), Decimal(alpha)
+        A = (O2[0] + a * ca, O2[1] + a * sa)
+        dx, dy = O4[0] - A[0], O4[1] - A[1]
+        f2 = dx * dx + dy * dy
+        f = f2.sqrt()
+        p = (b * b - c * c + f2) / (2 * f)
+        q2 = b * b - p * p
+        q = q2.sqrt() if q2 > 0 else Decimal(0)
+        ux, uy = dx / f, dy / f
+        B = (A[0] + p * ux - sigma * q * uy, A[1] + p * uy + sigma * q * ux)
+        e3 = ((B[0] - A[0]) / b, (B[1] - A[1]) / b)
+        e4 = ((B[0] - O4[0]) / c, (B[1] - O4[1]) / c)
+
+        def solve(rx: Decimal, ry: Decimal) -> tuple:  # b·e3·x3 − c·e4·x4 = r (two real equations)
+            det = -b * e3[0] * c * e4[1] + c * e4[0] * b * e3[1]
+            return (-rx * c * e4[1] + c * e4[0] * ry) / det, (b * e3[0] * ry - rx * b * e3[1]) / det
+
+        w3, w4 = solve(-a * w2 * ca, -a * w2 * sa)  # j·(a·ω2·e2 + b·ω3·e3 − c·ω4·e4) = 0
+        Rx = a * w2 * w2 * ca + b * w3 * w3 * e3[0] - c * w4 * w4 * e4[0]  # the centripetal terms
+        Ry = a * w2 * w2 * sa + b * w3 * w3 * e3[1] - c * w4 * w4 * e4[1]
+        al3, al4 = solve(-a * al2 * ca + Ry, -a * al2 * sa - Rx)
+        out = {
+            "B.x": B[0],
+            "B.y": B[1],
+            "coupler.omega": w3,
+            "rocker.omega": w4,
+            "coupler.alpha": al3,
+            "rocker.alpha": al4,
+            "B.vx": -c * w4 * e4[1],
+            "B.vy": c * w4 * e4[0],
+            "B.ax": -c * al4 * e4[1] - c * w4 * w4 * e4[0],
+            "B.ay": c * al4 * e4[0] - c * w4 * w4 * e4[1],
+        }
+        return {k: float(v) for k, v in out.items()}
+
+
+def _stated_geometry(mech: vloop.Mechanism) -> dict:
+    """The linkage the file states (see above), in Decimal: a, b, c, O2, O4 (d from s + l = p + q)."""
+    from decimal import Decimal, localcontext
+
+    from validators.analytic import fourbar as analytic_fourbar
+
+    roles = analytic_fourbar.roles(mech)
+    d_file = analytic_fourbar.dims(mech, roles).d
+    lengths = {lk.name: lk.length for lk in mech.links.values()}
+    with localcontext() as ctx:
+        ctx.prec = DIGITS
+        a, b, c = (Decimal(lengths[n]) for n in (roles.crank, roles.coupler, roles.rocker))
+        d = min(
+            (x for x in (b + c - a, a + abs(b - c), a - abs(b - c)) if x > 0), key=lambda x: abs(x - Decimal(d_file))
+        )
+        O2 = tuple(Decimal(v) for v in mech.joints[roles.O2])
+        ux, uy = (Decimal(v) - o for v, o in zip(mech.joints[roles.O4], O2, strict=True))
+        n = (ux * ux + uy * uy).sqrt()
+        return {"a": a, "b": b, "c": c, "O2": O2, "O4": (O2[0] + d * ux / n, O2[1] + d * uy / n), "roles": roles}
+
+
+def _times_at(mech: vloop.Mechanism, crank_angle: float) -> float:
+    d = mech.drivers[0]
+    return (crank_angle - d.x0) / d.v0
+
+
+CP_FAMILIES = ("parallelogram", "antiparallelogram", "kite", "change-point")
+CP_DRAWS = 3  # mechanisms per family
+CP_DISTANCES = (1e-3, 1e-6, 1e-9)  # rad of crank from the change point, either side
+
+
+@pytest.mark.parametrize("family", CP_FAMILIES)
+def test_rates_beside_a_change_point_every_generated_family(family):
+    """Each family of the generated corpus (seed 4242, CP_DRAWS mechanisms), the crank turned either way, sampled on
+    the file's times plus samples 1e-3, 1e-6 and 1e-9 rad either side of its first change point — and those six
+    alone (a late start: the stencil lies on the file's motion, not on the lead-in path). Against the 60-digit
+    closed form of the stated linkage (above), each quantity relative to its group's scale (ω_max for link rates,
+    ω_max² + α_max for link accelerations; the size L, ω_max·L, (ω_max² + α_max)·L for B):
+    * the links' ω and α to rtol = 1e-9 (measured ≤ 1.8e-10; the float closed form 1e-4 at 1e-6 rad);
+    * B's position, velocity and acceleration to rtol plus twice B's travel over the sample's distance Δθ from the
+      change point (|dB/dθ|·Δθ of L): at 1e-9 rad the branches lie within round-off of each other (h within its
+      round-off counts as 0), so B is placed at the change point itself (measured ≤ 9.3e-10; the float closed
+      form 1.2e-8)."""
+    from validators import corpus
+    from validators.analytic import changepoint as analytic_changepoint
+    from validators.analytic.common import cross
+
+    checked = 0
+    for index in range(CP_DRAWS):
+        base = corpus.draw_item(4242, index, families=[f"fourbar/{family}"], limit_fraction=0.0).item.mechanism
+        for sense in (1.0, -1.0):
+            drv = base.drivers[0]
+            mech = dataclasses.replace(base, drivers=(dataclasses.replace(drv, v0=sense * abs(drv.v0), a0=0.0),))
+            geo = _stated_geometry(mech)
+            roles = geo["roles"]
+            zO4, zA, zB = (complex(*mech.joints[j]) for j in (roles.O4, roles.A, roles.B))
+            sigma0 = float(np.sign(cross(zO4 - zA, zB - zA)))
+            angles = analytic_changepoint.change_angles(mech)
+            c = angles[0]
+            turn = math.floor((drv.x0 - c) / (2 * math.pi)) + (1 if sense > 0 else 0)  # the first crossing ahead
+            at = np.array([c + 2 * math.pi * turn + s * x for x in CP_DISTANCES for s in (-1, 1)])
+            samples = np.sort(np.array([_times_at(mech, x) for x in at]))
+            whole = vloop.solve(mech)
+            w = max(np.max(np.abs(whole[f"{k}.omega"])) for k in ("crank", "coupler", "rocker"))
+            acc = w * w + max(np.max(np.abs(whole[f"{k}.alpha"])) for k in ("crank", "coupler", "rocker"))
+            L = mech.scale
+            scale = {"omega": w, "alpha": acc, "x": L, "y": L, "vx": w * L, "vy": w * L, "ax": acc * L, "ay": acc * L}
+            for times in (np.unique(np.concatenate([mech.times, samples])), samples):
+                res = vloop.solve(mech, times)
+                for t in samples:
+                    k = int(np.searchsorted(res.t, t))
+                    th = res["crank.theta"][k]
+                    sigma = analytic_changepoint.branch_signs(np.array([drv.x0, th]), 0, sigma0, angles)[1]
+                    ref = _fourbar_hp(geo, int(sigma), th, res["crank.omega"][k], res["crank.alpha"][k])
+                    away = abs(math.remainder(th - c, 2 * math.pi))
+                    lever = math.hypot(ref["B.vx"], ref["B.vy"]) / abs(res["crank.omega"][k]) / L  # |dB/dθ| / L
+                    for q, value in ref.items():
+                        tol = 1e-9 + (2 * lever * away if q.startswith("B.") else 0.0)
+                        err = abs(res[q][k] - value) / scale[q.split(".")[1]]
+                        assert err <= tol, (
+                            f"{family} #{index} ω {sense:+g} at {away:.0e} rad, {q}: {err:.2e} > {tol:.2e}"
+                        )
+                    checked += 1
+    assert checked == CP_DRAWS * 2 * 2 * 2 * len(CP_DISTANCES)

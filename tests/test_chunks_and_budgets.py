@@ -3,7 +3,7 @@ solver's faster evaluations give the direct ones: sums entry by entry or by prod
 against the SVD, Newton blocks on change points, parallelograms and redundant loops, the grid by one bound.
 
 References are independent of vloop's loop equations: hand closed forms written out here or in
-validators/analytic_*.py, and the run solved in one piece (a chunk border must change nothing).
+validators/analytic/*.py, and the run solved in one piece (a chunk border must change nothing).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Kinetostatics (vloop.forces): every number against an independent reference.
 
-* Closed forms derived by hand (validators/analytic_forces.py: slider-crank and four-bar) match vloop's
+* Closed forms derived by hand (validators/analytic/forces.py: slider-crank and four-bar) match vloop's
   driver torque, pin forces, slider normal force and moment to 1e-9 of each quantity's peak
   (measured ≤ 4e-14).
 * The power balance on every catalog file with masses (and a driven-slider variant): Σ τ·ω + f·ṡ =

@@ -635,7 +635,7 @@ def test_viewer_page_draws_the_targets(written):
 
 def _sixbar_targets() -> list[list[float]]:
     """Ten points on the path of a tracer on link CD of a Stephenson III six-bar (the catalog's, scaled by 1/5),
-    at input angles 0.1 + 2πk/10, by its closed form (validators/analytic_sixbar_stephenson3.py)."""
+    at input angles 0.1 + 2πk/10, by its closed form (validators/analytic/sixbar_stephenson3.py)."""
     from validators.analytic import sixbar_stephenson3 as analytic_sixbar_stephenson3
     from vloop.synthesis.linkages import STEPHENSON3
 
@@ -747,7 +747,7 @@ def test_every_key_refuses_or_survives_hostile_values(tmp_path, capfd, section, 
 @given(st.floats(0.2, 0.5), st.floats(1.2, 2.0), st.floats(-0.3, 0.3), st.floats(-math.pi, math.pi), st.data())
 def test_slider_crank_function_round_trip(a, b, e, th0, data):
     """An offset slider-crank (crank a, rod b, offset e; the test's own B at t = 0) and its own crank angles and
-    slider positions at three instants (closed form, validators/analytic_slider_crank.py) → the slider-crank
+    slider positions at three instants (closed form, validators/analytic/slider_crank.py) → the slider-crank
     function generator → a, b, e to 1e-9 of b; it meets each pair to 1e-9."""
     from validators.analytic import slider_crank as analytic_slider_crank
     from vloop.synthesis.linkages import SLIDER_CRANK

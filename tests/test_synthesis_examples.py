@@ -99,7 +99,7 @@ def test_freudenstein_three_precision_points_ohio_state_lecture_12():
 
 
 def test_lecture_12_generator_moves_through_its_pairs():
-    """The generator's file, run by vloop and by the closed-form four-bar (validators/analytic_fourbar.py) at
+    """The generator's file, run by vloop and by the closed-form four-bar (validators/analytic/fourbar.py) at
     the instants it states: the rocker turns by φ2 − φ1 and φ3 − φ1 (printed angles) while the crank turns by
     θ2 − θ1 and θ3 − θ1, to 1e-9 rad — one assembly branch, no defect."""
     theta = chebyshev(30.0, 105.0, 3)

@@ -1,4 +1,4 @@
-"""vloop against the hand-derived closed forms (validators/analytic_*.py), within 1e-12 of each quantity's peak
+"""vloop against the hand-derived closed forms (validators/analytic/*.py), within 1e-12 of each quantity's peak
 (and 1e-12 of its group's peak for quantities near zero: vloop.compare), on both paths: closed-form dyads and one Newton block."""
 
 from __future__ import annotations

@@ -23,7 +23,10 @@ def evaluate(driver: Driver, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     the given columns: θ (or s) only, a not-a-knot cubic spline; with ω (or v), a cubic Hermite spline
     (ẍ then jumps at the rows); with ω and α (or v and a), a quintic Hermite spline (C², the columns'
     motion to O(h⁶) for smooth data); with α but no ω, the quintic Hermite spline through the rates of
-    the cubic spline at the rows. Raises MechanismError if ``t`` leaves the profile's time range.
+    the cubic spline at the rows. Two rows that repeat a value with rates of opposite signs (a rocked sweep
+    exported as a table: arriving at its extreme, leaving it) are a reversal there: the input rests at that value
+    between them (no polynomial overshoot past the table's extreme; :func:`reversals`). Raises MechanismError if
+    ``t`` leaves the profile's time range.
     """
     t = np.asarray(t, float)
     p = driver.profile
@@ -62,6 +65,11 @@ def _interpolant(p: Profile) -> Any:
     else:
         v = CubicSpline(p.t, p.x)(p.t, 1) if p.v is None else p.v
         xs = PPoly(_quintic_hermite(p.t, p.x, v, p.a), p.t)
+    rest = reversals(p)
+    if rest.any():  # (a copy of the coefficients: the spline's own are not written to)
+        xs = PPoly(xs.c.copy(), xs.x)
+        xs.c[:, rest] = 0.0
+        xs.c[-1, rest] = p.x[:-1][rest]
     if len(_BUILT) >= 64:
         _BUILT.clear()
     _BUILT[id(p)] = (p, xs)  # the profile is kept alive with it, so its id is not reused
@@ -69,6 +77,20 @@ def _interpolant(p: Profile) -> Any:
 
 
 _BUILT: dict[int, tuple[Profile, Any]] = {}
+
+
+REPEAT_RTOL = 1e-12  # two rows' values this close (of the larger of |x| and the profile's range) repeat a value
+
+
+def reversals(p: Profile) -> np.ndarray:
+    """Per interval between rows: whether its two rows repeat a value with given rates of opposite signs — the
+    input arrives at an extreme and leaves it (how a rocked sweep is exported: its extreme row twice, ω before and
+    after the reversal). Any polynomial through both rates overshoots past that value between them (by about
+    |ω|·Δt/4: the table's extreme is not where the input turns); the input rests at the value instead."""
+    if p.v is None or len(p.x) < 2:
+        return np.zeros(max(len(p.x) - 1, 0), bool)
+    scale = np.maximum(np.maximum(np.abs(p.x[:-1]), np.abs(p.x[1:])), np.ptp(p.x))
+    return (np.abs(np.diff(p.x)) <= REPEAT_RTOL * scale) & (p.v[:-1] * p.v[1:] < 0)
 
 
 def _quintic_hermite(t: np.ndarray, x: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:

@@ -89,6 +89,8 @@ def _health_and_rates(
     near = near_change_point(run, i, t_grid[rows], cond)  # (rows: a slice of every row, or the rated rows)
     if run.check:
         signed = branch_sign * sigma[rows]
+        if factor is None:  # on a toggle to round-off (h = 0: the branches coincide) det J has no sign to keep
+            signed = np.where(out.discs[i][rows] == 0, signed[0], signed)
         bad = np.nonzero(((velocity_bound(cond) > run.rtol) | (signed != signed[0])) & ~near)[0]
         if len(bad):
             m = int(bad[0])

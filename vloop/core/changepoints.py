@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import MechanismError
 from ..method.loops import LoopSystem
 from .accuracy import EPS, error_bound
-from .context import ChangePoint, Failure, Run, Solved, change_point_choices, impose_drivers, input_units
+from .context import ChangePoint, Failure, Inputs, Run, Solved, change_point_choices, impose_drivers, input_units
 from .data import Probe, State
 from .dyads import closed_form, dyad_health, dyad_rates, jacobian_columns
 from .plans import Plan, block_plans, store_rates
@@ -296,19 +296,22 @@ def dyads_at(
     rates: bool = False,
     health: bool = False,
     own: bool = True,
+    inputs: Callable[[np.ndarray], tuple] | None = None,
 ) -> tuple:
     """Closed-form blocks 0..upto at ``times`` (any order: each row solved on its own, on each block's branch at
     its time; block ``upto`` on ``sigma`` if given), in chunks of ROWS rows. Returns the probe's state, block
     upto's discriminant h and whether every block closes, per row (block upto itself only if ``own``: else its
     h < 0 tells), and with ``health`` block upto's condition number; with ``rates``, velocities and
-    accelerations. Raises MechanismError where a time is outside a tabulated input."""
+    accelerations. ``inputs``: the drivers' values as a function of time (default: the run's, a late start's
+    lead-in path included). Raises MechanismError where a time is outside a tabulated input."""
     system = run.system
     n, na = len(times), system.n_angles
     trial = Probe(n, na, len(system.slider_names))
     order = np.argsort(times, kind="stable")  # (ascending: a lead-in path is told by the first time)
-    inputs = np.empty((3, n, len(system.drivers)))
-    inputs[:, order] = run.inputs(times[order])
-    impose_drivers(system, trial, *inputs)
+    inputs_at = run.inputs if inputs is None else inputs
+    values = np.empty((3, n, len(system.drivers)))
+    values[:, order] = inputs_at(times[order])
+    impose_drivers(system, trial, *values)
     h, ok, cond = np.empty(n), np.ones(n, bool), np.empty(n)
     plans = block_plans(system)
     for start in range(0, n, ROWS):
@@ -422,7 +425,7 @@ def _smooth_continuation(run: Run, state: State, t_grid: np.ndarray, i: int, lo:
     return jumps[0] <= jumps[1]
 
 
-STENCIL = np.array([-4, -3, -2, -1, 1, 2, 3, 4], float)  # rates across a change point: interpolated from these
+STENCIL = np.r_[-8:0, 1:9].astype(float)  # rates across a change point: interpolated (degree 15) from these
 
 
 STENCIL_INPUT = 0.05  # ... multiples of at most the time in which the inputs move this far (rad, or sizes)
@@ -430,19 +433,29 @@ STENCIL_COND = 100.0  # ... and of the time from the change point at which the c
 
 
 def near_change_point(run: Run, i: int, t: np.ndarray, cond: np.ndarray) -> np.ndarray:
-    """Rows next to a change point whose rates the direct solve cannot deliver to ``rtol`` (cond³·ε above it).
-
-    Rows merely ill-conditioned (within rtol, above its flag level) keep their direct rates, flagged in health.
+    """Rows next to a change point whose rates the direct solve cannot deliver to ``rtol``: their accelerations'
+    bound ρ·cond³·ε above it (ρ: the round-off the block's known part carries, :func:`roundoff_factor`).
+    :func:`rates_across` keeps the better of theirs and the interpolated ones; rows merely ill-conditioned (within
+    rtol, above its flag level) keep their direct rates, flagged in health.
     """
     near = np.zeros(len(t), bool)
     events = run.events.get(i, ())
     if not events or not run.check:
         return near
-    refused = error_bound(cond) > run.rtol
+    refused = roundoff_factor(run, i) * error_bound(cond) > run.rtol
     for ev in events:
         reach = 4.0 * time_to_move(run, ev.time, math.inf, STENCIL_INPUT)
         near |= refused & (np.abs(t - ev.time) < reach)
     return near
+
+
+def roundoff_factor(run: Run, i: int) -> float:
+    """How much more round-off block ``i``'s positions carry than ε of the mechanism's size: the magnitudes its
+    known part is summed from (a ground chord counts the pivots' distances from the origin) over the size, at
+    least 1. Its rates' error bounds next to a change point grow with it (cond²·ε, cond³·ε times this)."""
+    plan = block_plans(run.system)[i]
+    sizes = plan.sizes[plan.known]
+    return max(1.0, float(np.max(np.sum(sizes, axis=0), initial=0.0)) / run.scale)
 
 
 def rates_across(
@@ -450,11 +463,13 @@ def rates_across(
 ) -> None:
     """Rates of block ``i`` at rows next to a change point, where its Jacobian is (nearly) singular.
 
-    Interpolated (degree 7) from the smooth branch at t* ± k·η, k = 1..4, η where the condition number
-    falls to STENCIL_COND (the stencil's own points then carry ~STENCIL_COND³·ε), and again at 2η: their
-    difference bounds the narrower one's truncation error (conservatively: where the branch bends fast the
-    error does not yet fall like η⁸). Each row keeps whichever is better: the interpolated rates (that
-    estimate) or its direct ones (their bound cond³·ε). The stencils of every change point are probed at once.
+    Interpolated (degree 15) from the smooth branch at t* ± k·η, k = 1..8, η where the condition number falls
+    to STENCIL_COND (the stencil's own points then carry ~STENCIL_COND²·ε in their velocities, STENCIL_COND³·ε
+    in their accelerations), and again at 2η: their difference bounds the narrower one's truncation error
+    (conservatively: it falls like η¹⁶ once the stencil resolves the branch). Each row keeps, for its velocities
+    and its accelerations apart, whichever is better: the interpolated ones (that estimate) or its direct ones
+    (their bounds cond²·ε and cond³·ε). The stencils of every change point are probed at once, on the file's
+    motion (also before a late start's first time) and on the branches either side of their change point.
     """
     events = run.events[i]
     t_star = np.array([ev.time for ev in events])
@@ -464,30 +479,53 @@ def rates_across(
     k = np.nonzero(reach.any(axis=1))[0]
     if not len(k):
         return
+    sides = [_sides(run, i, events[j]) for j in k.tolist()]
     t_star, widest = t_star[k], widest[k]
-    eta = _stencil_eta(run, state, t_grid, i, t_star, widest)
+    eta = _stencil_eta(run, state, t_grid, i, t_star, widest, sides)
     near = np.abs(t_rows[None, :] - t_star[:, None]) < 8.0 * eta[:, None]
     k = np.nonzero(near.any(axis=1))[0]
     stencils = [t_star[j] + f * eta[j] * STENCIL for j in k for f in (1.0, 2.0)]  # narrow, then wide
-    probed = _probe_groups(run, state, t_grid, i, stencils, rates=True)
-    na = run.system.n_angles
+    sigma = [np.where(STENCIL < 0, *sides[j]) for j in k for _ in (1.0, 2.0)]
+    probed = _probe_groups(run, state, t_grid, i, stencils, rates=True, sigma=sigma)
     for n, j in enumerate(k.tolist()):
         narrow, wide = probed[2 * n], probed[2 * n + 1]
         if narrow is None or wide is None:
             continue  # a stencil leaves the feasible range: keep the direct rates (flagged)
         mine = rows[near[j]]
         u = (t_grid[mine] - t_star[j]) / eta[j]
-        narrow, wide = _interpolated(narrow, u), _interpolated(wide, 0.5 * u)
-        use = np.zeros(len(mine), bool)
-        for what in ("v", "a"):
-            scale = _rate_scale(run, plan, narrow["scale_" + what], narrow["scale_v"], what)
-            err_stencil = np.abs(narrow[what] - wide[what]) + STENCIL_COND**3 * EPS * scale
-            err_direct = (cond[mine] ** 3 * EPS)[:, None] * scale
-            use |= np.all(err_stencil < err_direct, axis=1)
+        _keep_better(run, plan, (mine, cond[mine], u), roundoff_factor(run, i), (narrow, wide), state, out)
+
+
+def _keep_better(
+    run: Run,
+    plan: Plan,
+    at: tuple[np.ndarray, np.ndarray, np.ndarray],
+    rho: float,
+    stencils: tuple[_Probed, _Probed],
+    state: State,
+    out: Solved,
+) -> None:
+    """Store at rows ``at`` = (rows, their condition numbers, their stencil coordinates u) the interpolated
+    velocities, and accelerations, where they are better than the direct ones: the stencil's error estimate (the
+    narrow and wide stencils' difference, and its own points' round-off) against ρ·cond²·ε (ρ·cond³·ε) of the
+    rates' scale, ρ the round-off factor of the block's known part (:func:`roundoff_factor`)."""
+    rows, cond, u = at
+    narrow, wide = stencils
+    narrow_at, wide_at = _interpolated(narrow, u), _interpolated(wide, 0.5 * u)
+    for what, power in (("v", 2), ("a", 3)):
+        scale = _rate_scale(run, plan, narrow_at["scale_" + what], narrow_at["scale_v"], what)
+        err_stencil = np.abs(narrow_at[what] - wide_at[what]) + rho * STENCIL_COND**power * EPS * scale
+        err_direct = (rho * cond**power * EPS)[:, None] * scale
+        use = np.all(err_stencil < err_direct, axis=1)
         if use.any():
-            for what in ("v", "a"):
-                store_rates(plan, state, mine[use], narrow[what][use], what, na)
-            out.at_change[mine[use]] = True
+            store_rates(plan, state, rows[use], narrow_at[what][use], what, run.system.n_angles)
+            out.at_change[rows[use]] = True
+
+
+def _sides(run: Run, i: int, ev: ChangePoint) -> tuple[float, float]:
+    """Block ``i``'s branch σ just before and just after the change point ``ev`` (the stencil's two halves)."""
+    before = float(run.sigma(i, np.array([ev.time]))[0])  # (the flips strictly before t*)
+    return before, (-before if ev.flip else before)
 
 
 @dataclass
@@ -501,15 +539,25 @@ class _Probed:
 
 
 def _probe_groups(
-    run: Run, state: State, t_grid: np.ndarray, i: int, groups: list[np.ndarray], rates: bool
+    run: Run,
+    state: State,
+    t_grid: np.ndarray,
+    i: int,
+    groups: list[np.ndarray],
+    rates: bool,
+    sigma: list[np.ndarray] | None = None,
 ) -> list[_Probed | None]:
-    """Blocks 0..i solved at each group of times (ascending), on the run's branches: block i's condition number and
-    (with ``rates``) its rates there, or None for a group where a block cannot be solved. Every row at once where
-    blocks 0..i are closed forms; else a probe per group, continued from the sample before its first time."""
+    """Blocks 0..i solved at each group of times (ascending), on the run's branches (block i on ``sigma``, per
+    group, where given): block i's condition number and (with ``rates``) its rates there, or None for a group
+    where a block cannot be solved. Every row at once, on the file's motion, where blocks 0..i are closed forms;
+    else a probe per group, continued from the sample before its first time."""
     plan = block_plans(run.system)[i]
     if closed_forms_upto(run.system, i) and groups:
+        own = np.concatenate(sigma) if sigma is not None else None
         try:
-            trial, _, ok, cond = dyads_at(run, np.concatenate(groups), i, rates=rates, health=True)
+            trial, _, ok, cond = dyads_at(
+                run, np.concatenate(groups), i, own, rates=rates, health=True, inputs=Inputs(run.system.mechanism)
+            )
         except MechanismError:  # a probe past the end of a tabulated input: group by group below
             trial = None
         if trial is not None:
@@ -541,12 +589,16 @@ def _unknown_rates(run: Run, trial: State, plan: Plan, rows: slice) -> tuple[np.
 
 
 def _interpolated(probed: _Probed, u: np.ndarray) -> dict[str, np.ndarray]:
-    """The rates at stencil coordinates ``u`` (multiples of its step from t*) by the degree-7 polynomial through the
-    stencil's, and their magnitudes."""
+    """The rates at stencil coordinates ``u`` (multiples of its step from t*) by the polynomial through the
+    stencil's (its Lagrange basis at u: no Vandermonde system), and their magnitudes."""
+    x = STENCIL
+    diff = np.asarray(u, float)[:, None, None] - x[None, None, :]  # (rows, node k, node j): u − x_j
+    span = x[:, None] - x[None, :]
+    off = ~np.eye(len(x), dtype=bool)
+    basis = np.prod(np.where(off, diff / np.where(off, span, 1.0), 1.0), axis=2)  # Π_{j≠k} (u − x_j)/(x_k − x_j)
     out = {}
     for what, vals in (("v", probed.v), ("a", probed.a)):
-        fit = np.polynomial.polynomial.polyfit(STENCIL, vals, len(STENCIL) - 1)
-        out[what] = np.polynomial.polynomial.polyval(u, fit).T
+        out[what] = basis @ vals
         out["scale_" + what] = np.max(np.abs(vals), axis=0)
     return out
 
@@ -566,15 +618,21 @@ def _rate_scale(run: Run, plan: Plan, scale: np.ndarray, scale_v: np.ndarray, wh
 
 
 def _stencil_eta(
-    run: Run, state: State, t_grid: np.ndarray, i: int, t_star: np.ndarray, widest: np.ndarray
+    run: Run,
+    state: State,
+    t_grid: np.ndarray,
+    i: int,
+    t_star: np.ndarray,
+    widest: np.ndarray,
+    sides: list[tuple[float, float]],
 ) -> np.ndarray:
     """The stencil's step [s] at each change point t*: where block ``i``'s condition number falls to STENCIL_COND
     (it grows like 1/|t − t*| next to a change point), at most ``widest`` (the time the inputs take to move
-    STENCIL_INPUT)."""
+    STENCIL_INPUT). ``sides``: block i's branch σ before and after each t*."""
     d = 0.02 * widest
-    looks = _probe_groups(
-        run, state, t_grid, i, [np.array([t - e, t + e]) for t, e in zip(t_star, d, strict=True)], False
-    )
+    groups = [np.array([t - e, t + e]) for t, e in zip(t_star, d, strict=True)]
+    sigma = [np.array(side) for side in sides]
+    looks = _probe_groups(run, state, t_grid, i, groups, False, sigma=sigma)
     eta = widest.copy()
     for j, look in enumerate(looks):
         if look is not None:

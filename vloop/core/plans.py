@@ -44,11 +44,19 @@ class Plan:
     vel_sum: Sum = None  # type: ignore[assignment]
     per_row: bool = False  # r, cd one per variant and the closed form's constants one per row (sums.per_row)
     samples: int = 0  # ... each variant's rows
+    # per term: the magnitude its round-off is relative to (r, or for a chord the magnitudes it was summed from:
+    # a ground chord between pivots far from the origin is as exact as their coordinates, not as its length)
+    sizes: np.ndarray = None  # type: ignore[assignment]
 
     def known_magnitude(self, state: State, k: slice | np.ndarray) -> np.ndarray:
-        """Σ |r + s| over the known vectors per row: what the known part X is summed from (its round-off
-        grows with it, not with |X|: a mechanism far from the origin sums large vectors to a small X)."""
-        r = self.r[self.known] if not self.per_row else self.term_values(k)[0][:, self.known]
+        """Σ |r + s| over the known vectors per row (a chord's r counted as the magnitudes it was summed from):
+        what the known part X is computed from (its round-off grows with it, not with |X|: a mechanism far from
+        the origin sums large vectors to a small X)."""
+        if not self.per_row:
+            r = self.sizes[self.known]
+        else:
+            variant = np.arange(k.start or 0, k.stop) if isinstance(k, slice) else np.asarray(k)
+            r = self.sizes[:, variant // self.samples].T[:, self.known]
         return np.abs(r + state.s[k][:, self.sl[self.known]]).sum(axis=1)
 
     def term_values(self, k: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,6 +112,7 @@ def block_plans(system: LoopSystem) -> list[Plan]:
         for (owner, _, _), s in zip(group, build_sums(system, [(t, rows) for _, t, rows in group], K), strict=True):
             made.setdefault(owner, []).append(s)
     system.cache["sums"] = (made["points"][0], made["loops"][0])
+    system_terms = [block_terms(system, b)[0] for b in system.blocks]
     plans = []
     for n, (args, _, _) in enumerate(data):
         total, known_sum, vel_sum = made[n]
@@ -116,6 +125,7 @@ def block_plans(system: LoopSystem) -> list[Plan]:
                 vel_sum=vel_sum,
                 per_row=rows,
                 samples=system.cache.get("per_row", 0),
+                sizes=term_sizes(system)[system_terms[n]],
             )
         )  # type: ignore[misc]
     system.cache["plans"] = plans
@@ -158,6 +168,16 @@ def _plan_data(system: LoopSystem, b: Block) -> tuple[tuple, list, int]:
     cd = cd_all[terms]
     args = (b, Cb, CbT.astype(complex), ang, sl, r, cd, unk_ang, unk_sl, masks, w_const, w_sl, u_dir, known)
     return args, specs, len(Cb)
+
+
+def term_sizes(system: LoopSystem) -> np.ndarray:
+    """Per term (and per variant where given so): the magnitude its round-off is relative to — its own r, or for a
+    chord (a body's vectors a loop crosses, summed once) the larger of r and its parts' sizes summed."""
+    r = np.array(term_constants(system)[2], float)  # (terms,) or (terms, variants)
+    sizes = np.abs(r)
+    for tid, parts in sorted(system.chords):  # (a chord's parts are terms made before it)
+        sizes[tid] = np.maximum(sizes[tid], sum(abs(c) * sizes[p] for p, c in parts))
+    return sizes
 
 
 def _number(system: LoopSystem, x: complex | np.ndarray) -> complex | np.ndarray:

@@ -44,8 +44,9 @@ LIMIT_RTOL = 1e-12  # the limit is located to this fraction of the drivers' rang
 
 def _locate_failure(run: Run, state: State, t_grid: np.ndarray, f: Failure, X: np.ndarray) -> tuple[float, np.ndarray]:
     """Bisect between the last solved sample k−1 and the failing sample k (or the time between them where the
-    failure was found: ``f.at``) for the last assemblable time (a limit position or toggle). Returns (time,
-    driver values there)."""
+    failure was found: ``f.at``) for the last assemblable time (a limit position or toggle), then, where a
+    closed-form dyad cannot close there, take the root of its discriminant (:func:`_discriminant_root`).
+    Returns (time, driver values there)."""
     k = f.sample
     span = np.ptp(X, axis=0) if X.size else np.zeros(0)
     span = np.where(span > 0, span, 1.0)
@@ -56,15 +57,15 @@ def _locate_failure(run: Run, state: State, t_grid: np.ndarray, f: Failure, X: n
     x_lo, x_hi = X[k - 1], X[k]
     if f.at is not None:
         hi, x_hi = f.at
+    elif _probe_at(run, base, lo, hi)[0].n_ok == 2:  # row k closes (refused for its condition): the limit is there
+        return hi, x_hi
     for _ in range(200):
         if X.size and np.all(np.abs(x_hi - x_lo) <= LIMIT_RTOL * span):
             break
         if hi - lo <= 4 * np.spacing(max(abs(hi), 1.0)):
             break
         mid = 0.5 * (lo + hi)
-        solved, trial = probe(
-            run, base, np.array([lo]), 0, np.array([mid]), len(block_plans(run.system)) - 1, check=False, rates=False
-        )
+        solved, trial = _probe_at(run, base, lo, mid)
         xm = run.inputs(np.array([mid]))[0][0]
         if solved.n_ok == 2:
             lo, x_lo = mid, xm
@@ -72,7 +73,61 @@ def _locate_failure(run: Run, state: State, t_grid: np.ndarray, f: Failure, X: n
                 getattr(base, name)[0] = getattr(trial, name)[1]
         else:
             hi, x_hi = mid, xm
-    return lo, x_lo
+    root = _discriminant_root(run, base, lo, hi)
+    return (lo, x_lo) if root is None else (root, run.inputs(np.array([root]))[0][0])
+
+
+def _probe_at(run: Run, base: State, lo: float, t: float) -> tuple:
+    """Every block solved at time ``t``, continued from ``base`` (the configuration at ``lo``)."""
+    upto = len(block_plans(run.system)) - 1
+    return probe(run, base, np.array([lo]), 0, np.array([t]), upto, check=False, rates=False)
+
+
+LIMIT_STEPS = 12  # secant steps on a discriminant (it crosses zero linearly at a limit: a few suffice)
+
+
+def _discriminant_root(run: Run, base: State, lo: float, hi: float) -> float | None:
+    """Where the closed-form dyad that cannot close at ``hi`` (but closes at ``lo``) has its discriminant h = 0,
+    by the Illinois variant of regula falsi on h(t) inside [lo, hi]: h crosses zero linearly at a limit, so the
+    input is located to round-off (bisection to a tolerance leaves the configuration √Δx off the toggle). The
+    latest time found where every block closes (h within round-off of zero or above); None where the failing
+    block has no discriminant (a Newton block)."""
+    solved, _ = _probe_at(run, base, lo, hi)
+    plans = block_plans(run.system)
+    if solved.failure is None or solved.failure.loop is None:
+        return None
+    i = next((n for n, p in enumerate(plans) if solved.failure.loop in p.block.loops), None)
+    if i is None or plans[i].block.kind == "newton" or len(solved.discs) <= i or solved.discs[i][1] >= 0:
+        return None
+
+    def h_at(t: float) -> float | None:  # h at t, None where the run does not close there
+        got, _ = _probe_at(run, base, lo, t)
+        h = float(got.discs[i][1]) if len(got.discs) > i and len(got.discs[i]) > 1 else math.nan
+        return h if got.n_ok == 2 or h < 0 else None
+
+    a, b, ha, hb = lo, hi, h_at(lo), float(solved.discs[i][1])
+    if ha is None or ha < 0:
+        return None
+    side = 0
+    for _ in range(LIMIT_STEPS):
+        t = b - hb * (b - a) / (hb - ha) if hb < ha else 0.5 * (a + b)
+        if not a < t < b:
+            t = 0.5 * (a + b)
+        h = h_at(t)
+        if h is None:  # (another block fails there: halve)
+            b = t
+            continue
+        if h >= 0:
+            a, ha = t, h
+            hb, side = (0.5 * hb if side == 1 else hb), 1  # (Illinois: an end kept twice in a row counts half)
+            if h == 0:  # on the toggle, to the round-off of h
+                break
+        else:
+            b, hb = t, h
+            ha, side = (0.5 * ha if side == -1 else ha), -1
+        if b - a <= 4 * np.spacing(max(abs(b), 1.0)):
+            break
+    return a
 
 
 def assemble_blocks(system: LoopSystem, blocks: tuple, q0: np.ndarray) -> np.ndarray:
