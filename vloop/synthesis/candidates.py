@@ -20,8 +20,9 @@ from ..model import Mechanism
 @dataclass(frozen=True)
 class Task:
     """What was asked: the method, the targets (points (N,) complex; poses add ``angles`` (N,) [rad]; a function
-    generator's ``outputs`` (N,) of output column ``output``), the task's ``size`` [length] that relative errors
-    refer to, and whether the method is exact (its candidates pass through every position to round-off)."""
+    generator's ``outputs`` (N,) of output column ``output``), the task's ``size`` that relative errors refer to
+    (in the errors' own unit: the targets' size [length], or the output's range [rad or length]) and what it is
+    (``scale``), and whether the method is exact (its candidates pass through every position to round-off)."""
 
     method: str
     size: float
@@ -33,6 +34,7 @@ class Task:
     units: str = "m"
     function: Any = None  # (f, x range, y range, input range, output range) of a function generator
     timing: np.ndarray | None = None
+    scale: str = "the targets' size"
 
     @property
     def count(self) -> int:
@@ -82,8 +84,9 @@ class Candidate:
 
     @property
     def error(self) -> float:
-        """The largest error at a precision position, as a fraction of the task's size (angles: of 1 rad ×
-        size for a pose; NaN where a position was not reached)."""
+        """The largest error at a precision position, unit-free: a fraction of the task's size (the targets' size,
+        or a function generator's output range; a pose's angle error counts in rad, as a fraction of 1 rad); NaN
+        where a position was not reached."""
         e = np.asarray(self.errors, float)
         if self.angle_errors is not None:
             e = np.maximum(e, np.abs(self.angle_errors) * self.size)

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import MotionError, SynthesisError
 from .candidates import Candidates, Task
+from .circuits import arcs, classify, swept
 from .defects import Draft, Requirements, assess
 from .expression import parse
 from .linkages import FOURBAR, SLIDER_CRANK, Topology, reanchored
@@ -111,27 +112,56 @@ def function(
     setup = _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage)
     th, out = setup["theta"], setup["output"]
     top, coords, output = _linkage(linkage, th[0], out[0], th, out, ground)
-    direction = 1.0 if setup["input_range"][1] >= setup["input_range"][0] else -1.0
-    t = direction * (th - setup["input_range"][0])
-    span = direction * (setup["input_range"][1] - setup["input_range"][0])
+    ts, tf = setup["input_range"]
+    direction = 1.0 if tf >= ts else -1.0
+    verdict = classify(top, _configs(top, coords, th, out), direction)
+    t = direction * (th - ts)
+    span = direction * (tf - ts)
     mech0 = top.mechanism(coords, name=name, omega=direction, times=np.array([0.0]), units=units)
-    defects: tuple[str, ...] = ()
+    notes = _sweep_note(top, coords, th[0], ts, tf) if not verdict.kind else ()
     try:
         mech = reanchored(mech0, top, -float(t[0]), np.array([0.0]))
     except MotionError as exc:  # the range's start is beyond a limit of the motion from the first point
-        mech, defects = mech0, (f"branch: the input range's start cannot be reached from the first point ({exc})",)
+        mech = mech0
+        notes = notes or (f"branch defect: the input range's start cannot be reached from the first point ({exc})",)
         t, span = t - t[0], span - float(t[0])
-    size = max(abs(v) for v in _dims(top, coords).values())
-    task = Task("function", size, True, outputs=_physical(out, coords, top), output=output, units=units)
-    draft = Draft(f"{name}_1", "function", top, mech, t, span, notes=defects)
+    task = Task("function", setup["scale"], len(th) == 3, outputs=_physical(out, coords, top), output=output,
+                units=units, scale="the output's range")  # fmt: skip
+    draft = Draft(f"{name}_1", "function", top, mech, t, span, notes=notes, verdict=verdict)
     cand = assess(draft, task, requirements or Requirements())
-    if defects:
+    if notes and "branch" not in cand.defects:
         cand.defects = (*cand.defects, "branch")
     cand.guided = "rocker" if top.name == "fourbar" else "slider"
     cand.notes = (*cand.notes, *_flipped(coords, th[0], out[0], top))
     if setup["f"] is not None:
         _structural(cand, setup, samples, direction)
     return Candidates(task, [cand], time.perf_counter() - started).keep(name)
+
+
+def _configs(top: Topology, coords: dict[str, complex], th: np.ndarray, out: np.ndarray) -> list[dict[str, complex]]:
+    """The linkage at each precision pair as the method means it: the crank turned by the input's increment, the
+    rocker by the output's (a slider moved along +x by it)."""
+    turn = np.exp(1j * (th - th[0]))
+    if top.sliders:
+        moved = coords["B"] + (out - out[0])
+    else:
+        moved = coords["O4"] + (coords["B"] - coords["O4"]) * np.exp(1j * (out - out[0]))
+    return [{**coords, "A": coords["A"] * turn[k], "B": complex(moved[k])} for k in range(len(th))]
+
+
+def _sweep_note(top: Topology, coords: dict[str, complex], th1: float, ts: float, tf: float) -> tuple[str, ...]:
+    """A branch defect's note when the input range runs into a limit of the crank (a toggle between positions)."""
+    rng = arcs(top, coords)
+    start = float(np.angle(coords["A"])) + ts - th1
+    ends = swept(rng, start, start + tf - ts)
+    if ends is None:
+        return ()
+    at = float(rng.psi(np.array([start]))[0])
+    lo, hi = (math.degrees(ts + v - rng.phase - at) for v in ends)
+    return (
+        f"branch defect: the input range [{math.degrees(ts):.2f}°, {math.degrees(tf):.2f}°] runs into a limit of "
+        f"the crank, which rocks between {lo:.2f}° and {hi:.2f}° (in the input's angles)",
+    )
 
 
 def _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage) -> dict:
@@ -143,7 +173,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
         if P.ndim != 2 or P.shape[1] != 2 or len(P) < 3 or not np.all(np.isfinite(P)):
             raise SynthesisError("[function] pairs must be at least three finite [input, output] pairs")
         rng = input_range or (float(P[0, 0]), float(P[-1, 0]))
-        return {"f": None, "theta": P[:, 0], "output": P[:, 1], "input_range": rng}
+        return {"f": None, "theta": P[:, 0], "output": P[:, 1], "input_range": rng, "scale": float(np.ptp(P[:, 1]))}
     if f is None or x_range is None or input_range is None or output_range is None:
         raise SynthesisError("[function] give the function with x_range, input_range and output_range (or pairs)")
     fn = parse(f) if isinstance(f, str) else f
@@ -171,7 +201,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
     theta = ts + (xs - x0) / (xf - x0) * (tf - ts)
     output = os_ + (ys - y0) / (yf - y0) * (of - os_)
     return {"f": fn, "theta": theta, "output": output, "input_range": (ts, tf), "x": (x0, xf), "y": (y0, yf),
-            "output_range": (os_, of)}  # fmt: skip
+            "output_range": (os_, of), "scale": abs(of - os_)}  # fmt: skip
 
 
 def _pair(v: object, what: str) -> tuple[float, float]:

@@ -37,6 +37,7 @@ import numpy as np
 from ..errors import SynthesisError
 from ._evaluate import evaluate
 from .candidates import Candidates, Task
+from .circuits import classify
 from .defects import Draft, Requirements, assess, population_transmission
 from .fit import match
 from .linkages import FOURBAR
@@ -391,31 +392,21 @@ def _given(ps: Poses, choice: dict, i: int) -> tuple[complex, complex]:
 
 def _drafts(ps: Poses, pair: tuple, name: str, units: str) -> list[Draft]:
     """The four-bar of two dyads, each dyad driving in turn, its input turning the way that meets the poses in
-    order (an order defect when neither does)."""
+    order on one branch (its defect named from its configuration at each pose: :mod:`.circuits`)."""
     (O1, A1), (O2, A2) = pair
     if abs(A1 - A2) < 1e-9 or abs(O1 - O2) < 1e-9:
         return []
     out = []
     for (Oi, Ai), (Oj, Aj) in (((O1, A1), (O2, A2)), ((O2, A2), (O1, A1))):
-        omega, t = _timing(ps, Oi, Ai)
+        configs = [
+            {"O2": Oi, "A": ps.move(k, Ai), "B": ps.move(k, Aj), "O4": Oj} for k in range(len(ps.p))
+        ]
+        verdict = classify(FOURBAR, configs)
         world = {k: ps.centre + ps.size * v for k, v in {"O2": Oi, "A": Ai, "B": Aj, "O4": Oj, "P": ps.p[0]}.items()}
-        mech = FOURBAR.mechanism(world, name=name, omega=omega, times=np.array([0.0]), units=units)
-        out.append(Draft(name, "motion", FOURBAR, mech, t, float(np.max(t))))
+        mech = FOURBAR.mechanism(world, name=name, omega=verdict.omega, times=np.array([0.0]), units=units)
+        t = verdict.times
+        out.append(Draft(name, "motion", FOURBAR, mech, t, float(np.max(t)), verdict=verdict))
     return out
-
-
-def _timing(ps: Poses, M: complex, A: complex) -> tuple[float, np.ndarray]:
-    """(ω, instants): the crank's turn to each pose taken in the direction that meets them in order (ω = ±1 rad/s;
-    +1 with its unordered instants when neither direction does)."""
-    beta = np.array([0.0] + [np.angle((ps.move(k, A) - M) / (A - M)) for k in range(1, len(ps.p))])
-    for omega in (1.0, -1.0):
-        t = np.mod(omega * beta, TWO_PI)
-        t[0] = 0.0
-        if np.all(np.diff(t) > 0):
-            return omega, t
-    t = np.mod(beta, TWO_PI)
-    t[0] = 0.0
-    return 1.0, t
 
 
 # ---------------------------------------------------------------- the search
