@@ -124,7 +124,7 @@ def test_circuit_defect_across_a_crank_rockers_assemblies():
 def test_no_defect_in_order_on_one_assembly():
     """The crank-rocker's poses at 0°, 90°, 200° on one assembly: a solution; the closed form at its instants
     puts the tracer on each pose to round-off."""
-    coords, rows = build(*CRANK_ROCKER, (0.0, 90.0, 200.0), (1, 1, 1))
+    _, rows = build(*CRANK_ROCKER, (0.0, 90.0, 200.0), (1, 1, 1))
     c = synthesized(*CRANK_ROCKER, (0.0, 90.0, 200.0), (1, 1, 1))
     assert c.defects == () and c.solution
     res = analytic_fourbar.solve(c.mechanism, c.times)

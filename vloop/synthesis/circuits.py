@@ -80,7 +80,7 @@ def arcs(top: Topology, z: dict[str, complex]) -> Arcs:
     """The input's reachable angles of a four-bar or slider-crank with joint positions ``z`` (any instant)."""
     a = abs(z["A"] - z["O2"])
     if top.sliders:
-        (_, axis), = top.sliders.values()
+        ((_, axis),) = top.sliders.values()
         u = complex(*axis) / abs(complex(*axis))
         b = abs(z["B"] - z["A"])
         off = ((z["O2"] - z["B"]) / u).imag  # the crank pivot's offset from the slider's line
@@ -94,7 +94,7 @@ def arcs(top: Topology, z: dict[str, complex]) -> Arcs:
 def sign(top: Topology, z: dict[str, complex]) -> int:
     """The assembly σ (+1 / −1) the positions ``z`` show (see the module docstring)."""
     if top.sliders:
-        (_, axis), = top.sliders.values()
+        ((_, axis),) = top.sliders.values()
         return 1 if ((z["B"] - z["A"]) * complex(*axis).conjugate()).real >= 0 else -1
     return int(side(z, ("A", "B", "O4")))
 
@@ -122,7 +122,8 @@ def classify(top: Topology, configs: list[dict[str, complex]], omega: float | No
     if len(set(circuit.tolist())) > 1:
         k = int(np.nonzero(circuit != circuit[0])[0][0])
         where = "the two assemblies of an input that turns fully" if rng.full else "the input's two arcs"
-        return Verdict("circuit", f"circuit defect: positions 1 and {k + 1} are on different circuits ({where})", w, times)
+        note = f"circuit defect: positions 1 and {k + 1} are on different circuits ({where})"
+        return Verdict("circuit", note, w, times)
     if len(set(sigma.tolist())) > 1:
         k = int(np.nonzero(sigma != sigma[0])[0][0])
         lo, hi = (math.degrees(v) for v in rng.limits(int(arc[0])))

@@ -398,9 +398,7 @@ def _drafts(ps: Poses, pair: tuple, name: str, units: str) -> list[Draft]:
         return []
     out = []
     for (Oi, Ai), (Oj, Aj) in (((O1, A1), (O2, A2)), ((O2, A2), (O1, A1))):
-        configs = [
-            {"O2": Oi, "A": ps.move(k, Ai), "B": ps.move(k, Aj), "O4": Oj} for k in range(len(ps.p))
-        ]
+        configs = [{"O2": Oi, "A": ps.move(k, Ai), "B": ps.move(k, Aj), "O4": Oj} for k in range(len(ps.p))]
         verdict = classify(FOURBAR, configs)
         world = {k: ps.centre + ps.size * v for k, v in {"O2": Oi, "A": Ai, "B": Aj, "O4": Oj, "P": ps.p[0]}.items()}
         mech = FOURBAR.mechanism(world, name=name, omega=verdict.omega, times=np.array([0.0]), units=units)
