@@ -30,10 +30,12 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..errors import MotionError, SynthesisError
+from . import arguments as args
 from .candidates import Candidates, Task
 from .circuits import arcs, classify, swept
 from .defects import Draft, Requirements, assess
-from .expression import parse
+from .domain import check_bounded
+from .expression import Expression, parse
 from .linkages import FOURBAR, SLIDER_CRANK, Topology, reanchored
 
 SPACINGS = ("chebyshev", "even")
@@ -109,6 +111,10 @@ def function(
     through precision ``pairs`` (input [rad], output). ``ground``: O2O4 [length] of a four-bar. Returns the
     candidate, re-solved: errors at the precision points, structural error over the range (``samples``)."""
     started = time.perf_counter()
+    _arguments(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage)
+    args.common(name, units, requirements)
+    args.limited(ground, "ground", "function.ground")
+    args.count(samples, "samples", "function.samples")
     setup = _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage)
     th, out = setup["theta"], setup["output"]
     top, coords, output = _linkage(linkage, th[0], out[0], th, out, ground)
@@ -164,6 +170,29 @@ def _sweep_note(top: Topology, coords: dict[str, complex], th1: float, ts: float
     )
 
 
+def _arguments(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage) -> None:
+    """Each argument's type and range (vloop.synthesis.arguments), before any work."""
+    args.choice(linkage, "linkage", LINKAGES)
+    out_bound = args.MAX_ANGLE if linkage == "fourbar" else args.MAX_LENGTH
+    if pairs is not None:
+        args.rows(pairs, "pairs", 3, 1000, (("input", args.MAX_ANGLE), ("output", out_bound)))
+    else:
+        if f is not None:
+            args.function_of_x(f)
+        for value, where, bound in (
+            (x_range, "x_range", 1e300), (input_range, "input_range", args.MAX_ANGLE),
+            (output_range, "output_range", out_bound), (y_range, "y_range", 1e300),
+        ):  # fmt: skip
+            if value is not None:
+                args.pair(value, where, bound)
+    if input_range is not None:
+        args.pair(input_range, "input_range", args.MAX_ANGLE)
+    args.count(points, "points", "function.points")
+    args.choice(spacing, "spacing", SPACINGS)
+    if precision is not None:
+        args.table(precision, "precision", "a list of x values")
+
+
 def _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage) -> dict:
     """The precision pairs (input θ [rad], output) and the mapping, checked."""
     if linkage not in LINKAGES:
@@ -180,6 +209,8 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
     x0, xf = (float(v) for v in x_range)
     if not (math.isfinite(x0) and math.isfinite(xf)) or x0 == xf:
         raise SynthesisError(f"[function] x_range must be two different finite numbers, got {x_range}")
+    if isinstance(fn, Expression):  # found from the expression: its poles and domain over the whole range
+        check_bounded(fn.tree, x0, xf, fn.text)
     xs = _precision_x(x0, xf, points, spacing, precision)
     dense = np.linspace(x0, xf, 1001)
     yd = np.asarray(fn(np.concatenate([dense, xs])), float)
@@ -192,7 +223,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
         if y_range is not None
         else (float(fn(np.array([x0]))[0]), float(fn(np.array([xf]))[0]))
     )
-    if not (math.isfinite(y0) and math.isfinite(yf)) or abs(yf - y0) <= 1e-12 * max(1.0, float(np.max(np.abs(yd)))):
+    if not (math.isfinite(y0) and math.isfinite(yf)) or abs(yf - y0) <= 1e-12 * float(np.max(np.abs(yd))):
         raise SynthesisError(
             f"[function] f takes the same value at both ends of the range: give y_range (got {y0:g}, {yf:g})"
         )

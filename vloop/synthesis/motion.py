@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SynthesisError
+from . import arguments as args
 from ._evaluate import evaluate
 from .candidates import Candidates, Task
 from .circuits import classify
@@ -96,9 +97,24 @@ def poses_of(raw: object) -> Poses:
             same_angle = abs(math.remainder(arr[i, 2] - arr[j, 2], TWO_PI)) <= COINCIDENT
             if abs(z[i] - z[j]) <= COINCIDENT * size and same_angle:
                 raise SynthesisError(f"[motion] poses {j + 1} and {i + 1} coincide", entry="motion.poses")
-    if size == 1.0 and np.ptp(arr[:, 0]) == 0 and np.ptp(arr[:, 1]) == 0:
-        size = 1.0  # a body turning about one point: any length scale will do
+    _one_pole(z, arr[:, 2], size)
     return Poses((z - centre) / size, arr[:, 2].copy(), centre, size)
+
+
+def _one_pole(z: np.ndarray, theta: np.ndarray, size: float) -> None:
+    """Refuse poses that all turn about one point (the displacement poles P1k, z = D_k(z), coincide): every
+    moving pivot's centre point is that pole, so both dyads share one ground pivot: a crank, no four-bar."""
+    rot = np.exp(1j * (theta[1:] - theta[0]))
+    if len(rot) < 2 or np.any(np.abs(rot - 1) < 1e-9):  # two poses: any pole has dyads about it
+        return
+    poles = (z[1:] - rot * z[0]) / (1 - rot)
+    if np.max(np.abs(poles - poles[0])) <= COINCIDENT * max(size, float(np.max(np.abs(poles)))):
+        raise SynthesisError(
+            f"[motion] the poses all turn about one point ({poles[0].real + 0.0:.6g}, {poles[0].imag + 0.0:.6g}): the "
+            "body is a "
+            "crank pinned there (every moving pivot's ground pivot is that point), no four-bar",
+            entry="motion.poses",
+        )
 
 
 def _is_table(raw: object) -> bool:
@@ -328,6 +344,7 @@ def motion(
     by their size) on a ``grid`` × ``grid`` lattice (four poses: along the centre-point curve; five: the
     Burmester points). Returns up to ``count`` candidates, re-solved and checked."""
     started = time.perf_counter()
+    _arguments(poses, dyads, region, grid, count, requirements, name, units)
     ps = poses_of(poses)
     req = requirements or Requirements()
     task = Task("motion", ps.size, True, points=ps.centre + ps.size * ps.p, angles=ps.theta, units=units)
@@ -351,6 +368,28 @@ def motion(
         out.curves = {"centre": ps.centre + ps.size * M, "circle": ps.centre + ps.size * A}
     out.seconds = time.perf_counter() - started
     return out
+
+
+def _arguments(poses, dyads, region, grid, count, requirements, name, units) -> None:
+    """Each argument's type and range (vloop.synthesis.arguments), before any work."""
+    args.common(name, units, requirements)
+    args.rows(poses, "poses", 1, 10_000, (("x", args.MAX_LENGTH), ("y", args.MAX_LENGTH), ("θ", args.MAX_ANGLE)))
+    args.count(grid, "grid", "motion.grid")
+    args.count(count, "count")
+    if region is not None:
+        box = args.table(region, "region", "[xmin, ymin, xmax, ymax]")
+        if box.shape != (4,) or not np.all(np.abs(box) <= args.MAX_LENGTH):
+            raise SynthesisError(
+                f"region: must be [xmin, ymin, xmax, ymax] within ±{args.MAX_LENGTH:g}", entry="region"
+            )
+    for i, d in enumerate(dyads or ()):
+        if not isinstance(d, dict) or not set(d) <= {"fixed", "moving", "rotations"}:
+            raise SynthesisError(f"dyads[{i}]: must be a dict of fixed, moving or rotations", entry="dyads")
+        for k in ("fixed", "moving"):
+            if k in d:
+                args.point(d[k], f"dyads[{i}].{k}")
+        if "rotations" in d:
+            args.angles(d["rotations"], f"dyads[{i}].rotations", 1, 4)
 
 
 def _two(dyads: Sequence[dict]) -> Sequence[dict]:
@@ -463,6 +502,8 @@ def _search(ps: Poses, box: tuple, grid: int, count: int, req: Requirements) -> 
     omega, tN = _population_timing(ps, M[i], A[i])
     good = np.isfinite(tN)
     i, j, omega, tN = i[good], j[good], omega[good], tN[good]
+    if not len(i):
+        raise SynthesisError("[motion] no pair of dyads in the search region meets the poses in order: widen region")
     coords = np.stack([M[i], A[i], A[j], M[j], np.full(len(i), ps.p[0])], 1)
     values = np.stack([coords.real, coords.imag], 2).reshape(len(i), -1)
     times = np.linspace(0.0, 1.0, SCREEN_SAMPLES)

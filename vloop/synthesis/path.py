@@ -28,6 +28,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from ..errors import SynthesisError
+from . import arguments as args
 from ._evaluate import evaluate
 from .candidates import Candidates, Task
 from .defects import Draft, Requirements, assess, population_transmission
@@ -176,6 +177,13 @@ def path(
     ``seed`` makes it repeatable. Returns up to ``count`` distinct candidates, polished, re-solved and checked
     (the input must turn fully)."""
     started = time.perf_counter()
+    args.common(name, units, requirements)
+    args.count(seed, "seed")
+    if progress is not None and not callable(progress):
+        raise SynthesisError(f"progress: must be a function of one message, got {progress!r:.40}", entry="progress")
+    args.rows(points, "points", 1, 10_000, (("x", args.MAX_LENGTH), ("y", args.MAX_LENGTH)))
+    if timing is not None:
+        args.angles(timing, "timing")
     tg = targets_of(points, timing)
     _check_options(linkage, tolerance, count, population, generations, samples, restarts, region)
     req = dataclasses.replace(requirements or Requirements(full_rotation=True), tolerance=tolerance)
@@ -198,24 +206,14 @@ def path(
 
 
 def _check_options(linkage, tolerance, count, population, generations, samples, restarts, region) -> None:
-    if linkage not in LINKAGES:
-        raise SynthesisError(f"[path] linkage must be one of {', '.join(LINKAGES)}, got {linkage!r:.40}")
-    checks = (
-        ("tolerance", tolerance, 1e-12, 1.0, float),
-        ("region", region, 0.1, 100.0, float),
-        ("count", count, 1, 100, int),
-        ("population", population, 5, 200, int),
-        ("generations", generations, 1, 100_000, int),
-        ("samples", samples, 16, 10_000, int),
-        ("restarts", restarts, 1, 100, int),
-    )
-    for key, v, lo, hi, kind in checks:
-        good = not isinstance(v, bool) and isinstance(v, (int, float) if kind is float else int)
-        if not good or not (lo <= v <= hi):
-            what = "a number" if kind is float else "an integer"
-            raise SynthesisError(
-                f"[path] {key} must be {what} from {lo:g} to {hi:g}, got {v!r:.40}", entry=f"path.{key}"
-            )
+    """Each search option's type and range (vloop.synthesis.arguments), before any work."""
+    args.choice(linkage, "linkage", tuple(LINKAGES))
+    args.limited(tolerance, "tolerance", "path.tolerance", open_low=True)
+    args.limited(region, "region", "path.region")
+    args.count(count, "count")
+    for key, v in (("population", population), ("generations", generations), ("samples", samples),
+                   ("restarts", restarts)):  # fmt: skip
+        args.count(v, key, f"path.{key}")
 
 
 def _problem(top: Topology, tg: Targets, samples: int, req: Requirements, region: float) -> _Problem:
