@@ -127,9 +127,23 @@ def choice_list(value: Any, where: str, choices: Sequence[str]) -> tuple[str, ..
 
 
 def folder(value: Any, where: str = "--out") -> str:
-    """An output folder's path: non-empty text without NUL characters."""
+    """An output folder's path: non-empty text without NUL characters, a folder that can be written (checked
+    before any work: not an existing file, no file in its way, its nearest existing parent writable)."""
+    from .output import check_folder
+
     if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
         raise _refuse(where, "a folder path (not empty, no NUL character)", value)
+    check_folder(value, where)
+    return value
+
+
+def out_file(value: Any, where: str = "--out") -> str:
+    """An output file's path (checked before any work like :func:`folder`: not a folder, its folder writable)."""
+    from .output import check_file
+
+    if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
+        raise _refuse(where, "a file path (not empty, no NUL character)", value)
+    check_file(value, where)
     return value
 
 
@@ -180,6 +194,7 @@ OPTIONS: dict[str, Option] = {
         Option("limit-fraction", lambda v: real(v, "--limit-fraction", 0.0, 1.0), "0 to 1"),
         Option("minimize-tries", lambda v: integer(v, "--minimize-tries", 0, 10_000), "0 to 10000"),
         Option("out", folder, "a folder"),
+        Option("out-file", out_file, "a file"),
         Option("previous", lambda v: file_path(v, "--previous"), "a summary.json"),
         Option("file", file_path, "a file"),
     )

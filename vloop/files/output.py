@@ -61,6 +61,54 @@ def describe_os_error(exc: OSError) -> str:
     return (exc.strerror or type(exc).__name__).lower()
 
 
+def check_folder(folder: str | Path, where: str = "--out") -> Path:
+    """Refuse, before any work, an output folder that could not be written: an existing file of that name, a file
+    where one of its parents should be, a nearest existing parent not writable (nothing is created)."""
+    folder = Path(folder)
+    if "\x00" in str(folder):
+        raise OutputError(f"{where}: {str(folder)!r}: a path cannot contain a NUL character", entry="out")
+    try:
+        return _check_folder(folder, where)
+    except OSError as exc:  # a name too long, a loop of links
+        raise OutputError(f"{where}: output folder {folder}: {describe_os_error(exc)}", entry="out") from None
+
+
+def _check_folder(folder: Path, where: str) -> Path:
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"{where}: output folder {folder}: exists and is not a folder", entry="out")
+    parent = folder
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise OutputError(f"{where}: output folder {folder}: {parent} is a file, not a folder", entry="out")
+    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{where}: output folder {folder}: permission denied (in {parent})", entry="out")
+    return folder
+
+
+def check_file(path: str | Path, where: str = "--out") -> Path:
+    """Refuse, before any work, an output file that could not be written (a folder of that name, its folder)."""
+    path = Path(path)
+    try:
+        is_dir = path.is_dir()
+    except OSError as exc:
+        raise OutputError(f"{where}: output file {path}: {describe_os_error(exc)}", entry="out") from None
+    if is_dir:
+        raise OutputError(f"{where}: output file {path}: is a folder", entry="out")
+    check_folder(path.parent if str(path.parent) else ".", where)
+    return path
+
+
+def plain_name(name: str) -> str:
+    """A file name inside the output folder: no folder part, not "." or "..", not the staging area's."""
+    bad = not name or "/" in name or "\\" in name or "\x00" in name or name in (".", "..")
+    if bad or name.startswith(".vloop-stage-"):
+        raise OutputError(f"{name!r} is not a plain file name: every output stays inside its folder", entry="out")
+    return name
+
+
 def ensure_folder(folder: str | Path) -> Path:
     """Create ``folder`` (and parents) or raise OutputError naming it."""
     folder = Path(folder)
@@ -147,12 +195,15 @@ class OutputSet:
     user: Ctrl-C during the renames is held until they are done (the new set is then complete, and the
     interrupt is raised after). ``owns`` names the entries (files or folders, ``fnmatch`` patterns) this
     kind of set may hold: those of the previous set that the new one does not have are removed, so the
-    folder never holds a new summary beside an old report. ``published`` lists the paths.
+    folder never holds a new summary beside an old report. A set whose names vary (NAME_1.toml, ...) keeps a
+    ``record`` (a hidden file listing what it published): the next set of its kind removes those it does not
+    have, and nothing else. ``published`` lists the paths. Staged names are plain file names (never a path).
     """
 
-    def __init__(self, folder: str | Path, owns: Iterable[str] = ()) -> None:
+    def __init__(self, folder: str | Path, owns: Iterable[str] = (), record: str | None = None) -> None:
         self.folder = ensure_folder(folder)
         self.owns = tuple(owns)
+        self.record = record
         self.published: list[Path] = []
         try:
             self.stage = Path(tempfile.mkdtemp(prefix=".vloop-stage-", dir=self.folder))
@@ -161,11 +212,12 @@ class OutputSet:
 
     def path(self, name: str) -> Path:
         """Where a file is staged (for writers that want a path, e.g. matplotlib or pyarrow)."""
-        return self.stage / name
+        return self.stage / plain_name(name)
 
     def write(self, name: str, fill: Callable[[IO[Any]], None], binary: bool = False) -> Path:
         """Stage ``name`` by calling ``fill(file_object)``."""
         text = {} if binary else {"encoding": "utf-8", "newline": ""}
+        plain_name(name)
         try:
             with open(self.stage / name, "wb" if binary else "w", **text) as fh:
                 fill(fh)
@@ -218,10 +270,27 @@ class OutputSet:
                 os.replace(target, aside)  # a folder cannot replace a non-empty one: move the old one aside first
             os.replace(self.stage / name, target)
             self.published.append(target)
+        previous = self._recorded()
         for entry in self.folder.iterdir():
-            stale = entry.name not in names and any(fnmatch.fnmatchcase(entry.name, p) for p in self.owns)
-            if stale and not entry.name.startswith(".vloop-stage-"):
+            ours = entry.name in previous or any(fnmatch.fnmatchcase(entry.name, p) for p in self.owns)
+            if entry.name not in names and ours and not entry.name.startswith(".vloop-stage-"):
                 _remove(entry)
+        if self.record is not None:  # what this set holds, so that the next set of its kind removes what it lacks
+            write_text(self.folder / self.record, "".join(f"{n}\n" for n in names))
+
+    def _recorded(self) -> set[str]:
+        """The entries the previous set of this kind published (its record), plain names only."""
+        if self.record is None:
+            return set()
+        try:
+            lines = (self.folder / self.record).read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError):
+            return set()
+        out = set()
+        for n in lines:
+            with contextlib.suppress(OutputError):
+                out.add(plain_name(n))
+        return out - {self.record}
 
     def discard(self) -> None:
         shutil.rmtree(self.stage, ignore_errors=True)

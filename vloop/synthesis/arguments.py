@@ -38,6 +38,7 @@ LIMITS: dict[str, tuple[float, float]] = {
     "path.samples": (16, 10_000),
     "path.restarts": (1, 100),
     "count": (1, 100),
+    "files": (0, 100),
     "seed": (0, MAX_SEED),
     "links": (1e-6, 1e6),
 }
