@@ -611,9 +611,16 @@ def _synth_lines(res: Any) -> list[str]:
     ]
     for c in res:
         what = "solution" if c.solution else "defective: " + ", ".join(c.defects)
+        missed = [k + 1 for k, e in enumerate(c.errors) if not np.isfinite(e)]
+        error = f"largest error {c.error:.3g} of {res.task.scale}" if np.isfinite(c.error) else (
+            f"position{'s' if len(missed) > 1 else ''} {', '.join(map(str, missed))} not reached"
+            if missed else "no error figure"
+        )  # fmt: skip
+        mu = np.degrees(c.min_transmission)
         lines.append(
-            f"  {c.name}: {c.topology}, largest error {c.error:.3g} of the size, Grashof: {c.grashof or '-'}, "
-            f"min transmission {np.degrees(c.min_transmission):.1f}°, {what}"
+            f"  {c.name}: {c.topology}, {error}, Grashof: {c.grashof or '-'}, "
+            + (f"min transmission {mu:.1f}°, " if np.isfinite(mu) else "")
+            + what
         )
     return lines
 

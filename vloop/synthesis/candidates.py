@@ -53,7 +53,8 @@ class Candidate:
     position is reached; ``errors`` the distance [length] (function generation: output error [rad or length])
     there, ``angle_errors`` [rad] the guided body's angle error (motion generation); ``defects`` and ``notes``
     what is wrong and why; ``min_transmission`` [rad] over the working motion; ``structural_error`` a function
-    generator's largest |y − f(x)| over its range [y units]; ``search_error`` the optimizer's own figure."""
+    generator's largest |y − f(x)| over its range as a fraction of the y range; ``search_error`` the optimizer's
+    own figure."""
 
     name: str
     method: str
@@ -144,7 +145,8 @@ class Candidates:
         the link lengths."""
         import pandas as pd
 
-        return pd.DataFrame([_row(c, k + 1 if c.solution else None) for k, c in enumerate(self.items)])
+        rows = [_row(c, k + 1 if c.solution else None, self.task.scale) for k, c in enumerate(self.items)]
+        return pd.DataFrame(rows)
 
 
 def rank(items: list[Candidate]) -> list[Candidate]:
@@ -158,7 +160,7 @@ def rank(items: list[Candidate]) -> list[Candidate]:
     return sorted(items, key=key)
 
 
-def _row(c: Candidate, rank_: int | None) -> dict[str, Any]:
+def _row(c: Candidate, rank_: int | None, error_of: str) -> dict[str, Any]:
     row: dict[str, Any] = {
         "rank": rank_,
         "name": c.name,
@@ -170,6 +172,7 @@ def _row(c: Candidate, rank_: int | None) -> dict[str, Any]:
         "max_error": float(np.nanmax(np.abs(c.errors))) if np.any(np.isfinite(c.errors)) else math.nan,
         "search_error": c.search_error,
         "structural_error": c.structural_error,
+        "error_of": error_of,
         "grashof": c.grashof,
         "full_rotation": c.full_rotation,
         "min_transmission_angle": c.min_transmission,

@@ -303,8 +303,9 @@ def _dims(top: Topology, coords: dict[str, complex]) -> dict[str, float]:
 
 
 def _structural(cand, setup: dict, samples: int, direction: float) -> None:
-    """y(x) − f(x) over the range by re-solving the candidate at ``samples`` x values (NaN past a stop). An
-    angle output is read relative to the first precision point (the file's θ may differ by turns or by π)."""
+    """y(x) − f(x) over the range by re-solving the candidate at ``samples`` x values (NaN past a stop); its
+    largest magnitude as a fraction of the y range. An angle output is read relative to the first precision
+    point (the file's θ may differ by turns or by π)."""
     from .. import solve
 
     x0, xf = setup["x"]
@@ -326,5 +327,7 @@ def _structural(cand, setup: dict, samples: int, direction: float) -> None:
         phys = phys - out[-1] + setup["output"][0]
     y = y0 + (phys - os_) / (of - os_) * (yf - y0)
     err = y - setup["f"](x)
-    cand.structural_error = float(np.nanmax(np.abs(err))) if np.any(np.isfinite(err)) else math.nan
+    # unit-free: a fraction of the y range the output stands for
+    worst = float(np.nanmax(np.abs(err))) / abs(yf - y0) if np.any(np.isfinite(err)) else math.nan
+    cand.structural_error = worst
     cand.extra["structural"] = {"x": x, "error": err}

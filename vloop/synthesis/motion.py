@@ -347,7 +347,8 @@ def motion(
     _arguments(poses, dyads, region, grid, count, requirements, name, units)
     ps = poses_of(poses)
     req = requirements or Requirements()
-    task = Task("motion", ps.size, True, points=ps.centre + ps.size * ps.p, angles=ps.theta, units=units)
+    task = Task("motion", ps.size, True, points=ps.centre + ps.size * ps.p, angles=ps.theta, units=units,
+                scale="the poses' size (an angle error in rad)")  # fmt: skip
     if dyads:
         pairs = [tuple(_given(ps, d, i) for i, d in enumerate(_two(dyads)))]
     elif len(ps.p) == 5:

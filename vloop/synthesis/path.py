@@ -187,7 +187,8 @@ def path(
     tg = targets_of(points, timing)
     _check_options(linkage, tolerance, count, population, generations, samples, restarts, region)
     req = dataclasses.replace(requirements or Requirements(full_rotation=True), tolerance=tolerance)
-    task = Task("path", tg.size, False, points=tg.centre + tg.size * tg.z, units=units, timing=tg.timing)
+    task = Task("path", tg.size, False, points=tg.centre + tg.size * tg.z, units=units, timing=tg.timing,
+                scale="the points' size")  # fmt: skip
     cands, log, drafts = [], [], []
     for top in LINKAGES[linkage]:
         problem = _problem(top, tg, samples, req, region)

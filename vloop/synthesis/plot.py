@@ -48,7 +48,7 @@ def _structural(shown: list[Candidate], path: Path) -> Path:
         s = c.extra.get("structural")
         if s is None:
             continue
-        ax.plot(s["x"], s["error"], label=f"{c.name} (max {c.structural_error:.3g})")
+        ax.plot(s["x"], s["error"], label=f"{c.name} (max {c.structural_error:.3g} of the y range)")
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel("x")
     ax.set_ylabel("error in y")

@@ -91,7 +91,7 @@ def toml_text(c: Candidate) -> str:
     if c.angle_errors is not None:
         lines.append(f"#   angle error there = [{fmt(f'{e:.3g}' for e in c.angle_errors)}] rad")
     if c.structural_error is not None and math.isfinite(c.structural_error):
-        lines.append(f"# largest structural error over the range: {c.structural_error:.4g} (y units)")
+        lines.append(f"# largest structural error over the range: {c.structural_error:.4g} of the y range")
     mu = math.degrees(c.min_transmission)
     lines.append(f"# Grashof: {c.grashof or 'no four-bar loop'}; minimum transmission angle {mu:.1f}°")
     return "\n".join(lines) + "\n" + dumps(c.mechanism)
