@@ -609,6 +609,8 @@ def _synth_lines(res: Any) -> list[str]:
         f"{res.task.method} generation: {len(res)} candidate{'s' if len(res) != 1 else ''}, {len(sols)} "
         f"solution{'s' if len(sols) != 1 else ''} (no defect), in {res.seconds:.2f} s"
     ]
+    if res.note:
+        lines.append(f"  ({res.note})")
     for c in res:
         what = "solution" if c.solution else "defective: " + ", ".join(c.defects)
         missed = [k + 1 for k, e in enumerate(c.errors) if not np.isfinite(e)]

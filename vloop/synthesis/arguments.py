@@ -177,7 +177,29 @@ def requirements(value: Any, where: str = "requirements") -> Any:
     number(value.min_transmission, f"{where}.min_transmission", 0.0, math.pi / 2)
     if value.min_transmission >= math.pi / 2:
         raise _fail(f"{where}.min_transmission", "a number from 0 to below π/2", value.min_transmission)
+    if value.pivots is not None:
+        pivots(value.pivots, f"{where}.pivots")
+    if value.links is not None:
+        links(value.links, f"{where}.links")
     return value
+
+
+def pivots(value: Any, where: str = "pivots") -> tuple[float, float, float, float]:
+    """A region [xmin, ymin, xmax, ymax] (min < max) within ±MAX_LENGTH."""
+    what = f"[xmin, ymin, xmax, ymax] with min < max, within ±{MAX_LENGTH:g}"
+    box = table(value, where, what)
+    if box.shape != (4,) or not np.all(np.abs(box) <= MAX_LENGTH) or not (box[0] < box[2] and box[1] < box[3]):
+        raise _fail(where, what, value)
+    return tuple(float(v) for v in box)  # type: ignore[return-value]
+
+
+def links(value: Any, where: str = "links") -> tuple[float, float]:
+    """A range of link lengths [min, max], 0 < min < max ≤ MAX_LENGTH."""
+    what = f"[min, max] link lengths with 0 < min < max ≤ {MAX_LENGTH:g}"
+    rng = table(value, where, what)
+    if rng.shape != (2,) or not (0 < rng[0] < rng[1] <= MAX_LENGTH):
+        raise _fail(where, what, value)
+    return float(rng[0]), float(rng[1])
 
 
 def common(name_: Any, units: Any, requirements_: Any) -> None:

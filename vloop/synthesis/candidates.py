@@ -105,6 +105,7 @@ class Candidates:
     seconds: float = 0.0
     log: list[str] = field(default_factory=list)
     curves: dict[str, np.ndarray] = field(default_factory=dict)  # Burmester's centre- and circle-point curves
+    note: str = ""  # why there are fewer candidates than asked
 
     def __post_init__(self) -> None:
         self.items = rank(self.items)

@@ -46,11 +46,32 @@ TWO_PI = 2.0 * math.pi
 class Requirements:
     """What a solution must also do: turn its input fully; keep the transmission angle at or above
     ``min_transmission`` [rad] over its working motion; (an optimization's candidate) pass every precision
-    position within ``tolerance`` of the task's size."""
+    position within ``tolerance`` of the task's size; keep its ground pivots inside ``pivots`` [xmin, ymin, xmax,
+    ymax] and every moving link's length (each side of a plate) within ``links`` [min, max] [length]."""
 
     full_rotation: bool = False
     min_transmission: float = 0.0
     tolerance: float | None = None
+    pivots: tuple[float, float, float, float] | None = None
+    links: tuple[float, float] | None = None
+
+    def outside(self, mech: Mechanism) -> list[str]:
+        """What of a mechanism lies outside the bounds asked (empty when nothing does or none were asked)."""
+        out = []
+        if self.pivots is not None:
+            x0, y0, x1, y1 = self.pivots
+            ground = [j for lk in mech.links.values() if lk.ground for j in lk.joints]
+            for j in ground:
+                x, y = mech.joints[j]
+                if not (x0 <= x <= x1 and y0 <= y <= y1):
+                    out.append(f"ground pivot {j} at ({x:.6g}, {y:.6g}) is outside pivots {list(self.pivots)}")
+        if self.links is not None:
+            lo, hi = self.links
+            ground = {n for n, lk in mech.links.items() if lk.ground}
+            for key, length in lengths(mech).items():
+                if key.split(".")[0] not in ground and not lo <= length <= hi:
+                    out.append(f"{key} = {length:.6g} is outside links [{lo:g}, {hi:g}]")
+        return out
 
 
 @dataclass
@@ -91,6 +112,10 @@ def assess(draft: Draft, task: Task, req: Requirements) -> Candidate:
     if req.full_rotation and not full:
         defects.append("no full rotation")
         notes.append(f"the input {top.input} cannot turn through a full revolution")
+    outside = req.outside(mech)
+    if outside:
+        defects.append("bounds")
+        notes.append("bounds: " + "; ".join(outside))
     mu = min_transmission(mech, res, system)
     if req.min_transmission > 0 and not mu >= req.min_transmission:
         defects.append("transmission angle")

@@ -357,7 +357,8 @@ def motion(
             raise SynthesisError(f"[motion] the five poses have {len(found)} real Burmester point(s): no four-bar")
         pairs = [(found[i], found[j]) for i in range(len(found)) for j in range(i + 1, len(found))]
     else:
-        pairs = _search(ps, _region(ps, region), grid, count, req)
+        box = region if region is not None or req.pivots is None else req.pivots  # pivots asked: search there
+        pairs = _search(ps, _region(ps, box), grid, count, req)
     drafts = [d for p in pairs for d in _drafts(ps, p, name, units)]
     if not drafts:
         raise SynthesisError("[motion] no four-bar: every pair of dyads found is degenerate")
@@ -506,6 +507,10 @@ def _search(ps: Poses, box: tuple, grid: int, count: int, req: Requirements) -> 
     if not len(i):
         raise SynthesisError("[motion] no pair of dyads in the search region meets the poses in order: widen region")
     coords = np.stack([M[i], A[i], A[j], M[j], np.full(len(i), ps.p[0])], 1)
+    inside = _in_bounds(ps, req, coords)
+    if not inside.any():
+        raise SynthesisError("[motion] no pair of dyads in the search region keeps within pivots and links: widen them")
+    i, j, omega, tN, coords = i[inside], j[inside], omega[inside], tN[inside], coords[inside]
     values = np.stack([coords.real, coords.imag], 2).reshape(len(i), -1)
     times = np.linspace(0.0, 1.0, SCREEN_SAMPLES)
     ev = evaluate(FOURBAR, values, omega * tN, times, points=FOURBAR.coordinates, links=("coupler",))
@@ -523,6 +528,24 @@ def _search(ps: Poses, box: tuple, grid: int, count: int, req: Requirements) -> 
         if len(picked) == 2 * max(count, 1):
             break
     return [((M[i[k]], A[i[k]]), (M[j[k]], A[j[k]])) for k in picked]
+
+
+def _in_bounds(ps: Poses, req: Requirements, coords: np.ndarray) -> np.ndarray:
+    """Which four-bars (rows of normalised O2, A, B, O4, P) keep their ground pivots in ``pivots`` and their moving
+    links (crank, coupler's sides, rocker) within ``links`` [length]."""
+    world = ps.centre + ps.size * coords
+    ok = np.ones(len(coords), bool)
+    if req.pivots is not None:
+        x0, y0, x1, y1 = req.pivots
+        for k in (0, 3):
+            z = world[:, k]
+            ok &= (z.real >= x0) & (z.real <= x1) & (z.imag >= y0) & (z.imag <= y1)
+    if req.links is not None:
+        lo, hi = req.links
+        for a, b in ((0, 1), (1, 2), (2, 3), (1, 4), (2, 4)):
+            d = np.abs(world[:, a] - world[:, b])
+            ok &= (d >= lo) & (d <= hi)
+    return ok
 
 
 def _population_timing(ps: Poses, M: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

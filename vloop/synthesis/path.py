@@ -128,6 +128,39 @@ class _Problem:
     def n_coords(self) -> int:
         return 2 * len(self.top.coordinates)
 
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each coordinate's search bounds (normalised): within ``box`` sizes of the points, a ground pivot's
+        within the ``pivots`` region asked."""
+        lo, hi = np.full(self.n_coords, -self.box), np.full(self.n_coords, self.box)
+        if self.req.pivots is not None:
+            x0, y0, x1, y1 = self.req.pivots
+            a = (complex(x0, y0) - self.tg.centre) / self.tg.size
+            b = (complex(x1, y1) - self.tg.centre) / self.tg.size
+            for i, name in enumerate(self.top.coordinates):
+                if name in self.top.links[self.top.ground]:
+                    lo[2 * i : 2 * i + 2], hi[2 * i : 2 * i + 2] = (a.real, a.imag), (b.real, b.imag)
+        return lo, hi
+
+    def in_bounds(self, coords: np.ndarray) -> np.ndarray:
+        """Which rows of coordinates (V, 2·n) keep their ground pivots in the region and every moving link's
+        length (a plate's sides, the tracer's distances) within the range asked."""
+        lo, hi = self.limits()
+        inside = np.all((coords >= lo - 1e-12) & (coords <= hi + 1e-12), axis=1)
+        return inside & (self.link_excess(coords) <= 1e-12)
+
+    def link_excess(self, coords: np.ndarray) -> np.ndarray:
+        """How far (V,) the rows' moving links fall outside the ``links`` range: the sum of each length's relative
+        shortfall below its minimum and excess over its maximum (0 inside, or without a range)."""
+        out = np.zeros(len(coords))
+        if self.req.links is None:
+            return out
+        z = coords[:, 0::2] + 1j * coords[:, 1::2]
+        short, long_ = (v / self.tg.size for v in self.req.links)
+        for i, j in _link_pairs(self.top):
+            d = np.abs(z[:, i] - z[:, j])
+            out += np.maximum(0.0, short - d) / short + np.maximum(0.0, d - long_) / long_
+        return out
+
     def split(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Coordinates (S, 2·n) and input speeds (S,) of members X (S, genes)."""
         if self.tg.timing is not None:
@@ -148,6 +181,7 @@ class _Problem:
         if self.req.min_transmission > 0:
             mu = population_transmission(self.top, ev.points, self.times)
             cost = cost + np.maximum(0.0, self.req.min_transmission - np.nan_to_num(mu))
+        cost = cost + ORDER_PENALTY * self.link_excess(coords)  # graded: the evolution moves into the range
         return np.where(ev.completed & np.isfinite(cost), cost, INFEASIBLE)
 
 
@@ -231,7 +265,8 @@ def _search(p: _Problem, tolerance, count, seed, population, generations, restar
     one finds nothing; one that stagnates (its population gathered in a basin whose polish fails) hands its
     remaining generations to a new one; then, if still short, the polish of the best members of the last
     populations."""
-    bounds = [(-p.box, p.box)] * p.n_coords + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
+    lo, hi = p.limits()
+    bounds = list(zip(lo, hi, strict=True)) + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
     members, energies, polished = [], [], []
     for start in p.seeds:
         out = _polish(p, *start)
@@ -367,7 +402,7 @@ def _acceptable(p: _Problem, coords: np.ndarray, omega: float) -> bool:
     """Whether a polished member still turns fully (the batch takes its whole turn) with its transmission angle
     at or above the limit asked (the polish minds only the distances)."""
     ev = evaluate(p.top, coords[None, :], np.array([omega]), p.times, points=p.top.coordinates)
-    if not ev.completed[0]:
+    if not ev.completed[0] or not p.in_bounds(coords[None, :])[0]:
         return False
     if p.req.min_transmission <= 0:
         return True
@@ -446,6 +481,15 @@ def _polish_start(p: _Problem, coords: np.ndarray, t: np.ndarray) -> tuple[np.nd
     """The polish's unknowns at the start and their bounds: joints within POLISH_REACH search regions (or as far
     out as the member's own, re-anchored, already are); instants within a turn."""
     reach = np.maximum(POLISH_REACH[p.top.name] * p.box, 1.05 * np.abs(coords))
+    if p.req.pivots is not None:  # a ground pivot stays in the region asked
+        lo_c, hi_c = p.limits()
+        ground = np.array([c in p.top.links[p.top.ground] for c in p.top.coordinates]).repeat(2)
+        low, high = np.where(ground, lo_c, -reach), np.where(ground, hi_c, reach)
+        coords = np.clip(coords, low, high)
+        if p.tg.timing is not None:
+            return coords, low, high
+        return (np.concatenate([coords, np.clip(t[1:], 0, TWO_PI)]), np.concatenate([low, np.zeros(len(t) - 1)]),
+                np.concatenate([high, np.full(len(t) - 1, TWO_PI)]))  # fmt: skip
     if p.tg.timing is not None:
         return np.clip(coords, -reach, reach), -reach, reach
     lo = np.concatenate([-reach, np.zeros(len(t) - 1)])
@@ -475,6 +519,19 @@ def _residual_jacobian(p: _Problem, omega: float, x: np.ndarray, nc: int) -> tup
     if p.tg.timing is None:
         cols = np.concatenate([cols, ev.velocities[p.top.tracer][0, at[1:], None] * np.eye(N)[:, 1:]], 1)
     return np.concatenate([r.real, r.imag]), np.nan_to_num(np.concatenate([cols.real, cols.imag], 0))
+
+
+def _link_pairs(top: Topology) -> list[tuple[int, int]]:
+    """Index pairs (into the coordinates) of every moving link's joints and of the tracer with its link's joints:
+    the lengths a ``links`` range bounds (as :func:`~vloop.synthesis.linkages.lengths` lists them)."""
+    at = {c: i for i, c in enumerate(top.coordinates)}
+    out = []
+    for name, joints in top.links.items():
+        if name != top.ground:
+            out += [(at[a], at[b]) for k, a in enumerate(joints) for b in joints[k + 1 :]]
+    for point, body in top.points.items():
+        out += [(at[j], at[point]) for j in top.links[body]]
+    return out
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:

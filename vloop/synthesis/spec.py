@@ -24,6 +24,7 @@ from typing import Any
 from ..errors import MechanismError, SynthesisError
 from ..files.schema import Key, Problems, Section, check_keys, integer, name_problem, real, show
 from ..files.schema import markdown as schema_markdown
+from . import arguments as args
 from .arguments import LIMITS
 from .defects import Requirements
 
@@ -60,6 +61,22 @@ SECTIONS: tuple[Section, ...] = (
                 0.5236,
             ),
             Key("full_rotation", "bool", "true for path, else false", "", "the input must turn fully", True),
+            Key(
+                "pivots",
+                "[xmin, ymin, xmax, ymax]",
+                "none",
+                "length",
+                "a solution's ground pivots lie in this region (the search keeps them there)",
+                [-500.0, -500.0, 500.0, 500.0],
+            ),
+            Key(
+                "links",
+                "[min, max]",
+                "none",
+                "length",
+                "every moving link's length (a plate's sides) lies in this range (the search keeps them there)",
+                [10.0, 800.0],
+            ),
         ),
     ),
     Section(
@@ -249,7 +266,14 @@ def _requirements(data: dict, method: str, probs: Problems) -> Requirements:
     if not isinstance(full, bool):
         probs.add("synthesis", f"'full_rotation' must be true or false, got {show(full)}")
         full = False
-    return Requirements(full, mu)
+    bounds: dict[str, Any] = {}
+    for key, check in (("pivots", args.pivots), ("links", args.links)):
+        if key in data:
+            try:
+                bounds[key] = check(data[key], key)
+            except SynthesisError as exc:
+                probs.add("synthesis", f"'{key}' {str(exc).split(': ', 1)[-1]}")
+    return Requirements(full, mu, **bounds)
 
 
 def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
@@ -413,7 +437,24 @@ def run(spec: SynthSpec, progress: Any = None) -> Any:
     if spec.title:
         for c in out:
             c.mechanism = dataclasses.replace(c.mechanism, title=f"{spec.title} ({c.name})")
+    if len(out) < spec.candidates:
+        out.note = shortfall(spec, len(out))
     return out
+
+
+def shortfall(spec: SynthSpec, found: int) -> str:
+    """Why a synthesis returns fewer candidates than the file's ``candidates`` asks."""
+    got = f"{found} candidate{'s' if found != 1 else ''} of the {spec.candidates} asked"
+    opts = spec.options
+    if spec.method == "function":
+        return f"{got}: function generation's equation is linear, so the precision points fix one linkage"
+    if spec.method == "motion" and opts.get("dyads"):
+        return f"{got}: the free choices given fix one four-bar (either dyad driving)"
+    if spec.method == "motion" and len(opts.get("poses") or ()) == 5:
+        return f"{got}: five poses have at most four Burmester points; every pair of those found is a candidate"
+    if spec.method == "motion":
+        return f"{got}: no more distinct four-bars in the region meet the poses in order (widen region, refine grid)"
+    return f"{got}: the searches found no more distinct linkages within the tolerance (more restarts may find more)"
 
 
 def _run(spec: SynthSpec, progress: Any) -> Any:
