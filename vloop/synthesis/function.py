@@ -39,6 +39,7 @@ from .expression import Expression, parse
 from .linkages import FOURBAR, SLIDER_CRANK, Topology, reanchored
 
 SPACINGS = ("chebyshev", "even")
+MAX_RATIO = 1e6  # a crank or rocker longer than this many grounds is a linkage at infinity, not a design
 LINKAGES = ("fourbar", "slider-crank")
 
 
@@ -61,6 +62,12 @@ def fourbar_lengths(K: np.ndarray, d: float) -> tuple[float, float, float]:
     if K1 == 0 or K2 == 0:
         raise SynthesisError("no four-bar: a Freudenstein coefficient is zero (a crank or rocker of infinite length)")
     a, c = d / K1, d / K2
+    if max(abs(a), abs(c)) > MAX_RATIO * d:
+        raise SynthesisError(
+            f"no four-bar: the precision pairs ask for a {'crank' if abs(a) >= abs(c) else 'rocker'} "
+            f"{max(abs(a), abs(c)) / d:.3g} times the ground (an output that follows the input in step: a linkage at "
+            "infinity); choose other pairs or ranges"
+        )
     b2 = a * a + c * c + d * d - 2 * a * c * K3
     if not b2 > 0:
         raise SynthesisError(f"no four-bar through these precision points: the coupler's length² is {b2:.4g} ≤ 0")
