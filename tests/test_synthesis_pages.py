@@ -42,21 +42,8 @@ def two_paths():
     size = float(np.hypot(np.ptp(points.real), np.ptp(points.imag)))
     task = Task("path", size, False, points=points, scale="the points' size")
     req = syn.Requirements(full_rotation=True, tolerance=0.5)
-    cands = [
-        assess(
-            Draft(
-                "path",
-                "path",
-                FOURBAR,
-                FOURBAR.mechanism(z, name="path", omega=1.0, times=times[:1]),
-                times,
-                2 * math.pi,
-            ),
-            task,
-            req,
-        )  # fmt: skip
-        for z in (first, second)
-    ]
+    mechs = [FOURBAR.mechanism(z, name="path", omega=1.0, times=times[:1]) for z in (first, second)]
+    cands = [assess(Draft("path", "path", FOURBAR, m, times, 2 * math.pi), task, req) for m in mechs]
     return Candidates(task, cands).keep("path")
 
 
@@ -208,7 +195,7 @@ def test_no_warning_on_success(tmp_path, two_paths):
 def test_targets_are_shown_when_the_page_opens(tmp_path, open_page, two_paths):  # noqa: F811
     """A written candidate's page in Chromium: the targets' crosses drawn and visible without a click."""
     res = two_paths
-    page = [p for p in syn.write(res, tmp_path / "p", html=True) if p.suffix == ".html"][0]
+    page = next(p for p in syn.write(res, tmp_path / "p", html=True) if p.suffix == ".html")
     opened = open_page(Path(page))
     crosses = opened.page.locator("path.v-target")
     assert crosses.count() == len(PATH_POINTS)
