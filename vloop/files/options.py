@@ -12,10 +12,13 @@ makes no sense, a string, a bool and a nested list are refused); counts are inte
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from ..errors import VloopError
@@ -126,11 +129,58 @@ def choice_list(value: Any, where: str, choices: Sequence[str]) -> tuple[str, ..
 # ---------------------------------------------------------------- names and places
 
 
+def describe_os_error(exc: OSError) -> str:
+    """A short reason for an OSError (``permission denied``, ``no space left on device``...)."""
+    if exc.errno == errno.ENOSPC:
+        return "no space left on device"
+    if exc.errno == errno.EDQUOT:
+        return "disk quota exceeded"
+    return (exc.strerror or type(exc).__name__).lower()
+
+
+def check_folder(folder: str | Path, where: str = "--out") -> Path:
+    """Refuse, before any work, an output folder that could not be written: an existing file of that name, a file
+    where one of its parents should be, a nearest existing parent not writable (nothing is created)."""
+    folder = Path(folder)
+    if "\x00" in str(folder):
+        raise OptionError(f"{where}: {str(folder)!r}: a path cannot contain a NUL character", entry="out")
+    try:
+        return _check_folder(folder, where)
+    except OSError as exc:  # a name too long, a loop of links
+        raise OptionError(f"{where}: output folder {folder}: {describe_os_error(exc)}", entry="out") from None
+
+
+def _check_folder(folder: Path, where: str) -> Path:
+    if folder.exists() and not folder.is_dir():
+        raise OptionError(f"{where}: output folder {folder}: exists and is not a folder", entry="out")
+    parent = folder
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise OptionError(f"{where}: output folder {folder}: {parent} is a file, not a folder", entry="out")
+    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
+        raise OptionError(f"{where}: output folder {folder}: permission denied (in {parent})", entry="out")
+    return folder
+
+
+def check_file(path: str | Path, where: str = "--out") -> Path:
+    """Refuse, before any work, an output file that could not be written (a folder of that name, its folder)."""
+    path = Path(path)
+    try:
+        is_dir = path.is_dir()
+    except OSError as exc:
+        raise OptionError(f"{where}: output file {path}: {describe_os_error(exc)}", entry="out") from None
+    if is_dir:
+        raise OptionError(f"{where}: output file {path}: is a folder", entry="out")
+    check_folder(path.parent if str(path.parent) else ".", where)
+    return path
+
+
 def folder(value: Any, where: str = "--out") -> str:
     """An output folder's path: non-empty text without NUL characters, a folder that can be written (checked
     before any work: not an existing file, no file in its way, its nearest existing parent writable)."""
-    from .output import check_folder
-
     if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
         raise _refuse(where, "a folder path (not empty, no NUL character)", value)
     check_folder(value, where)
@@ -139,8 +189,6 @@ def folder(value: Any, where: str = "--out") -> str:
 
 def out_file(value: Any, where: str = "--out") -> str:
     """An output file's path (checked before any work like :func:`folder`: not a folder, its folder writable)."""
-    from .output import check_file
-
     if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
         raise _refuse(where, "a file path (not empty, no NUL character)", value)
     check_file(value, where)

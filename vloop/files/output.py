@@ -19,7 +19,6 @@ Rules (docs/cli.md, "Output files"):
 from __future__ import annotations
 
 import contextlib
-import errno
 import fnmatch
 import os
 import re
@@ -30,6 +29,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ..errors import VloopError
+from .options import check_file, check_folder, describe_os_error  # noqa: F401  (re-exported: one place for them)
 
 DEFAULT_ROOT = Path("out")
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
@@ -50,55 +50,6 @@ def safe_folder_name(name: str) -> str:
 def default_folder(name: str, root: str | Path = DEFAULT_ROOT) -> Path:
     """``out/<safe name>``: always a direct child of ``root``."""
     return Path(root) / safe_folder_name(name)
-
-
-def describe_os_error(exc: OSError) -> str:
-    """A short reason for an OSError (``permission denied``, ``no space left on device``...)."""
-    if exc.errno == errno.ENOSPC:
-        return "no space left on device"
-    if exc.errno == errno.EDQUOT:
-        return "disk quota exceeded"
-    return (exc.strerror or type(exc).__name__).lower()
-
-
-def check_folder(folder: str | Path, where: str = "--out") -> Path:
-    """Refuse, before any work, an output folder that could not be written: an existing file of that name, a file
-    where one of its parents should be, a nearest existing parent not writable (nothing is created)."""
-    folder = Path(folder)
-    if "\x00" in str(folder):
-        raise OutputError(f"{where}: {str(folder)!r}: a path cannot contain a NUL character", entry="out")
-    try:
-        return _check_folder(folder, where)
-    except OSError as exc:  # a name too long, a loop of links
-        raise OutputError(f"{where}: output folder {folder}: {describe_os_error(exc)}", entry="out") from None
-
-
-def _check_folder(folder: Path, where: str) -> Path:
-    if folder.exists() and not folder.is_dir():
-        raise OutputError(f"{where}: output folder {folder}: exists and is not a folder", entry="out")
-    parent = folder
-    while not parent.exists():
-        if parent.parent == parent:
-            break
-        parent = parent.parent
-    if parent.exists() and not parent.is_dir():
-        raise OutputError(f"{where}: output folder {folder}: {parent} is a file, not a folder", entry="out")
-    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{where}: output folder {folder}: permission denied (in {parent})", entry="out")
-    return folder
-
-
-def check_file(path: str | Path, where: str = "--out") -> Path:
-    """Refuse, before any work, an output file that could not be written (a folder of that name, its folder)."""
-    path = Path(path)
-    try:
-        is_dir = path.is_dir()
-    except OSError as exc:
-        raise OutputError(f"{where}: output file {path}: {describe_os_error(exc)}", entry="out") from None
-    if is_dir:
-        raise OutputError(f"{where}: output file {path}: is a folder", entry="out")
-    check_folder(path.parent if str(path.parent) else ".", where)
-    return path
 
 
 def plain_name(name: str) -> str:

@@ -31,7 +31,7 @@ LIMITS: dict[str, tuple[float, float]] = {
     "function.samples": (2, 100_000),
     "function.ground": (MIN_LENGTH, MAX_LENGTH),
     "motion.grid": (2, 40),
-    "path.tolerance": (0.0, 1.0),
+    "path.tolerance": (1e-12, 1.0),
     "path.region": (0.1, 100.0),
     "path.population": (5, 200),
     "path.generations": (1, 100_000),

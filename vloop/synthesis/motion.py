@@ -384,6 +384,8 @@ def _arguments(poses, dyads, region, grid, count, requirements, name, units) -> 
             raise SynthesisError(
                 f"region: must be [xmin, ymin, xmax, ymax] within ±{args.MAX_LENGTH:g}", entry="region"
             )
+    if dyads is not None and (not isinstance(dyads, (list, tuple)) or len(dyads) not in (0, 2)):
+        raise SynthesisError(f"dyads: must be two dicts of free choices (or none), got {dyads!r:.40}", entry="dyads")
     for i, d in enumerate(dyads or ()):
         if not isinstance(d, dict) or not set(d) <= {"fixed", "moving", "rotations"}:
             raise SynthesisError(f"dyads[{i}]: must be a dict of fixed, moving or rotations", entry="dyads")

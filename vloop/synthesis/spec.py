@@ -289,7 +289,7 @@ def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
             parse(d["expression"])
             opts["f"] = d["expression"]
         except SynthesisError as exc:
-            probs.add(e, str(exc).split("] ", 1)[-1])
+            probs.add(e, "'expression': " + str(exc).split("] ", 1)[-1])
     elif "pairs" not in d:
         probs.add(e, "give 'expression' (with x, input, output) or 'pairs'")
     for key, arg in (("x", "x_range"), ("y", "y_range"), ("input", "input_range"), ("output", "output_range")):
