@@ -235,3 +235,59 @@ def test_no_nan_in_a_written_table(tmp_path):
     syn.write(res, tmp_path / "o")
     text = (tmp_path / "o" / "candidates.csv").read_text(encoding="utf-8").lower()
     assert "nan" not in text and "inf" not in text
+
+
+# ---------------------------------------------------------------- messages that name the right thing
+
+FUNCTION_FILE = 'method = "function"\n[function]\nexpression = "{e}"\nx = [{x0}, {x1}]\ninput = [0.5236, 2.0944]\n' \
+    "output = [4.1888, 5.7596]\n{extra}\n"  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("expression", "x0", "x1", "extra", "says"),
+    [
+        ("1/(x-1.4995)", 1, 2, "", "[function] 'expression': f(x) = '1/(x-1.4995)' is not defined or not bounded "
+         "over x in [1, 2]: a denominator is zero (a pole) at x = 1.4995"),
+        ("tan(x)", 1, 2, "", "tan's argument is an odd multiple of π/2 (a pole) at x = 1.570796"),
+        ("log(x - 1)", 0.5, 2, "", "log of a number ≤ 0 at x = 0.5"),
+        ("sqrt(x - 1.5)", 1, 2, "", "square root of a negative number at x = 1"),
+        ("1/(x-1.5)**2", 1, 2, "", "a denominator is zero (a pole) at x = 1.5"),
+        ("log10(x)", 1, 2, "ground = 1e300", "[function] 'ground' must be a length from 1e-50 to 1e+50, got 1e+300"),
+        ("log10(x)", 1, 2, "samples = 0", "[function] 'samples' must be an integer from 2 to 100,000, got 0"),
+    ],
+)  # fmt: skip
+def test_function_file_messages(tmp_path, capfd, expression, x0, x1, extra, says):
+    """Poles and domains found from the expression (not from samples: 1.4995 lies between the 1,001 samples the
+    range was once checked at), and out-of-range keys: exit 2, one line naming the file and the key."""
+    spec = tmp_path / "f.toml"
+    spec.write_text(FUNCTION_FILE.format(e=expression, x0=x0, x1=x1, extra=extra), encoding="utf-8")
+    assert main(["synth", str(spec), "--out", str(tmp_path / "o")]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"vloop: error: {spec}: ") and says in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_tiny_function_is_not_constant(tmp_path, capfd):
+    """1e-13·x² over [1, 2]: values 1e-13 to 4e-13, not "the same value at both ends" (a relative test)."""
+    spec = tmp_path / "f.toml"
+    spec.write_text(FUNCTION_FILE.format(e="1e-13*x**2", x0=1, x1=2, extra=""), encoding="utf-8")
+    assert main(["synth", str(spec), "--out", str(tmp_path / "o")]) == 0
+    assert "1 solutions" not in capfd.readouterr().out
+
+
+def test_a_path_scaled_to_1e300_names_the_key(tmp_path, capfd):
+    spec = tmp_path / "p.toml"
+    big = [[x * 1e300, y * 1e300] for x, y in PATH_POINTS]
+    spec.write_text(f'method = "path"\n[path]\npoints = {big}\n', encoding="utf-8")
+    assert main(["synth", str(spec), "--out", str(tmp_path / "o")]) == 2
+    err = capfd.readouterr().err
+    assert f"{spec}: [path] 'points' must be a list of 1 to 10000 [x, y] rows (x within ±1e+50" in err
+
+
+def test_poses_turning_about_one_point(tmp_path, capfd):
+    """poses = [[0,0,0],[0,0,0.3],[0,0,0.8]], no dyads: every pole P1k is the origin (z = D_k(z) at z = 0)."""
+    spec = tmp_path / "m.toml"
+    spec.write_text('method = "motion"\n[motion]\nposes = [[0,0,0],[0,0,0.3],[0,0,0.8]]\n', encoding="utf-8")
+    assert main(["synth", str(spec), "--out", str(tmp_path / "o")]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the poses all turn about one point (0, 0)" in err[0] and str(spec) in err[0]

@@ -41,7 +41,7 @@ class _Iv:
     why: np.ndarray
 
 
-def check_bounded(tree: ast.AST, x0: float, xf: float, text: str, entry: str = "function.expression") -> None:
+def check_bounded(tree: ast.AST, x0: float, xf: float, text: str, entry: str = "f") -> None:
     """SynthesisError naming the x where f is undefined or unbounded on [x0, xf] (or cannot be shown bounded)."""
     lo, hi = min(x0, xf), max(x0, xf)
     edges = np.linspace(lo, hi, PIECES + 1)
@@ -53,7 +53,7 @@ def check_bounded(tree: ast.AST, x0: float, xf: float, text: str, entry: str = "
             k = int(np.argmax(iv.bad))
             x, why = _locate(tree, a[k], b[k])
             raise SynthesisError(
-                f"[{entry}] f(x) = {text.strip()!r:.60} is not defined or not bounded over x in [{lo:g}, {hi:g}]: "
+                f"{entry}: f(x) = {text.strip()!r:.60} is not defined or not bounded over x in [{lo:g}, {hi:g}]: "
                 f"{why} at x = {x:.7g}",
                 entry=entry,
             )
@@ -65,7 +65,7 @@ def check_bounded(tree: ast.AST, x0: float, xf: float, text: str, entry: str = "
         a, b = np.concatenate([a, mid]), np.concatenate([mid, b])
     x = 0.5 * (a[0] + b[0])
     raise SynthesisError(
-        f"[{entry}] f(x) = {text.strip()!r:.60} cannot be shown bounded over x in [{lo:g}, {hi:g}]: near x = {x:.7g} "
+        f"{entry}: f(x) = {text.strip()!r:.60} cannot be shown bounded over x in [{lo:g}, {hi:g}]: near x = {x:.7g} "
         "it may have a pole (a denominator or a log's argument touching zero) — give a range that keeps clear of it",
         entry=entry,
     )

@@ -35,21 +35,21 @@ class Expression:
         return evaluate(self.tree, np.asarray(x, float))
 
 
-def parse(text: object, entry: str = "function.expression") -> Expression:
+def parse(text: object, entry: str = "f") -> Expression:
     """A vectorized f(x) from its text; SynthesisError naming ``entry`` for anything else than the grammar."""
     if not isinstance(text, str) or not text.strip() or len(text) > MAX_LENGTH:
-        raise SynthesisError(f"[{entry}] must be an expression in x of at most {MAX_LENGTH} characters", entry=entry)
+        raise SynthesisError(f"{entry}: must be an expression in x of at most {MAX_LENGTH} characters", entry=entry)
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except (SyntaxError, ValueError, RecursionError, MemoryError):
-        raise SynthesisError(f"[{entry}] {text!r:.80} is not an expression in x", entry=entry) from None
+        raise SynthesisError(f"{entry}: {text!r:.80} is not an expression in x", entry=entry) from None
     _check(tree.body, entry, text)
     return Expression(tree.body, text)
 
 
 def _check(node: ast.AST, entry: str, text: str, depth: int = 0) -> None:
     if depth > 50:
-        raise SynthesisError(f"[{entry}] the expression is nested too deeply", entry=entry)
+        raise SynthesisError(f"{entry}: the expression is nested too deeply", entry=entry)
     ok = (
         (isinstance(node, ast.Constant) and type(node.value) in (int, float) and _finite(node.value))
         or (isinstance(node, ast.Name) and (node.id == "x" or node.id in CONSTANTS))
@@ -66,7 +66,7 @@ def _check(node: ast.AST, entry: str, text: str, depth: int = 0) -> None:
     if not ok:
         what = ast.unparse(node)[:40] if hasattr(ast, "unparse") else type(node).__name__
         raise SynthesisError(
-            f"[{entry}] {what!r} is not allowed in {text!r:.60} (numbers, x, pi, e, + - * / **, and "
+            f"{entry}: {what!r} is not allowed in {text!r:.60} (numbers, x, pi, e, + - * / **, and "
             f"{', '.join(FUNCTIONS)})",
             entry=entry,
         )

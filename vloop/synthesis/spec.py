@@ -289,7 +289,7 @@ def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
             parse(d["expression"])
             opts["f"] = d["expression"]
         except SynthesisError as exc:
-            probs.add(e, "'expression': " + str(exc).split("] ", 1)[-1])
+            probs.add(e, "'expression': " + str(exc).split(": ", 1)[-1])
     elif "pairs" not in d:
         probs.add(e, "give 'expression' (with x, input, output) or 'pairs'")
     for key, arg in (("x", "x_range"), ("y", "y_range"), ("input", "input_range"), ("output", "output_range")):
@@ -373,7 +373,10 @@ def _read_path(d: dict, probs: Problems) -> dict[str, Any]:
 
 _READERS = {"function": _read_function, "motion": _read_motion, "path": _read_path}
 # the functions' argument names as the file's keys (a message from a function names the file's key)
-FILE_KEYS = {"x_range": "x", "y_range": "y", "input_range": "input", "output_range": "output", "count": "candidates"}
+FILE_KEYS = {
+    "f": "expression", "x_range": "x", "y_range": "y", "input_range": "input", "output_range": "output",
+    "count": "candidates",
+}  # fmt: skip
 
 
 def _limits(key: str) -> tuple[int, int]:
@@ -432,7 +435,8 @@ def run(spec: SynthSpec, progress: Any = None) -> Any:
         text = str(exc)
         key, _, rest = text.partition(": ")
         if not text.startswith("[") and rest and key.isidentifier():
-            text = f"[{spec.method}] '{FILE_KEYS.get(key, key)}' {rest}"
+            sep = " " if rest.startswith("must") else ": "
+            text = f"[{spec.method}] '{FILE_KEYS.get(key, key)}'{sep}{rest}"
         raise SynthesisError(f"{spec.source}: {text}", entry=exc.entry) from None
     if spec.title:
         for c in out:
