@@ -46,8 +46,9 @@ TWO_PI = 2.0 * math.pi
 class Requirements:
     """What a solution must also do: turn its input fully; keep the transmission angle at or above
     ``min_transmission`` [rad] over its working motion; (an optimization's candidate) pass every precision
-    position within ``tolerance`` of the task's size; keep its ground pivots inside ``pivots`` [xmin, ymin, xmax,
-    ymax] and every moving link's length (each side of a plate) within ``links`` [min, max] [length]."""
+    position within ``tolerance`` of the task's size; keep its ground pivots inside ``pivots`` = (xmin, ymin,
+    xmax, ymax) and every moving link's length (each side of a plate) within ``links`` = (min, max), lengths in
+    the task's units."""
 
     full_rotation: bool = False
     min_transmission: float = 0.0

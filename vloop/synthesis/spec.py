@@ -170,7 +170,7 @@ SECTIONS: tuple[Section, ...] = (
             ),
             Key(
                 "tolerance",
-                "0 < number ≤ 1",
+                "1e-12 < number ≤ 1",
                 "0.01",
                 "",
                 "error that counts as reached, fraction of the points' size",
