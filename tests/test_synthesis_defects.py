@@ -22,9 +22,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 import vloop.synthesis as syn
 from validators import analytic_fourbar
+from vloop.synthesis.circuits import classify, screen
 from vloop.synthesis.linkages import FOURBAR
 
 from .test_synthesis import TOL, assert_recovered, circle_meet, own_pair
@@ -146,3 +149,28 @@ def test_function_generation_runs_into_its_cranks_limit():
     assert far[0].defects == ("branch",)
     assert "rocks between -126.85° and 126.85°" in " ".join(far[0].notes)
     assert FOURBAR.name == far[0].topology
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    lengths=st.tuples(*[st.floats(0.2, 2.0)] * 4),
+    thetas=st.lists(st.floats(-math.pi, math.pi), min_size=3, max_size=5),
+    sides=st.lists(st.sampled_from([-1, 1]), min_size=5, max_size=5),
+)
+def test_the_population_screen_is_the_same_rule(lengths, thetas, sides):
+    """circuits.screen (a search's whole population at once) and circuits.classify (one linkage) agree on random
+    four-bars placed at random reachable crank angles and sides: a row passes the screen exactly when classify
+    names no defect, with the same direction and instants."""
+    a, b, c, d = lengths
+    configs = []
+    for th, s in zip(thetas, sides, strict=False):
+        A = a * np.exp(1j * th)
+        f = abs(d - A)
+        assume(abs(b - c) + 1e-3 < f < b + c - 1e-3)
+        configs.append({"O2": 0j, "A": A, "B": circle_meet(A, b, complex(d), c, s), "O4": complex(d)})
+    verdict = classify(FOURBAR, configs)
+    rows = {k: np.array([[z[k] for z in configs]]) for k in ("O2", "A", "B", "O4")}
+    omega, times, ok = screen(FOURBAR, rows)
+    assert bool(ok[0]) == (verdict.kind == "")
+    if ok[0]:
+        assert omega[0] == verdict.omega and times[0] == pytest.approx(verdict.times, abs=1e-12)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -32,71 +33,79 @@ TWO_PI = 2.0 * math.pi
 
 @dataclass(frozen=True)
 class Arcs:
-    """The input angles θ [rad] at which the dyad closes: cos(θ − ``phase``) ∈ [``lo``, ``hi``]."""
+    """The input angles θ [rad] at which the dyad closes: cos(θ − ``phase``) ∈ [``lo``, ``hi``]; numbers, or arrays
+    over a population (then θ has one more axis: the positions)."""
 
-    phase: float
-    lo: float
-    hi: float
+    phase: Any
+    lo: Any
+    hi: Any
 
     @property
-    def full(self) -> bool:
+    def full(self) -> Any:
         """The input turns fully (no toggle)."""
-        return self.lo <= -1.0 and self.hi >= 1.0
+        return np.logical_and(np.asarray(self.lo) <= -1.0, np.asarray(self.hi) >= 1.0)
 
     @property
-    def count(self) -> int:
+    def count(self) -> Any:
         """How many arcs (a full circle counts as one)."""
-        if self.lo > 1.0 or self.hi < -1.0 or self.lo > self.hi:
-            return 0
-        return 2 if self.lo > -1.0 and self.hi < 1.0 else 1
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        empty = (lo > 1.0) | (hi < -1.0) | (lo > hi)
+        return np.where(empty, 0, np.where((lo > -1.0) & (hi < 1.0), 2, 1))
 
     def psi(self, theta: np.ndarray) -> np.ndarray:
         """θ − phase, wrapped so that every arc is one interval: (−π, π], or [0, 2π) for the arc about π."""
-        psi = np.angle(np.exp(1j * (np.asarray(theta, float) - self.phase)))
-        if self.count == 1 and not self.full and self.lo <= -1.0:  # one arc about π
-            psi = np.mod(psi, TWO_PI)
-        return psi
+        phase = (
+            np.expand_dims(np.asarray(self.phase, float), -1) if np.ndim(theta) > np.ndim(self.phase) else self.phase
+        )
+        psi = np.angle(np.exp(1j * (np.asarray(theta, float) - phase)))
+        about_pi = (self.count == 1) & ~self.full & (np.asarray(self.lo) <= -1.0)  # one arc about π
+        if np.ndim(theta) > np.ndim(about_pi):
+            about_pi = np.expand_dims(about_pi, -1)
+        return np.where(about_pi, np.mod(psi, TWO_PI), psi)
 
     def index(self, theta: np.ndarray) -> np.ndarray:
         """Which arc each θ is on (0 or 1; the arc at negative ψ is 1 when there are two)."""
-        if self.count == 2:
-            return np.where(self.psi(theta) < 0, 1, 0)
-        return np.zeros(np.shape(theta), int)
+        two = self.count == 2
+        if np.ndim(theta) > np.ndim(two):
+            two = np.expand_dims(two, -1)
+        return np.where(two & (self.psi(theta) < 0), 1, 0)
 
     def limits(self, k: int) -> tuple[float, float]:
-        """Arc k's ends as input angles [rad] (ascending along ψ)."""
-        a_hi = math.acos(min(max(self.hi, -1.0), 1.0))
-        a_lo = math.acos(min(max(self.lo, -1.0), 1.0))
-        if self.count == 2:
+        """Arc k's ends as input angles [rad] (ascending along ψ) of a single linkage."""
+        a_hi = math.acos(min(max(float(self.hi), -1.0), 1.0))
+        a_lo = math.acos(min(max(float(self.lo), -1.0), 1.0))
+        if int(self.count) == 2:
             ends = (a_hi, a_lo) if k == 0 else (-a_lo, -a_hi)
-        elif self.lo <= -1.0:
+        elif float(self.lo) <= -1.0:
             ends = (a_hi, TWO_PI - a_hi)
         else:
             ends = (-a_lo, a_lo)
-        return ends[0] + self.phase, ends[1] + self.phase
+        return ends[0] + float(self.phase), ends[1] + float(self.phase)
 
 
-def arcs(top: Topology, z: dict[str, complex]) -> Arcs:
-    """The input's reachable angles of a four-bar or slider-crank with joint positions ``z`` (any instant)."""
-    a = abs(z["A"] - z["O2"])
-    if top.sliders:
-        ((_, axis),) = top.sliders.values()
-        u = complex(*axis) / abs(complex(*axis))
-        b = abs(z["B"] - z["A"])
-        off = ((z["O2"] - z["B"]) / u).imag  # the crank pivot's offset from the slider's line
-        return Arcs(float(np.angle(u)) + math.pi / 2, (-b - off) / a, (b - off) / a)
-    b, c, d = abs(z["B"] - z["A"]), abs(z["B"] - z["O4"]), abs(z["O4"] - z["O2"])
-    lo = (a * a + d * d - (b + c) ** 2) / (2 * a * d)
-    hi = (a * a + d * d - (b - c) ** 2) / (2 * a * d)
-    return Arcs(float(np.angle(z["O4"] - z["O2"])), lo, hi)
+def arcs(top: Topology, z: dict[str, Any]) -> Arcs:
+    """The input's reachable angles of a four-bar or slider-crank with joint positions ``z`` (any instant;
+    complex numbers, or arrays over a population)."""
+    a = np.abs(z["A"] - z["O2"])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if top.sliders:
+            ((_, axis),) = top.sliders.values()
+            u = complex(*axis) / abs(complex(*axis))
+            b = np.abs(z["B"] - z["A"])
+            off = ((z["O2"] - z["B"]) / u).imag  # the crank pivot's offset from the slider's line
+            return Arcs(float(np.angle(u)) + math.pi / 2 + 0 * off, (-b - off) / a, (b - off) / a)
+        b, c, d = np.abs(z["B"] - z["A"]), np.abs(z["B"] - z["O4"]), np.abs(z["O4"] - z["O2"])
+        lo = (a * a + d * d - (b + c) ** 2) / (2 * a * d)
+        hi = (a * a + d * d - (b - c) ** 2) / (2 * a * d)
+    return Arcs(np.angle(z["O4"] - z["O2"]), lo, hi)
 
 
-def sign(top: Topology, z: dict[str, complex]) -> int:
+def sign(top: Topology, z: dict[str, Any]) -> Any:
     """The assembly σ (+1 / −1) the positions ``z`` show (see the module docstring)."""
     if top.sliders:
         ((_, axis),) = top.sliders.values()
-        return 1 if ((z["B"] - z["A"]) * complex(*axis).conjugate()).real >= 0 else -1
-    return int(side(z, ("A", "B", "O4")))
+        return np.where(((z["B"] - z["A"]) * complex(*axis).conjugate()).real >= 0, 1, -1)
+    return side(z, ("A", "B", "O4")).astype(int)
 
 
 @dataclass(frozen=True)
@@ -115,13 +124,13 @@ def classify(top: Topology, configs: list[dict[str, complex]], omega: float | No
     order asked); ``omega`` the input's direction when it is asked (function generation), else either way."""
     rng = arcs(top, configs[0])
     theta = np.array([np.angle(z["A"] - z["O2"]) for z in configs])
-    sigma = np.array([sign(top, z) for z in configs])
+    sigma = np.array([int(sign(top, z)) for z in configs])
     arc = rng.index(theta)
-    circuit = sigma if rng.full else arc
+    circuit = sigma if bool(rng.full) else arc
     times, w = _instants(rng, theta, omega)
     if len(set(circuit.tolist())) > 1:
         k = int(np.nonzero(circuit != circuit[0])[0][0])
-        where = "the two assemblies of an input that turns fully" if rng.full else "the input's two arcs"
+        where = "the two assemblies of an input that turns fully" if bool(rng.full) else "the input's two arcs"
         note = f"circuit defect: positions 1 and {k + 1} are on different circuits ({where})"
         return Verdict("circuit", note, w, times)
     if len(set(sigma.tolist())) > 1:
@@ -156,11 +165,13 @@ def _instants(rng: Arcs, theta: np.ndarray, omega: float | None) -> tuple[np.nda
     return _turns(rng, psi, w), w
 
 
-def _turns(rng: Arcs, psi: np.ndarray, w: float) -> np.ndarray:
-    t = w * (psi - psi[0])
-    if rng.full:
-        t = np.mod(t, TWO_PI)
-        t[0] = 0.0
+def _turns(rng: Arcs, psi: np.ndarray, w: Any) -> np.ndarray:
+    """The input's turn from position 1 to each (last axis), turning the way w (±1): modulo a turn on a full
+    circle, along the arc otherwise."""
+    t = np.expand_dims(w, -1) * (psi - psi[..., :1]) if np.ndim(psi) > 1 else w * (psi - psi[0])
+    full = np.expand_dims(rng.full, -1) if np.ndim(psi) > np.ndim(rng.full) else rng.full
+    t = np.where(full, np.mod(t, TWO_PI), t)
+    t[..., 0] = 0.0
     return t
 
 
@@ -173,18 +184,35 @@ def _order_note(rng: Arcs, theta: np.ndarray, omega: float | None) -> str:
         order = np.argsort(_turns(rng, psi, w), kind="stable") + 1
         turning = "counter-clockwise" if w > 0 else "clockwise"
         seen.append(f"{turning}: {', '.join(str(k) for k in order)}")
-    along = "" if rng.full else " (the input rocks on an arc: it cannot pass the gap between its limits)"
+    along = "" if bool(rng.full) else " (the input rocks on an arc: it cannot pass the gap between its limits)"
     return f"order defect: the input meets the positions in another order than asked ({'; '.join(seen)}){along}"
 
 
 def swept(rng: Arcs, start: float, stop: float) -> tuple[float, float] | None:
     """Whether the input can turn from ``start`` to ``stop`` [rad] (the way the sign of stop − start says) without
     leaving its arc: None if so, else the arc's ends [rad] it runs into."""
-    if rng.full:
+    if bool(rng.full):
         return None
     psi = rng.psi(np.array([start]))[0]
     k = int(rng.index(np.array([start]))[0])
     lo, hi = rng.limits(k)
     end = psi + (stop - start)
-    lo_psi, hi_psi = lo - rng.phase, hi - rng.phase
+    lo_psi, hi_psi = lo - float(rng.phase), hi - float(rng.phase)
     return None if lo_psi - 1e-12 <= end <= hi_psi + 1e-12 else (lo, hi)
+
+
+def screen(top: Topology, configs: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A population's rows (joint positions (V, N) at each position, complex): the direction (±1) that meets the
+    positions in order on one branch, the input's turn to each (V, N) [rad], and whether a row does (no circuit,
+    branch or order defect) — :func:`classify`'s rule, every row at once."""
+    rng = arcs(top, {k: v[:, 0] for k, v in configs.items()})
+    theta = np.angle(configs["A"] - configs["O2"])
+    sigma = sign(top, configs)
+    psi = rng.psi(theta)
+    one_branch = np.all(sigma == sigma[:, :1], axis=1) & np.all(rng.index(theta) == rng.index(theta)[:, :1], axis=1)
+    omega, times, ok = np.ones(len(theta)), np.zeros(theta.shape), np.zeros(len(theta), bool)
+    for w in (-1.0, 1.0):
+        t = _turns(rng, psi, np.full(len(theta), w))
+        good = one_branch & np.all(np.diff(t, axis=1) > 1e-9, axis=1) & (rng.count > 0)
+        omega, times, ok = np.where(good, w, omega), np.where(good[:, None], t, times), ok | good
+    return omega, times, ok

@@ -38,7 +38,7 @@ from ..errors import SynthesisError
 from . import arguments as args
 from ._evaluate import evaluate
 from .candidates import Candidates, Task
-from .circuits import classify
+from .circuits import classify, screen
 from .defects import Draft, Requirements, assess, population_transmission
 from .fit import match
 from .linkages import FOURBAR
@@ -503,9 +503,10 @@ def _search(ps: Poses, box: tuple, grid: int, count: int, req: Requirements) -> 
     i, j = np.nonzero(~np.eye(len(dy), dtype=bool))
     ok = (np.abs(A[i] - A[j]) > 1e-6) & (np.abs(M[i] - M[j]) > 1e-6)
     i, j = i[ok], j[ok]
-    omega, tN = _population_timing(ps, M[i], A[i])
-    good = np.isfinite(tN)
-    i, j, omega, tN = i[good], j[good], omega[good], tN[good]
+    rows = {"O2": M[i, None], "O4": M[j, None], "A": np.stack([ps.move(k, A[i]) for k in range(len(ps.p))], 1),
+            "B": np.stack([ps.move(k, A[j]) for k in range(len(ps.p))], 1)}  # fmt: skip
+    omega, turns, good = screen(FOURBAR, {k: np.broadcast_to(v, rows["A"].shape) for k, v in rows.items()})
+    i, j, omega, tN = i[good], j[good], omega[good], turns[good, -1]
     if not len(i):
         raise SynthesisError("[motion] no pair of dyads in the search region meets the poses in order: widen region")
     coords = np.stack([M[i], A[i], A[j], M[j], np.full(len(i), ps.p[0])], 1)
@@ -548,17 +549,3 @@ def _in_bounds(ps: Poses, req: Requirements, coords: np.ndarray) -> np.ndarray:
             d = np.abs(world[:, a] - world[:, b])
             ok &= (d >= lo) & (d <= hi)
     return ok
-
-
-def _population_timing(ps: Poses, M: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per driving dyad: the direction (±1) that meets the poses in order and the turn to the last pose [rad]
-    (NaN when neither direction does)."""
-    beta = np.stack([np.zeros(len(M))] + [np.angle((ps.move(k, A) - M) / (A - M)) for k in range(1, len(ps.p))], 1)
-    out_w, out_t = np.ones(len(M)), np.full(len(M), np.nan)
-    for omega in (-1.0, 1.0):
-        t = np.mod(omega * beta, TWO_PI)
-        t[:, 0] = 0.0
-        ok = np.all(np.diff(t, axis=1) > 1e-9, axis=1)
-        out_w = np.where(ok, omega, out_w)
-        out_t = np.where(ok, t[:, -1], out_t)
-    return out_w, out_t
