@@ -189,7 +189,10 @@ def test_no_warning_on_success(tmp_path, two_paths):
         syn.write(res, tmp_path / "f", plot=True, html=True)
         two_paths.task = dataclasses.replace(two_paths.task, units="µm😀")
         syn.write(two_paths, tmp_path / "p", plot=True, html=True)
+        dyads = [{"fixed": (0.0, 0.0)}, {"fixed": (1.3, 0.0)}]
+        syn.write(syn.motion(MOTION_POSES, dyads=dyads, units="😀"), tmp_path / "m", plot=True, html=True)
     assert (tmp_path / "f" / "structural_error.png").exists() and (tmp_path / "p" / "path.png").exists()
+    assert (tmp_path / "m" / "poses.png").exists()
 
 
 def test_targets_are_shown_when_the_page_opens(tmp_path, open_page, two_paths):  # noqa: F811
