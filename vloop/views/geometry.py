@@ -28,6 +28,7 @@ from ..result import Result
 BLOCK_SIZE = (0.08, 0.045)  # slider block length and height in drawings, fractions of the mechanism size
 
 
+
 @dataclass(frozen=True)
 class LoopChain:
     """One vector loop drawn head to tail over a run.

@@ -222,6 +222,8 @@ def _targets(mech: Mechanism, targets: Any) -> list[dict[str, float]]:
     return out
 
 
+
+
 def _columns(mech: Mechanism, result: Result, forces: Any) -> tuple[list[str], np.ndarray]:
     """Every column the page shows, checked finite: t, the Result's, health, forces (``force:NAME``)."""
     names = ["t", *result.columns]
