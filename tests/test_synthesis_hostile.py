@@ -291,3 +291,13 @@ def test_poses_turning_about_one_point(tmp_path, capfd):
     assert main(["synth", str(spec), "--out", str(tmp_path / "o")]) == 2
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "the poses all turn about one point (0, 0)" in err[0] and str(spec) in err[0]
+
+
+@pytest.mark.parametrize("value", [None, 5, "", " ", "a\x00b", "/nonexistent.toml", "/etc", "x" * 5000, ["a"]])
+def test_load_and_run_take_only_what_they_read(value):
+    """syn.load of a hostile path, syn.run of something not a SynthSpec: one VloopError, one line."""
+    with pytest.raises(VloopError) as info:
+        syn.load(value)
+    assert "\n" not in str(info.value)
+    with pytest.raises(VloopError, match=r"^spec: must be a SynthSpec"):
+        syn.run(value)

@@ -208,6 +208,8 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
         P = np.asarray(pairs, float)
         if P.ndim != 2 or P.shape[1] != 2 or len(P) < 3 or not np.all(np.isfinite(P)):
             raise SynthesisError("[function] pairs must be at least three finite [input, output] pairs")
+        if not np.ptp(P[:, 1]) > 0 or not np.ptp(P[:, 0]) > 0:
+            raise SynthesisError("[function] pairs: the inputs, and the outputs, must not all be the same")
         rng = input_range or (float(P[0, 0]), float(P[-1, 0]))
         return {"f": None, "theta": P[:, 0], "output": P[:, 1], "input_range": rng, "scale": float(np.ptp(P[:, 1]))}
     if f is None or x_range is None or input_range is None or output_range is None:

@@ -215,6 +215,8 @@ def load(path: str | Path) -> SynthSpec:
     """Read and check a synthesis file. Raises a VloopError naming the file and the entry."""
     from ..files.fileformat import _read_text_file, parse_toml
 
+    if not isinstance(path, (str, Path)) or not str(path).strip():
+        raise SynthesisError(f"path: must be a synthesis file's path, got {show(path)}", entry="path")
     path = Path(path)
     data = parse_toml(_read_text_file(path, MAX_SPEC_BYTES, what="synthesis file", entry=str(path)), str(path))
     return from_dict(data, source=str(path), default_name=path.stem)
@@ -429,6 +431,10 @@ def _rows(v: Any, width: int, key: str, entry: str, probs: Problems, lo: int, hi
 def run(spec: SynthSpec, progress: Any = None) -> Any:
     """Synthesize what a spec asks (:func:`vloop.synthesis.function`, ``motion`` or ``path``); a problem the
     functions find is named as the file's entry."""
+    if not isinstance(spec, SynthSpec):
+        raise SynthesisError(f"spec: must be a SynthSpec (vloop.synthesis.load), got {show(spec)}", entry="spec")
+    if progress is not None and not callable(progress):
+        raise SynthesisError(f"progress: must be a function of one message, got {show(progress)}", entry="progress")
     try:
         out = _run(spec, progress)
     except SynthesisError as exc:
