@@ -18,6 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import vloop
 import vloop.synthesis as syn
 from vloop.cli import main
 from vloop.errors import VloopError
@@ -301,3 +302,55 @@ def test_load_and_run_take_only_what_they_read(value):
     assert "\n" not in str(info.value)
     with pytest.raises(VloopError, match=r"^spec: must be a SynthSpec"):
         syn.run(value)
+
+
+# ---------------------------------------------------------------- export, assemble and study from Python
+
+
+@pytest.fixture(scope="module")
+def textbook():
+    from .conftest import MECHANISMS
+
+    return vloop.load(MECHANISMS / "fourbar_textbook_example.toml")
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(argument=st.sampled_from(["mech", "folder", "at", "fmt"]), value=st.sampled_from(HOSTILE))
+def test_export_arguments(tmp_path, textbook, argument, value):
+    """vloop.views.export.export with one hostile argument: a VloopError naming it, or a file in the folder."""
+    from vloop.views.export import export
+
+    os.chdir(tmp_path)
+    kwargs = {"mech": textbook, "folder": str(tmp_path / "out"), "at": 0.0, "fmt": "svg", argument: value}
+    try:
+        path = export(**kwargs)
+    except VloopError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert Path(path).resolve().is_relative_to(Path(kwargs["folder"]).resolve())
+
+
+@pytest.mark.parametrize("value", HOSTILE[:12])
+def test_assemble_takes_a_mechanism(value):
+    from vloop.authoring import assemble_mechanism
+
+    with pytest.raises(VloopError, match=r"^mech: must be a Mechanism"):
+        assemble_mechanism(value)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    argument=st.sampled_from(["times", "samples", "seed", "sensitivity", "chunk", "workers", "memory_budget"]),
+    value=st.sampled_from(HOSTILE),
+)
+def test_study_arguments(argument, value):
+    """vloop.study with one hostile keyword: a VloopError in one line, or a result with no NaN in its table."""
+    from .conftest import MECHANISMS
+
+    kwargs = {"params": [{"name": "links.l2.length", "values": [1.0]}], "outputs": ["l3.theta"], "progress": False}
+    try:
+        res = vloop.study(MECHANISMS / "fourbar_textbook_example.toml", **kwargs, **{argument: value})
+    except VloopError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert res.counts["variants"] >= 1

@@ -195,6 +195,18 @@ def out_file(value: Any, where: str = "--out") -> str:
     return value
 
 
+def folder_path(value: Any, where: str = "folder") -> Path:
+    """An output folder given to a Python function (text or a Path), checked as ``--out`` is."""
+    return Path(folder(str(value) if isinstance(value, Path) else value, where))
+
+
+def instance(value: Any, where: str, kind: type | tuple[type, ...], what: str) -> Any:
+    """``value`` if it is a ``kind``, else OptionError naming ``where`` and ``what`` it must be."""
+    if not isinstance(value, kind):
+        raise OptionError(f"{where}: must be {what}, got {show(value, 40)}", entry=where)
+    return value
+
+
 def file_path(value: Any, where: str = "FILE") -> str:
     """An input file's path: non-empty text without NUL characters (whether it exists is the reader's check)."""
     if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
