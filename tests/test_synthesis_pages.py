@@ -90,6 +90,9 @@ def test_fewer_candidates_than_asked_says_why(tmp_path, capsys):
     assert main(["synth", str(spec), "--out", str(tmp_path / "o")]) == 0
     out = capsys.readouterr().out
     assert "1 candidate of the 3 asked: function generation's equation is linear" in out
+    dyads = [{"fixed": (0.0, 0.0)}, {"fixed": (1.3, 0.0)}]
+    given = syn.motion(MOTION_POSES, dyads=dyads, count=5)
+    assert len(given) == 2 and given.note.endswith("the free choices given fix one four-bar (either dyad driving)")
 
 
 def test_path_png_draws_each_candidate_in_its_own_colour(tmp_path, two_paths):

@@ -150,6 +150,20 @@ class Candidates:
         return pd.DataFrame(rows)
 
 
+def shortfall(method: str, asked: int, found: int, *, dyads: bool = False, poses: int = 0) -> str:
+    """Why a synthesis returns fewer candidates than asked."""
+    got = f"{found} candidate{'s' if found != 1 else ''} of the {asked} asked"
+    if method == "function":
+        return f"{got}: function generation's equation is linear, so the precision points fix one linkage"
+    if method == "motion" and dyads:
+        return f"{got}: the free choices given fix one four-bar (either dyad driving)"
+    if method == "motion" and poses == 5:
+        return f"{got}: five poses have at most four Burmester points; every pair of those found is a candidate"
+    if method == "motion":
+        return f"{got}: no more distinct four-bars in the region meet the poses in order (widen region, refine grid)"
+    return f"{got}: the searches found no more distinct linkages within the tolerance (more restarts may find more)"
+
+
 def rank(items: list[Candidate]) -> list[Candidate]:
     """Solutions first, by error then larger minimum transmission angle; then defective ones by error."""
 

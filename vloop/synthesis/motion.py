@@ -37,7 +37,7 @@ import numpy as np
 from ..errors import SynthesisError
 from . import arguments as args
 from ._evaluate import evaluate
-from .candidates import Candidates, Task
+from .candidates import Candidates, Task, shortfall
 from .circuits import classify, screen
 from .defects import Draft, Requirements, assess, population_transmission
 from .fit import match
@@ -369,6 +369,8 @@ def motion(
         M, A, _ = centre_curve(first4, reach=3 * max(np.max(np.abs(ps.p)), 1.0))
         out.curves = {"centre": ps.centre + ps.size * M, "circle": ps.centre + ps.size * A}
     out.seconds = time.perf_counter() - started
+    if len(out) < count:
+        out.note = shortfall("motion", count, len(out), dyads=bool(dyads), poses=len(ps.p))
     return out
 
 

@@ -30,7 +30,7 @@ from scipy.optimize import differential_evolution, least_squares
 from ..errors import SynthesisError
 from . import arguments as args
 from ._evaluate import evaluate
-from .candidates import Candidates, Task
+from .candidates import Candidates, Task, shortfall
 from .defects import Draft, Requirements, assess, population_transmission
 from .fit import match
 from .linkages import FOURBAR, STEPHENSON3, Topology
@@ -237,6 +237,8 @@ def path(
             progress(f"no {top.name} within {tolerance:g} of the size: trying a {LINKAGES[linkage][-1].name}")
     out = Candidates(task, cands, log=log).keep(name, count)
     out.seconds = time.perf_counter() - started
+    if len(out) < count:
+        out.note = shortfall("path", count, len(out))
     return out
 
 

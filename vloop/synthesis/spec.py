@@ -26,6 +26,7 @@ from ..files.schema import Key, Problems, Section, check_keys, integer, name_pro
 from ..files.schema import markdown as schema_markdown
 from . import arguments as args
 from .arguments import LIMITS
+from .candidates import shortfall
 from .defects import Requirements
 
 MAX_SPEC_BYTES = 4 * 2**20
@@ -448,23 +449,9 @@ def run(spec: SynthSpec, progress: Any = None) -> Any:
         for c in out:
             c.mechanism = dataclasses.replace(c.mechanism, title=f"{spec.title} ({c.name})")
     if len(out) < spec.candidates:
-        out.note = shortfall(spec, len(out))
+        dyads, poses = bool(spec.options.get("dyads")), len(spec.options.get("poses") or ())
+        out.note = shortfall(spec.method, spec.candidates, len(out), dyads=dyads, poses=poses)
     return out
-
-
-def shortfall(spec: SynthSpec, found: int) -> str:
-    """Why a synthesis returns fewer candidates than the file's ``candidates`` asks."""
-    got = f"{found} candidate{'s' if found != 1 else ''} of the {spec.candidates} asked"
-    opts = spec.options
-    if spec.method == "function":
-        return f"{got}: function generation's equation is linear, so the precision points fix one linkage"
-    if spec.method == "motion" and opts.get("dyads"):
-        return f"{got}: the free choices given fix one four-bar (either dyad driving)"
-    if spec.method == "motion" and len(opts.get("poses") or ()) == 5:
-        return f"{got}: five poses have at most four Burmester points; every pair of those found is a candidate"
-    if spec.method == "motion":
-        return f"{got}: no more distinct four-bars in the region meet the poses in order (widen region, refine grid)"
-    return f"{got}: the searches found no more distinct linkages within the tolerance (more restarts may find more)"
 
 
 def _run(spec: SynthSpec, progress: Any) -> Any:
