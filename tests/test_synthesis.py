@@ -239,26 +239,6 @@ def test_limits_of_the_triple_rocker():
     assert sorted(analytic_fourbar.limit_angles(mech)) == pytest.approx([lim, 2 * math.pi - lim], abs=1e-12)
 
 
-def test_branch_defect_detected():
-    """Three poses of the triple rocker at crank angles 2.0, 1.0, 5.0 rad (own pivots as free choices): only
-    turning clockwise meets poses 1 and 2 in order, and clockwise the crank reaches its limit (0.5857 rad)
-    before pose 3 (5.0 ≡ −1.28): a branch defect, reported, never ranked as a solution."""
-    coords = _triple_rocker()
-    cw = analytic_fourbar.solve(FOURBAR.mechanism(coords, name="t", omega=-1.0, times=np.array([0.0, 1.0])))
-    ccw = analytic_fourbar.solve(FOURBAR.mechanism(coords, name="t", omega=1.0, times=np.array([3.0])))
-    pz = [
-        [float(r["P.x"][k]), float(r["P.y"][k]), float(r["coupler.theta"][k])] for r, k in ((cw, 0), (cw, 1), (ccw, 0))
-    ]
-    out = syn.motion(pz, dyads=[{"fixed": (0.0, 0.0)}, {"fixed": (0.7, 0.0)}])
-    c = own_pair(out, coords, 1.1)
-    assert_recovered(c, coords, 1.1)
-    assert c.mechanism.drivers[0].v0 == -1.0 and c.times[1] == pytest.approx(1.0, abs=1e-12)
-    assert "branch" in c.defects and not c.solution
-    assert math.isnan(c.errors[2]) and abs(c.errors[1]) <= TOL
-    row = out.table().set_index("name").loc[c.name]
-    assert not row["solution"] and (row["rank"] is None or math.isnan(row["rank"]))
-
-
 def test_order_defect_detected():
     """Five poses of a crank-rocker at crank angles 0, 2, 1, 3, 4 rad from the first (out of order either way
     round): the pair of Burmester points that is the four-bar's own pivots comes back, with an order defect,

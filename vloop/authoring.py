@@ -79,6 +79,9 @@ class Assembly:
 def assemble_mechanism(mech: Mechanism) -> tuple[Mechanism, Assembly]:
     """The t = 0 assembly of a mechanism written from dimensions (see the module docstring): the closed Mechanism and
     the report. Raises MechanismError where the dimensions cannot close or the choice is ambiguous."""
+    from .files.options import instance
+
+    instance(mech, "mech", Mechanism, "a Mechanism (vloop.load)")
     if not mech.from_dimensions:
         raise MechanismError(f"{mech.source}: not written from dimensions: its coordinates are its assembly")
     system, structure = loop_system(mech)

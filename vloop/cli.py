@@ -43,10 +43,10 @@ def _load(args: argparse.Namespace) -> Any:
 
 
 def _out_folder(args: argparse.Namespace, mech: Any) -> Path:
-    """--out, else out/<safe name> (a name can never lead outside out/)."""
-    from .files.output import default_folder
+    """--out, else out/<safe name> (a name can never lead outside out/), checked before any work."""
+    from .files.output import check_folder, default_folder
 
-    return Path(args.out) if args.out else default_folder(mech.name)
+    return check_folder(Path(args.out) if args.out else default_folder(mech.name))
 
 
 def _add_file(p: argparse.ArgumentParser) -> None:
@@ -521,7 +521,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_study(args: argparse.Namespace) -> int:
     """Run a design study file: every variant solved (in this process, or on Dask), its tables (Parquet or CSV) and
     pictures published as one set in --out. Exit 2 (after writing the tables) when no variant completed."""
-    from .files.output import OutputSet, default_folder
+    from .files.output import OutputSet, check_folder, default_folder
     from .studies.study import OWNS, run
     from .studies.studyfile import load
 
@@ -531,7 +531,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         check_scheduler(args.scheduler)
     spec = load(args.file)
     out = Path(args.out) if args.out else default_folder(Path(args.file).stem)
-    with OutputSet(out, owns=OWNS) as outset:
+    with OutputSet(check_folder(out), owns=OWNS) as outset:
         res = run(spec, scheduler=args.scheduler, workers=args.workers, memory_budget=args.memory_budget)
         res.stage(outset, plot=args.plot, fmt=args.format)
     for line in _study_lines(res):
@@ -653,11 +653,11 @@ def _engines(text: str) -> tuple[str, ...]:
 def cmd_synth(args: argparse.Namespace) -> int:
     """Synthesize what a synthesis file asks; write the ranked candidates, the best solutions' mechanism files
     and (with --plot, --html) their pictures and viewer pages into --out."""
-    from .files.output import default_folder
+    from .files.output import check_folder, default_folder
     from .synthesis import load, run, write
 
     spec = load(args.file)
-    out = Path(args.out) if args.out else default_folder(spec.name)
+    out = check_folder(Path(args.out) if args.out else default_folder(spec.name))  # before the search
     res = run(spec, progress=lambda msg: print(f"vloop: {msg}", file=sys.stderr))
     files = write(res, out, files=spec.files, plot=args.plot, html=args.html)
     for line in _synth_lines(res):
@@ -673,11 +673,20 @@ def _synth_lines(res: Any) -> list[str]:
         f"{res.task.method} generation: {len(res)} candidate{'s' if len(res) != 1 else ''}, {len(sols)} "
         f"solution{'s' if len(sols) != 1 else ''} (no defect), in {res.seconds:.2f} s"
     ]
+    if res.note:
+        lines.append(f"  ({res.note})")
     for c in res:
         what = "solution" if c.solution else "defective: " + ", ".join(c.defects)
+        missed = [k + 1 for k, e in enumerate(c.errors) if not np.isfinite(e)]
+        error = f"largest error {c.error:.3g} of {res.task.scale}" if np.isfinite(c.error) else (
+            f"position{'s' if len(missed) > 1 else ''} {', '.join(map(str, missed))} not reached"
+            if missed else "no error figure"
+        )  # fmt: skip
+        mu = np.degrees(c.min_transmission)
         lines.append(
-            f"  {c.name}: {c.topology}, largest error {c.error:.3g} of the size, Grashof: {c.grashof or '-'}, "
-            f"min transmission {np.degrees(c.min_transmission):.1f}°, {what}"
+            f"  {c.name}: {c.topology}, {error}, Grashof: {c.grashof or '-'}, "
+            + (f"min transmission {mu:.1f}°, " if np.isfinite(mu) else "")
+            + what
         )
     return lines
 
@@ -707,14 +716,16 @@ def _parser_export(sub: Any) -> None:
     _add_file(e)
     e.add_argument("--at", required=True, metavar="T", help="the instant [s], within the file's run")
     e.add_argument("--format", choices=["svg", "pdf", "dxf"], default="svg", help="svg or pdf (drawing), dxf (parts)")
-    e.add_argument("--out", help="output folder (default: out/NAME)")
+    e.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME)")
     e.set_defaults(func=cmd_export)
 
 
 def _parser_assemble(sub: Any) -> None:
     a = sub.add_parser("assemble", help="assemble a file written from dimensions at t = 0, write it with coordinates")
     _add_file(a)
-    a.add_argument("--out", metavar="FIXED.toml", help="the file to write (default: standard output)")
+    a.add_argument(
+        "--out", type=_type("out-file"), metavar="FIXED.toml", help="the file to write (default: standard output)"
+    )
     a.set_defaults(func=cmd_assemble)
 
 
@@ -889,8 +900,8 @@ def _parser_study(sub: Any) -> None:
 
 def _parser_synth(sub: Any) -> None:
     sy = sub.add_parser("synth", help="design from motion: function, motion or path generation (a synthesis file)")
-    sy.add_argument("file", help="synthesis file (TOML; docs/synthesis.md)")
-    sy.add_argument("--out", help="output folder (default: out/NAME)")
+    sy.add_argument("file", type=_type("file"), help="synthesis file (TOML; docs/synthesis.md)")
+    sy.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME)")
     sy.add_argument("--plot", action="store_true", help="also write the picture (structural error, path or poses)")
     sy.add_argument("--html", action="store_true", help="also write a viewer page per written candidate, targets drawn")
     sy.set_defaults(func=cmd_synth)

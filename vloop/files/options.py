@@ -12,10 +12,13 @@ makes no sense, a string, a bool and a nested list are refused); counts are inte
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from ..errors import VloopError
@@ -126,10 +129,81 @@ def choice_list(value: Any, where: str, choices: Sequence[str]) -> tuple[str, ..
 # ---------------------------------------------------------------- names and places
 
 
+def describe_os_error(exc: OSError) -> str:
+    """A short reason for an OSError (``permission denied``, ``no space left on device``...)."""
+    if exc.errno == errno.ENOSPC:
+        return "no space left on device"
+    if exc.errno == errno.EDQUOT:
+        return "disk quota exceeded"
+    return (exc.strerror or type(exc).__name__).lower()
+
+
+def check_folder(folder: str | Path, where: str = "--out") -> Path:
+    """Refuse, before any work, an output folder that could not be written: an existing file of that name, a file
+    where one of its parents should be, a nearest existing parent not writable (nothing is created)."""
+    folder = Path(folder)
+    if "\x00" in str(folder):
+        raise OptionError(f"{where}: {str(folder)!r}: a path cannot contain a NUL character", entry="out")
+    try:
+        return _check_folder(folder, where)
+    except OSError as exc:  # a name too long, a loop of links
+        raise OptionError(f"{where}: output folder {folder}: {describe_os_error(exc)}", entry="out") from None
+
+
+def _check_folder(folder: Path, where: str) -> Path:
+    if folder.exists() and not folder.is_dir():
+        raise OptionError(f"{where}: output folder {folder}: exists and is not a folder", entry="out")
+    parent = folder
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise OptionError(f"{where}: output folder {folder}: {parent} is a file, not a folder", entry="out")
+    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
+        raise OptionError(f"{where}: output folder {folder}: permission denied (in {parent})", entry="out")
+    return folder
+
+
+def check_file(path: str | Path, where: str = "--out") -> Path:
+    """Refuse, before any work, an output file that could not be written (a folder of that name, its folder)."""
+    path = Path(path)
+    try:
+        is_dir = path.is_dir()
+    except OSError as exc:
+        raise OptionError(f"{where}: output file {path}: {describe_os_error(exc)}", entry="out") from None
+    if is_dir:
+        raise OptionError(f"{where}: output file {path}: is a folder", entry="out")
+    check_folder(path.parent if str(path.parent) else ".", where)
+    return path
+
+
 def folder(value: Any, where: str = "--out") -> str:
-    """An output folder's path: non-empty text without NUL characters."""
+    """An output folder's path: non-empty text without NUL characters, a folder that can be written (checked
+    before any work: not an existing file, no file in its way, its nearest existing parent writable)."""
     if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
         raise _refuse(where, "a folder path (not empty, no NUL character)", value)
+    check_folder(value, where)
+    return value
+
+
+def out_file(value: Any, where: str = "--out") -> str:
+    """An output file's path (checked before any work like :func:`folder`: not a folder, its folder writable)."""
+    if not isinstance(value, str) or not value.strip() or "\x00" in value or len(value) > 4096:
+        raise _refuse(where, "a file path (not empty, no NUL character)", value)
+    check_file(value, where)
+    return value
+
+
+def folder_path(value: Any, where: str = "folder") -> Path:
+    """An output folder given to a Python function (text or a Path), checked as ``--out`` is."""
+    return Path(folder(str(value) if isinstance(value, Path) else value, where))
+
+
+def instance(value: Any, where: str, kind: type | tuple[type, ...], what: str) -> Any:
+    """``value`` if it is a ``kind``, else OptionError naming ``where`` and ``what`` it must be."""
+    if not isinstance(value, kind):
+        raise OptionError(f"{where}: must be {what}, got {show(value, 40)}", entry=where)
     return value
 
 
@@ -180,6 +254,7 @@ OPTIONS: dict[str, Option] = {
         Option("limit-fraction", lambda v: real(v, "--limit-fraction", 0.0, 1.0), "0 to 1"),
         Option("minimize-tries", lambda v: integer(v, "--minimize-tries", 0, 10_000), "0 to 10000"),
         Option("out", folder, "a folder"),
+        Option("out-file", out_file, "a file"),
         Option("previous", lambda v: file_path(v, "--previous"), "a summary.json"),
         Option("file", file_path, "a file"),
         Option("cs", lambda v: real(v, "--flywheel-for", 0.0, 2.0, open_low=True), "a number above 0, at most 2"),

@@ -19,7 +19,6 @@ Rules (docs/cli.md, "Output files"):
 from __future__ import annotations
 
 import contextlib
-import errno
 import fnmatch
 import os
 import re
@@ -30,6 +29,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ..errors import VloopError
+from .options import check_file, check_folder, describe_os_error  # noqa: F401  (re-exported: one place for them)
 
 DEFAULT_ROOT = Path("out")
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
@@ -52,13 +52,12 @@ def default_folder(name: str, root: str | Path = DEFAULT_ROOT) -> Path:
     return Path(root) / safe_folder_name(name)
 
 
-def describe_os_error(exc: OSError) -> str:
-    """A short reason for an OSError (``permission denied``, ``no space left on device``...)."""
-    if exc.errno == errno.ENOSPC:
-        return "no space left on device"
-    if exc.errno == errno.EDQUOT:
-        return "disk quota exceeded"
-    return (exc.strerror or type(exc).__name__).lower()
+def plain_name(name: str) -> str:
+    """A file name inside the output folder: no folder part, not "." or "..", not the staging area's."""
+    bad = not name or "/" in name or "\\" in name or "\x00" in name or name in (".", "..")
+    if bad or name.startswith(".vloop-stage-"):
+        raise OutputError(f"{name!r} is not a plain file name: every output stays inside its folder", entry="out")
+    return name
 
 
 def ensure_folder(folder: str | Path) -> Path:
@@ -147,12 +146,15 @@ class OutputSet:
     user: Ctrl-C during the renames is held until they are done (the new set is then complete, and the
     interrupt is raised after). ``owns`` names the entries (files or folders, ``fnmatch`` patterns) this
     kind of set may hold: those of the previous set that the new one does not have are removed, so the
-    folder never holds a new summary beside an old report. ``published`` lists the paths.
+    folder never holds a new summary beside an old report. A set whose names vary (NAME_1.toml, ...) keeps a
+    ``record`` (a hidden file listing what it published): the next set of its kind removes those it does not
+    have, and nothing else. ``published`` lists the paths. Staged names are plain file names (never a path).
     """
 
-    def __init__(self, folder: str | Path, owns: Iterable[str] = ()) -> None:
+    def __init__(self, folder: str | Path, owns: Iterable[str] = (), record: str | None = None) -> None:
         self.folder = ensure_folder(folder)
         self.owns = tuple(owns)
+        self.record = record
         self.published: list[Path] = []
         try:
             self.stage = Path(tempfile.mkdtemp(prefix=".vloop-stage-", dir=self.folder))
@@ -161,11 +163,12 @@ class OutputSet:
 
     def path(self, name: str) -> Path:
         """Where a file is staged (for writers that want a path, e.g. matplotlib or pyarrow)."""
-        return self.stage / name
+        return self.stage / plain_name(name)
 
     def write(self, name: str, fill: Callable[[IO[Any]], None], binary: bool = False) -> Path:
         """Stage ``name`` by calling ``fill(file_object)``."""
         text = {} if binary else {"encoding": "utf-8", "newline": ""}
+        plain_name(name)
         try:
             with open(self.stage / name, "wb" if binary else "w", **text) as fh:
                 fill(fh)
@@ -218,10 +221,27 @@ class OutputSet:
                 os.replace(target, aside)  # a folder cannot replace a non-empty one: move the old one aside first
             os.replace(self.stage / name, target)
             self.published.append(target)
+        previous = self._recorded()
         for entry in self.folder.iterdir():
-            stale = entry.name not in names and any(fnmatch.fnmatchcase(entry.name, p) for p in self.owns)
-            if stale and not entry.name.startswith(".vloop-stage-"):
+            ours = entry.name in previous or any(fnmatch.fnmatchcase(entry.name, p) for p in self.owns)
+            if entry.name not in names and ours and not entry.name.startswith(".vloop-stage-"):
                 _remove(entry)
+        if self.record is not None:  # what this set holds, so that the next set of its kind removes what it lacks
+            write_text(self.folder / self.record, "".join(f"{n}\n" for n in names))
+
+    def _recorded(self) -> set[str]:
+        """The entries the previous set of this kind published (its record), plain names only."""
+        if self.record is None:
+            return set()
+        try:
+            lines = (self.folder / self.record).read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError):
+            return set()
+        out = set()
+        for n in lines:
+            with contextlib.suppress(OutputError):
+                out.add(plain_name(n))
+        return out - {self.record}
 
     def discard(self) -> None:
         shutil.rmtree(self.stage, ignore_errors=True)

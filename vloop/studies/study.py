@@ -105,6 +105,10 @@ def study(
     spec = from_dict(data, mechanism, source="vloop.study")
     if times is not None:
         spec = dataclasses.replace(spec, times=_check_times(times))
+    from ..files.options import OPTIONS  # the command line's parsers: one check for --workers and workers=
+
+    scheduler = OPTIONS["scheduler"].parse(scheduler) if scheduler is not None else None
+    workers = OPTIONS["workers"].parse(workers) if workers is not None else None
     return run(spec, scheduler=scheduler, workers=workers, progress=progress, memory_budget=memory_budget)
 
 

@@ -20,8 +20,9 @@ from ..model import Mechanism
 @dataclass(frozen=True)
 class Task:
     """What was asked: the method, the targets (points (N,) complex; poses add ``angles`` (N,) [rad]; a function
-    generator's ``outputs`` (N,) of output column ``output``), the task's ``size`` [length] that relative errors
-    refer to, and whether the method is exact (its candidates pass through every position to round-off)."""
+    generator's ``outputs`` (N,) of output column ``output``), the task's ``size`` that relative errors refer to
+    (in the errors' own unit: the targets' size [length], or the output's range [rad or length]) and what it is
+    (``scale``), and whether the method is exact (its candidates pass through every position to round-off)."""
 
     method: str
     size: float
@@ -33,6 +34,7 @@ class Task:
     units: str = "m"
     function: Any = None  # (f, x range, y range, input range, output range) of a function generator
     timing: np.ndarray | None = None
+    scale: str = "the targets' size"
 
     @property
     def count(self) -> int:
@@ -51,7 +53,8 @@ class Candidate:
     position is reached; ``errors`` the distance [length] (function generation: output error [rad or length])
     there, ``angle_errors`` [rad] the guided body's angle error (motion generation); ``defects`` and ``notes``
     what is wrong and why; ``min_transmission`` [rad] over the working motion; ``structural_error`` a function
-    generator's largest |y − f(x)| over its range [y units]; ``search_error`` the optimizer's own figure."""
+    generator's largest |y − f(x)| over its range as a fraction of the y range; ``search_error`` the optimizer's
+    own figure."""
 
     name: str
     method: str
@@ -82,8 +85,9 @@ class Candidate:
 
     @property
     def error(self) -> float:
-        """The largest error at a precision position, as a fraction of the task's size (angles: of 1 rad ×
-        size for a pose; NaN where a position was not reached)."""
+        """The largest error at a precision position, unit-free: a fraction of the task's size (the targets' size,
+        or a function generator's output range; a pose's angle error counts in rad, as a fraction of 1 rad); NaN
+        where a position was not reached."""
         e = np.asarray(self.errors, float)
         if self.angle_errors is not None:
             e = np.maximum(e, np.abs(self.angle_errors) * self.size)
@@ -101,6 +105,7 @@ class Candidates:
     seconds: float = 0.0
     log: list[str] = field(default_factory=list)
     curves: dict[str, np.ndarray] = field(default_factory=dict)  # Burmester's centre- and circle-point curves
+    note: str = ""  # why there are fewer candidates than asked
 
     def __post_init__(self) -> None:
         self.items = rank(self.items)
@@ -141,7 +146,22 @@ class Candidates:
         the link lengths."""
         import pandas as pd
 
-        return pd.DataFrame([_row(c, k + 1 if c.solution else None) for k, c in enumerate(self.items)])
+        rows = [_row(c, k + 1 if c.solution else None, self.task.scale) for k, c in enumerate(self.items)]
+        return pd.DataFrame(rows)
+
+
+def shortfall(method: str, asked: int, found: int, *, dyads: bool = False, poses: int = 0) -> str:
+    """Why a synthesis returns fewer candidates than asked."""
+    got = f"{found} candidate{'s' if found != 1 else ''} of the {asked} asked"
+    if method == "function":
+        return f"{got}: function generation's equation is linear, so the precision points fix one linkage"
+    if method == "motion" and dyads:
+        return f"{got}: the free choices given fix one four-bar (either dyad driving)"
+    if method == "motion" and poses == 5:
+        return f"{got}: five poses have at most four Burmester points; every pair of those found is a candidate"
+    if method == "motion":
+        return f"{got}: no more distinct four-bars in the region meet the poses in order (widen region, refine grid)"
+    return f"{got}: the searches found no more distinct linkages within the tolerance (more restarts may find more)"
 
 
 def rank(items: list[Candidate]) -> list[Candidate]:
@@ -155,7 +175,7 @@ def rank(items: list[Candidate]) -> list[Candidate]:
     return sorted(items, key=key)
 
 
-def _row(c: Candidate, rank_: int | None) -> dict[str, Any]:
+def _row(c: Candidate, rank_: int | None, error_of: str) -> dict[str, Any]:
     row: dict[str, Any] = {
         "rank": rank_,
         "name": c.name,
@@ -167,6 +187,7 @@ def _row(c: Candidate, rank_: int | None) -> dict[str, Any]:
         "max_error": float(np.nanmax(np.abs(c.errors))) if np.any(np.isfinite(c.errors)) else math.nan,
         "search_error": c.search_error,
         "structural_error": c.structural_error,
+        "error_of": error_of,
         "grashof": c.grashof,
         "full_rotation": c.full_rotation,
         "min_transmission_angle": c.min_transmission,

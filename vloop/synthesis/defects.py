@@ -1,15 +1,18 @@
 """Defects and quality of a synthesized linkage, found by re-solving it with vloop over its whole motion.
 
-The classic failures of synthesis (Erdman & Sandor; Norton, ch. 5), as vloop sees them when it runs the
-candidate's own file from its first precision position with the input moving one way:
+The classic failures of synthesis (Erdman & Sandor; Norton, ch. 5). A method that means its linkage to be in
+a given configuration at each precision position (function and motion generation) names the defect from those
+configurations (:mod:`.circuits`: the input's arcs and the dyad's assembly sign):
 
-* **branch defect** — the motion stops at a limit (a toggle of the input) before the last precision position:
-  the positions are not all reachable without reversing the input through a dead point; or a non-Grashof
-  linkage reaches some position's input angle on the other branch of its one circuit;
-* **circuit defect** — an exact method's linkage passes through every position on paper, but the motion from
-  the first position reaches some position's input angle on the other assembly circuit of a Grashof linkage
-  (the error there is not round-off: more than CIRCUIT_TOL of the size);
-* **order defect** — the positions are reached in another order than asked as the input moves one way;
+* **circuit defect** — the positions lie on different circuits: the linkage must be taken apart to pass
+  through them;
+* **branch defect** — on one circuit, but on different branches: a toggle lies between them;
+* **order defect** — on one branch, but the positions are reached in another order than asked as the input
+  moves one way.
+
+The candidate's own file is then run by vloop from its first precision position with the input moving that
+way, and the run confirms it: a run that stops at a limit before the last position is a branch defect (the
+only name a search's candidate, whose positions are read off its own run, can have besides order);
 * **no full rotation** — a full-turning input was required and the input cannot turn through 360°;
 * **transmission angle** — the smallest transmission angle over the working motion is below the limit asked;
 * **error** — an optimization's candidate misses a precision position by more than the tolerance asked.
@@ -30,9 +33,10 @@ from ..method.loops import LoopSystem
 from ..model import Mechanism
 from ..result import Result
 from .candidates import Candidate, Task
+from .circuits import Verdict
 from .linkages import Topology, lengths, reanchored
 
-CIRCUIT_TOL = 1e-6  # of the size: an exact method's error beyond this is another circuit, not round-off
+CIRCUIT_TOL = 1e-6  # of the task's scale: an exact method's error beyond this is not round-off
 WORK_SAMPLES = 181  # samples of the working motion (plus every precision instant)
 TURN_SAMPLES = 361  # samples of the full-turn check (1° apart)
 TWO_PI = 2.0 * math.pi
@@ -42,11 +46,33 @@ TWO_PI = 2.0 * math.pi
 class Requirements:
     """What a solution must also do: turn its input fully; keep the transmission angle at or above
     ``min_transmission`` [rad] over its working motion; (an optimization's candidate) pass every precision
-    position within ``tolerance`` of the task's size."""
+    position within ``tolerance`` of the task's size; keep its ground pivots inside ``pivots`` = (xmin, ymin,
+    xmax, ymax) and every moving link's length (each side of a plate) within ``links`` = (min, max), lengths in
+    the task's units."""
 
     full_rotation: bool = False
     min_transmission: float = 0.0
     tolerance: float | None = None
+    pivots: tuple[float, float, float, float] | None = None
+    links: tuple[float, float] | None = None
+
+    def outside(self, mech: Mechanism) -> list[str]:
+        """What of a mechanism lies outside the bounds asked (empty when nothing does or none were asked)."""
+        out = []
+        if self.pivots is not None:
+            x0, y0, x1, y1 = self.pivots
+            ground = [j for lk in mech.links.values() if lk.ground for j in lk.joints]
+            for j in ground:
+                x, y = mech.joints[j]
+                if not (x0 <= x <= x1 and y0 <= y <= y1):
+                    out.append(f"ground pivot {j} at ({x:.6g}, {y:.6g}) is outside pivots {list(self.pivots)}")
+        if self.links is not None:
+            lo, hi = self.links
+            ground = {n for n, lk in mech.links.items() if lk.ground}
+            for key, length in lengths(mech).items():
+                if key.split(".")[0] not in ground and not lo <= length <= hi:
+                    out.append(f"{key} = {length:.6g} is outside links [{lo:g}, {hi:g}]")
+        return out
 
 
 @dataclass
@@ -64,6 +90,7 @@ class Draft:
     search_error: float | None = None
     notes: tuple[str, ...] = ()
     extra: dict = field(default_factory=dict)
+    verdict: Verdict | None = None  # the defect the method's configurations make (None: read it off the run)
 
 
 def assess(draft: Draft, task: Task, req: Requirements) -> Candidate:
@@ -75,28 +102,21 @@ def assess(draft: Draft, task: Task, req: Requirements) -> Candidate:
     system = compile(mech)
     res, stop = _solve(system, work)
     errors, angle_errors = _errors(res, times, task, top)
-    defects, notes = [], list(draft.notes)
-    if stop is not None:
-        missed = [k + 1 for k in range(len(times)) if not np.isfinite(errors[k])]
-        defects.append("branch")
-        notes.append(f"branch defect: {stop} (precision position{'s' if len(missed) > 1 else ''} {missed} not reached)")
+    defects, notes = _named(draft, times, errors, stop)
+    off = np.nan_to_num(np.abs(errors), nan=0.0) > CIRCUIT_TOL * task.size
+    if task.exact and not defects and np.any(off):
+        # the configurations say the run meets every position: a run that misses one is named, never ranked
+        defects.append("error")
+        notes.append(f"the run misses position(s) {[k + 1 for k in np.nonzero(off)[0]]} its method meant to meet")
     grashof = grashof_class(system)
-    if task.exact and np.any(np.nan_to_num(np.abs(errors), nan=0.0) > CIRCUIT_TOL * task.size):
-        bad = [k + 1 for k in range(len(errors)) if abs(errors[k]) > CIRCUIT_TOL * task.size]
-        # a Grashof four-bar's two assemblies are two circuits; a non-Grashof one's are two branches of one
-        # circuit, joined at the toggles
-        kind = "branch" if grashof.startswith(("non-Grashof", "special")) else "circuit"
-        if kind not in defects:
-            defects.append(kind)
-        where = "across a toggle, on the other branch" if kind == "branch" else "on another assembly circuit"
-        notes.append(f"{kind} defect: position{'s' if len(bad) > 1 else ''} {bad} lie {where}")
-    if len(times) > 1 and not np.all(np.diff(times) > 0):
-        defects.append("order")
-        notes.append("order defect: the positions are not reached in the order asked as the input moves one way")
     full = _turns_fully(system, draft.span, stop)
     if req.full_rotation and not full:
         defects.append("no full rotation")
         notes.append(f"the input {top.input} cannot turn through a full revolution")
+    outside = req.outside(mech)
+    if outside:
+        defects.append("bounds")
+        notes.append("bounds: " + "; ".join(outside))
     mu = min_transmission(mech, res, system)
     if req.min_transmission > 0 and not mu >= req.min_transmission:
         defects.append("transmission angle")
@@ -106,12 +126,30 @@ def assess(draft: Draft, task: Task, req: Requirements) -> Candidate:
     worst = np.nanmax(np.abs(errors)) / task.size if np.any(np.isfinite(errors)) else math.nan
     if req.tolerance is not None and not task.exact and worst > req.tolerance:
         defects.append("error")
-        notes.append(f"misses a precision position by {worst:.3g} of the size (tolerance {req.tolerance:g})")
+        notes.append(f"misses a precision position by {worst:.3g} of {task.scale} (tolerance {req.tolerance:g})")
     return Candidate(
         draft.name, draft.method, top.name, mech, top.input, top.guided, top.tracer, times,
         _inputs(res, times, top), errors, task.size, tuple(defects), tuple(notes), angle_errors,
         grashof, full, mu, None, draft.search_error, lengths(mech), dict(draft.extra),
     )  # fmt: skip
+
+
+def _named(draft: Draft, times: np.ndarray, errors: np.ndarray, stop: str | None) -> tuple[list[str], list[str]]:
+    """The defect the draft's configurations make (or, without them, the run's), and the notes that say why."""
+    defects, notes = [], list(draft.notes)
+    missed = [k + 1 for k in range(len(times)) if not np.isfinite(errors[k])]
+    reached = f" (precision position{'s' if len(missed) > 1 else ''} {missed} not reached)" if missed else ""
+    v = draft.verdict
+    if v is not None and v.kind:
+        defects.append(v.kind)
+        notes.append(v.note + (f"; the run: {stop}" if stop else ""))
+    elif stop is not None:
+        defects.append("branch")
+        notes.append(f"branch defect: {stop}{reached}")
+    if v is None and len(times) > 1 and not np.all(np.diff(times) > 0) and "order" not in defects:
+        defects.append("order")
+        notes.append("order defect: the positions are not reached in the order asked as the input moves one way")
+    return defects, notes
 
 
 def _solve(system: LoopSystem, times: np.ndarray) -> tuple[Result, str | None]:

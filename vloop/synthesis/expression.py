@@ -24,21 +24,32 @@ MAX_LENGTH = 500
 _BINARY = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
 
 
-def parse(text: object, entry: str = "function.expression") -> Callable[[np.ndarray], np.ndarray]:
+class Expression:
+    """f(x) parsed from its text: callable on arrays (NaN where undefined), its ``tree`` for analysis
+    (:mod:`.domain`) and its ``text``."""
+
+    def __init__(self, tree: ast.AST, text: str) -> None:
+        self.tree, self.text = tree, text
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return evaluate(self.tree, np.asarray(x, float))
+
+
+def parse(text: object, entry: str = "f") -> Expression:
     """A vectorized f(x) from its text; SynthesisError naming ``entry`` for anything else than the grammar."""
     if not isinstance(text, str) or not text.strip() or len(text) > MAX_LENGTH:
-        raise SynthesisError(f"[{entry}] must be an expression in x of at most {MAX_LENGTH} characters", entry=entry)
+        raise SynthesisError(f"{entry}: must be an expression in x of at most {MAX_LENGTH} characters", entry=entry)
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except (SyntaxError, ValueError, RecursionError, MemoryError):
-        raise SynthesisError(f"[{entry}] {text!r:.80} is not an expression in x", entry=entry) from None
+        raise SynthesisError(f"{entry}: {text!r:.80} is not an expression in x", entry=entry) from None
     _check(tree.body, entry, text)
-    return lambda x: _eval(tree.body, np.asarray(x, float))
+    return Expression(tree.body, text)
 
 
 def _check(node: ast.AST, entry: str, text: str, depth: int = 0) -> None:
     if depth > 50:
-        raise SynthesisError(f"[{entry}] the expression is nested too deeply", entry=entry)
+        raise SynthesisError(f"{entry}: the expression is nested too deeply", entry=entry)
     ok = (
         (isinstance(node, ast.Constant) and type(node.value) in (int, float) and _finite(node.value))
         or (isinstance(node, ast.Name) and (node.id == "x" or node.id in CONSTANTS))
@@ -55,7 +66,7 @@ def _check(node: ast.AST, entry: str, text: str, depth: int = 0) -> None:
     if not ok:
         what = ast.unparse(node)[:40] if hasattr(ast, "unparse") else type(node).__name__
         raise SynthesisError(
-            f"[{entry}] {what!r} is not allowed in {text!r:.60} (numbers, x, pi, e, + - * / **, and "
+            f"{entry}: {what!r} is not allowed in {text!r:.60} (numbers, x, pi, e, + - * / **, and "
             f"{', '.join(FUNCTIONS)})",
             entry=entry,
         )
@@ -72,16 +83,17 @@ def _finite(value: float) -> bool:
         return False
 
 
-def _eval(node: ast.AST, x: np.ndarray) -> np.ndarray:
+def evaluate(node: ast.AST, x: np.ndarray) -> np.ndarray:
+    """The expression tree's values at x (NaN or ±inf where it is undefined)."""
     with np.errstate(all="ignore"):
         if isinstance(node, ast.Constant):
             return np.full_like(x, float(node.value))
         if isinstance(node, ast.Name):
             return x if node.id == "x" else np.full_like(x, CONSTANTS[node.id])
         if isinstance(node, ast.BinOp):
-            return _BINARY[type(node.op)](_eval(node.left, x), _eval(node.right, x))
+            return _BINARY[type(node.op)](evaluate(node.left, x), evaluate(node.right, x))
         if isinstance(node, ast.UnaryOp):
-            v = _eval(node.operand, x)
+            v = evaluate(node.operand, x)
             return -v if isinstance(node.op, ast.USub) else v
         assert isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
-        return FUNCTIONS[node.func.id](_eval(node.args[0], x))
+        return FUNCTIONS[node.func.id](evaluate(node.args[0], x))

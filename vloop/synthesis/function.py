@@ -30,12 +30,16 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..errors import MotionError, SynthesisError
+from . import arguments as args
 from .candidates import Candidates, Task
+from .circuits import arcs, classify, swept
 from .defects import Draft, Requirements, assess
-from .expression import parse
+from .domain import check_bounded
+from .expression import Expression, parse
 from .linkages import FOURBAR, SLIDER_CRANK, Topology, reanchored
 
 SPACINGS = ("chebyshev", "even")
+MAX_RATIO = 1e6  # a crank or rocker longer than this many grounds is a linkage at infinity, not a design
 LINKAGES = ("fourbar", "slider-crank")
 
 
@@ -58,6 +62,12 @@ def fourbar_lengths(K: np.ndarray, d: float) -> tuple[float, float, float]:
     if K1 == 0 or K2 == 0:
         raise SynthesisError("no four-bar: a Freudenstein coefficient is zero (a crank or rocker of infinite length)")
     a, c = d / K1, d / K2
+    if max(abs(a), abs(c)) > MAX_RATIO * d:
+        raise SynthesisError(
+            f"no four-bar: the precision pairs ask for a {'crank' if abs(a) >= abs(c) else 'rocker'} "
+            f"{max(abs(a), abs(c)) / d:.3g} times the ground (an output that follows the input in step: a linkage at "
+            "infinity); choose other pairs or ranges"
+        )
     b2 = a * a + c * c + d * d - 2 * a * c * K3
     if not b2 > 0:
         raise SynthesisError(f"no four-bar through these precision points: the coupler's length² is {b2:.4g} ≤ 0")
@@ -108,30 +118,86 @@ def function(
     through precision ``pairs`` (input [rad], output). ``ground``: O2O4 [length] of a four-bar. Returns the
     candidate, re-solved: errors at the precision points, structural error over the range (``samples``)."""
     started = time.perf_counter()
+    _arguments(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage)
+    args.common(name, units, requirements)
+    args.limited(ground, "ground", "function.ground")
+    args.count(samples, "samples", "function.samples")
     setup = _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage)
     th, out = setup["theta"], setup["output"]
     top, coords, output = _linkage(linkage, th[0], out[0], th, out, ground)
-    direction = 1.0 if setup["input_range"][1] >= setup["input_range"][0] else -1.0
-    t = direction * (th - setup["input_range"][0])
-    span = direction * (setup["input_range"][1] - setup["input_range"][0])
+    ts, tf = setup["input_range"]
+    direction = 1.0 if tf >= ts else -1.0
+    verdict = classify(top, _configs(top, coords, th, out), direction)
+    t = direction * (th - ts)
+    span = direction * (tf - ts)
     mech0 = top.mechanism(coords, name=name, omega=direction, times=np.array([0.0]), units=units)
-    defects: tuple[str, ...] = ()
+    notes = _sweep_note(top, coords, th[0], ts, tf) if not verdict.kind else ()
     try:
         mech = reanchored(mech0, top, -float(t[0]), np.array([0.0]))
     except MotionError as exc:  # the range's start is beyond a limit of the motion from the first point
-        mech, defects = mech0, (f"branch: the input range's start cannot be reached from the first point ({exc})",)
+        mech = mech0
+        notes = notes or (f"branch defect: the input range's start cannot be reached from the first point ({exc})",)
         t, span = t - t[0], span - float(t[0])
-    size = max(abs(v) for v in _dims(top, coords).values())
-    task = Task("function", size, True, outputs=_physical(out, coords, top), output=output, units=units)
-    draft = Draft(f"{name}_1", "function", top, mech, t, span, notes=defects)
+    task = Task("function", setup["scale"], len(th) == 3, outputs=_physical(out, coords, top), output=output,
+                units=units, scale="the output's range")  # fmt: skip
+    draft = Draft(f"{name}_1", "function", top, mech, t, span, notes=notes, verdict=verdict)
     cand = assess(draft, task, requirements or Requirements())
-    if defects:
+    if notes and "branch" not in cand.defects:
         cand.defects = (*cand.defects, "branch")
     cand.guided = "rocker" if top.name == "fourbar" else "slider"
     cand.notes = (*cand.notes, *_flipped(coords, th[0], out[0], top))
     if setup["f"] is not None:
         _structural(cand, setup, samples, direction)
     return Candidates(task, [cand], time.perf_counter() - started).keep(name)
+
+
+def _configs(top: Topology, coords: dict[str, complex], th: np.ndarray, out: np.ndarray) -> list[dict[str, complex]]:
+    """The linkage at each precision pair as the method means it: the crank turned by the input's increment, the
+    rocker by the output's (a slider moved along +x by it)."""
+    turn = np.exp(1j * (th - th[0]))
+    if top.sliders:
+        moved = coords["B"] + (out - out[0])
+    else:
+        moved = coords["O4"] + (coords["B"] - coords["O4"]) * np.exp(1j * (out - out[0]))
+    return [{**coords, "A": coords["A"] * turn[k], "B": complex(moved[k])} for k in range(len(th))]
+
+
+def _sweep_note(top: Topology, coords: dict[str, complex], th1: float, ts: float, tf: float) -> tuple[str, ...]:
+    """A branch defect's note when the input range runs into a limit of the crank (a toggle between positions)."""
+    rng = arcs(top, coords)
+    start = float(np.angle(coords["A"])) + ts - th1
+    ends = swept(rng, start, start + tf - ts)
+    if ends is None:
+        return ()
+    at = float(rng.psi(np.array([start]))[0])
+    lo, hi = (math.degrees(ts + v - rng.phase - at) for v in ends)
+    return (
+        f"branch defect: the input range [{math.degrees(ts):.2f}°, {math.degrees(tf):.2f}°] runs into a limit of "
+        f"the crank, which rocks between {lo:.2f}° and {hi:.2f}° (in the input's angles)",
+    )
+
+
+def _arguments(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage) -> None:
+    """Each argument's type and range (vloop.synthesis.arguments), before any work."""
+    args.choice(linkage, "linkage", LINKAGES)
+    out_bound = args.MAX_ANGLE if linkage == "fourbar" else args.MAX_LENGTH
+    if pairs is not None:
+        args.rows(pairs, "pairs", 3, 1000, (("input", args.MAX_ANGLE), ("output", out_bound)))
+    else:
+        if f is not None:
+            args.function_of_x(f)
+        for value, where, bound in (
+            (x_range, "x_range", 1e300), (input_range, "input_range", args.MAX_ANGLE),
+            (output_range, "output_range", out_bound), (y_range, "y_range", 1e300),
+        ):  # fmt: skip
+            if value is not None:
+                args.pair(value, where, bound)
+    if input_range is not None:
+        args.pair(input_range, "input_range", args.MAX_ANGLE)
+    args.count(points, "points", "function.points")
+    args.choice(spacing, "spacing", SPACINGS)
+    if precision is not None:
+        args.table(precision, "precision", "a list of x values")
 
 
 def _setup(f, x_range, input_range, output_range, y_range, points, spacing, precision, pairs, linkage) -> dict:
@@ -142,14 +208,18 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
         P = np.asarray(pairs, float)
         if P.ndim != 2 or P.shape[1] != 2 or len(P) < 3 or not np.all(np.isfinite(P)):
             raise SynthesisError("[function] pairs must be at least three finite [input, output] pairs")
+        if not np.ptp(P[:, 1]) > 0 or not np.ptp(P[:, 0]) > 0:
+            raise SynthesisError("[function] pairs: the inputs, and the outputs, must not all be the same")
         rng = input_range or (float(P[0, 0]), float(P[-1, 0]))
-        return {"f": None, "theta": P[:, 0], "output": P[:, 1], "input_range": rng}
+        return {"f": None, "theta": P[:, 0], "output": P[:, 1], "input_range": rng, "scale": float(np.ptp(P[:, 1]))}
     if f is None or x_range is None or input_range is None or output_range is None:
         raise SynthesisError("[function] give the function with x_range, input_range and output_range (or pairs)")
     fn = parse(f) if isinstance(f, str) else f
     x0, xf = (float(v) for v in x_range)
     if not (math.isfinite(x0) and math.isfinite(xf)) or x0 == xf:
         raise SynthesisError(f"[function] x_range must be two different finite numbers, got {x_range}")
+    if isinstance(fn, Expression):  # found from the expression: its poles and domain over the whole range
+        check_bounded(fn.tree, x0, xf, fn.text)
     xs = _precision_x(x0, xf, points, spacing, precision)
     dense = np.linspace(x0, xf, 1001)
     yd = np.asarray(fn(np.concatenate([dense, xs])), float)
@@ -162,7 +232,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
         if y_range is not None
         else (float(fn(np.array([x0]))[0]), float(fn(np.array([xf]))[0]))
     )
-    if not (math.isfinite(y0) and math.isfinite(yf)) or abs(yf - y0) <= 1e-12 * max(1.0, float(np.max(np.abs(yd)))):
+    if not (math.isfinite(y0) and math.isfinite(yf)) or abs(yf - y0) <= 1e-12 * float(np.max(np.abs(yd))):
         raise SynthesisError(
             f"[function] f takes the same value at both ends of the range: give y_range (got {y0:g}, {yf:g})"
         )
@@ -171,7 +241,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
     theta = ts + (xs - x0) / (xf - x0) * (tf - ts)
     output = os_ + (ys - y0) / (yf - y0) * (of - os_)
     return {"f": fn, "theta": theta, "output": output, "input_range": (ts, tf), "x": (x0, xf), "y": (y0, yf),
-            "output_range": (os_, of)}  # fmt: skip
+            "output_range": (os_, of), "scale": abs(of - os_)}  # fmt: skip
 
 
 def _pair(v: object, what: str) -> tuple[float, float]:
@@ -242,8 +312,9 @@ def _dims(top: Topology, coords: dict[str, complex]) -> dict[str, float]:
 
 
 def _structural(cand, setup: dict, samples: int, direction: float) -> None:
-    """y(x) − f(x) over the range by re-solving the candidate at ``samples`` x values (NaN past a stop). An
-    angle output is read relative to the first precision point (the file's θ may differ by turns or by π)."""
+    """y(x) − f(x) over the range by re-solving the candidate at ``samples`` x values (NaN past a stop); its
+    largest magnitude as a fraction of the y range. An angle output is read relative to the first precision
+    point (the file's θ may differ by turns or by π)."""
     from .. import solve
 
     x0, xf = setup["x"]
@@ -265,5 +336,7 @@ def _structural(cand, setup: dict, samples: int, direction: float) -> None:
         phys = phys - out[-1] + setup["output"][0]
     y = y0 + (phys - os_) / (of - os_) * (yf - y0)
     err = y - setup["f"](x)
-    cand.structural_error = float(np.nanmax(np.abs(err))) if np.any(np.isfinite(err)) else math.nan
+    # unit-free: a fraction of the y range the output stands for
+    worst = float(np.nanmax(np.abs(err))) / abs(yf - y0) if np.any(np.isfinite(err)) else math.nan
+    cand.structural_error = worst
     cand.extra["structural"] = {"x": x, "error": err}

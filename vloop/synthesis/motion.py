@@ -35,8 +35,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SynthesisError
+from . import arguments as args
 from ._evaluate import evaluate
-from .candidates import Candidates, Task
+from .candidates import Candidates, Task, shortfall
+from .circuits import classify, screen
 from .defects import Draft, Requirements, assess, population_transmission
 from .fit import match
 from .linkages import FOURBAR
@@ -95,9 +97,24 @@ def poses_of(raw: object) -> Poses:
             same_angle = abs(math.remainder(arr[i, 2] - arr[j, 2], TWO_PI)) <= COINCIDENT
             if abs(z[i] - z[j]) <= COINCIDENT * size and same_angle:
                 raise SynthesisError(f"[motion] poses {j + 1} and {i + 1} coincide", entry="motion.poses")
-    if size == 1.0 and np.ptp(arr[:, 0]) == 0 and np.ptp(arr[:, 1]) == 0:
-        size = 1.0  # a body turning about one point: any length scale will do
+    _one_pole(z, arr[:, 2], size)
     return Poses((z - centre) / size, arr[:, 2].copy(), centre, size)
+
+
+def _one_pole(z: np.ndarray, theta: np.ndarray, size: float) -> None:
+    """Refuse poses that all turn about one point (the displacement poles P1k, z = D_k(z), coincide): every
+    moving pivot's centre point is that pole, so both dyads share one ground pivot: a crank, no four-bar."""
+    rot = np.exp(1j * (theta[1:] - theta[0]))
+    if len(rot) < 2 or np.any(np.abs(rot - 1) < 1e-9):  # two poses: any pole has dyads about it
+        return
+    poles = (z[1:] - rot * z[0]) / (1 - rot)
+    if np.max(np.abs(poles - poles[0])) <= COINCIDENT * max(size, float(np.max(np.abs(poles)))):
+        raise SynthesisError(
+            f"[motion] the poses all turn about one point ({poles[0].real + 0.0:.6g}, {poles[0].imag + 0.0:.6g}): the "
+            "body is a "
+            "crank pinned there (every moving pivot's ground pivot is that point), no four-bar",
+            entry="motion.poses",
+        )
 
 
 def _is_table(raw: object) -> bool:
@@ -327,9 +344,11 @@ def motion(
     by their size) on a ``grid`` × ``grid`` lattice (four poses: along the centre-point curve; five: the
     Burmester points). Returns up to ``count`` candidates, re-solved and checked."""
     started = time.perf_counter()
+    _arguments(poses, dyads, region, grid, count, requirements, name, units)
     ps = poses_of(poses)
     req = requirements or Requirements()
-    task = Task("motion", ps.size, True, points=ps.centre + ps.size * ps.p, angles=ps.theta, units=units)
+    task = Task("motion", ps.size, True, points=ps.centre + ps.size * ps.p, angles=ps.theta, units=units,
+                scale="the poses' size (an angle error in rad)")  # fmt: skip
     if dyads:
         pairs = [tuple(_given(ps, d, i) for i, d in enumerate(_two(dyads)))]
     elif len(ps.p) == 5:
@@ -338,7 +357,8 @@ def motion(
             raise SynthesisError(f"[motion] the five poses have {len(found)} real Burmester point(s): no four-bar")
         pairs = [(found[i], found[j]) for i in range(len(found)) for j in range(i + 1, len(found))]
     else:
-        pairs = _search(ps, _region(ps, region), grid, count, req)
+        box = region if region is not None or req.pivots is None else req.pivots  # pivots asked: search there
+        pairs = _search(ps, _region(ps, box), grid, count, req)
     drafts = [d for p in pairs for d in _drafts(ps, p, name, units)]
     if not drafts:
         raise SynthesisError("[motion] no four-bar: every pair of dyads found is degenerate")
@@ -349,7 +369,33 @@ def motion(
         M, A, _ = centre_curve(first4, reach=3 * max(np.max(np.abs(ps.p)), 1.0))
         out.curves = {"centre": ps.centre + ps.size * M, "circle": ps.centre + ps.size * A}
     out.seconds = time.perf_counter() - started
+    if len(out) < count:
+        out.note = shortfall("motion", count, len(out), dyads=bool(dyads), poses=len(ps.p))
     return out
+
+
+def _arguments(poses, dyads, region, grid, count, requirements, name, units) -> None:
+    """Each argument's type and range (vloop.synthesis.arguments), before any work."""
+    args.common(name, units, requirements)
+    args.rows(poses, "poses", 1, 10_000, (("x", args.MAX_LENGTH), ("y", args.MAX_LENGTH), ("θ", args.MAX_ANGLE)))
+    args.count(grid, "grid", "motion.grid")
+    args.count(count, "count")
+    if region is not None:
+        box = args.table(region, "region", "[xmin, ymin, xmax, ymax]")
+        if box.shape != (4,) or not np.all(np.abs(box) <= args.MAX_LENGTH):
+            raise SynthesisError(
+                f"region: must be [xmin, ymin, xmax, ymax] within ±{args.MAX_LENGTH:g}", entry="region"
+            )
+    if dyads is not None and (not isinstance(dyads, (list, tuple)) or len(dyads) not in (0, 2)):
+        raise SynthesisError(f"dyads: must be two dicts of free choices (or none), got {dyads!r:.40}", entry="dyads")
+    for i, d in enumerate(dyads or ()):
+        if not isinstance(d, dict) or not set(d) <= {"fixed", "moving", "rotations"}:
+            raise SynthesisError(f"dyads[{i}]: must be a dict of fixed, moving or rotations", entry="dyads")
+        for k in ("fixed", "moving"):
+            if k in d:
+                args.point(d[k], f"dyads[{i}].{k}")
+        if "rotations" in d:
+            args.angles(d["rotations"], f"dyads[{i}].rotations", 1, 4)
 
 
 def _two(dyads: Sequence[dict]) -> Sequence[dict]:
@@ -391,31 +437,19 @@ def _given(ps: Poses, choice: dict, i: int) -> tuple[complex, complex]:
 
 def _drafts(ps: Poses, pair: tuple, name: str, units: str) -> list[Draft]:
     """The four-bar of two dyads, each dyad driving in turn, its input turning the way that meets the poses in
-    order (an order defect when neither does)."""
+    order on one branch (its defect named from its configuration at each pose: :mod:`.circuits`)."""
     (O1, A1), (O2, A2) = pair
     if abs(A1 - A2) < 1e-9 or abs(O1 - O2) < 1e-9:
         return []
     out = []
     for (Oi, Ai), (Oj, Aj) in (((O1, A1), (O2, A2)), ((O2, A2), (O1, A1))):
-        omega, t = _timing(ps, Oi, Ai)
+        configs = [{"O2": Oi, "A": ps.move(k, Ai), "B": ps.move(k, Aj), "O4": Oj} for k in range(len(ps.p))]
+        verdict = classify(FOURBAR, configs)
         world = {k: ps.centre + ps.size * v for k, v in {"O2": Oi, "A": Ai, "B": Aj, "O4": Oj, "P": ps.p[0]}.items()}
-        mech = FOURBAR.mechanism(world, name=name, omega=omega, times=np.array([0.0]), units=units)
-        out.append(Draft(name, "motion", FOURBAR, mech, t, float(np.max(t))))
+        mech = FOURBAR.mechanism(world, name=name, omega=verdict.omega, times=np.array([0.0]), units=units)
+        t = verdict.times
+        out.append(Draft(name, "motion", FOURBAR, mech, t, float(np.max(t)), verdict=verdict))
     return out
-
-
-def _timing(ps: Poses, M: complex, A: complex) -> tuple[float, np.ndarray]:
-    """(ω, instants): the crank's turn to each pose taken in the direction that meets them in order (ω = ±1 rad/s;
-    +1 with its unordered instants when neither direction does)."""
-    beta = np.array([0.0] + [np.angle((ps.move(k, A) - M) / (A - M)) for k in range(1, len(ps.p))])
-    for omega in (1.0, -1.0):
-        t = np.mod(omega * beta, TWO_PI)
-        t[0] = 0.0
-        if np.all(np.diff(t) > 0):
-            return omega, t
-    t = np.mod(beta, TWO_PI)
-    t[0] = 0.0
-    return 1.0, t
 
 
 # ---------------------------------------------------------------- the search
@@ -471,10 +505,17 @@ def _search(ps: Poses, box: tuple, grid: int, count: int, req: Requirements) -> 
     i, j = np.nonzero(~np.eye(len(dy), dtype=bool))
     ok = (np.abs(A[i] - A[j]) > 1e-6) & (np.abs(M[i] - M[j]) > 1e-6)
     i, j = i[ok], j[ok]
-    omega, tN = _population_timing(ps, M[i], A[i])
-    good = np.isfinite(tN)
-    i, j, omega, tN = i[good], j[good], omega[good], tN[good]
+    rows = {"O2": M[i, None], "O4": M[j, None], "A": np.stack([ps.move(k, A[i]) for k in range(len(ps.p))], 1),
+            "B": np.stack([ps.move(k, A[j]) for k in range(len(ps.p))], 1)}  # fmt: skip
+    omega, turns, good = screen(FOURBAR, {k: np.broadcast_to(v, rows["A"].shape) for k, v in rows.items()})
+    i, j, omega, tN = i[good], j[good], omega[good], turns[good, -1]
+    if not len(i):
+        raise SynthesisError("[motion] no pair of dyads in the search region meets the poses in order: widen region")
     coords = np.stack([M[i], A[i], A[j], M[j], np.full(len(i), ps.p[0])], 1)
+    inside = _in_bounds(ps, req, coords)
+    if not inside.any():
+        raise SynthesisError("[motion] no pair of dyads in the search region keeps within pivots and links: widen them")
+    i, j, omega, tN, coords = i[inside], j[inside], omega[inside], tN[inside], coords[inside]
     values = np.stack([coords.real, coords.imag], 2).reshape(len(i), -1)
     times = np.linspace(0.0, 1.0, SCREEN_SAMPLES)
     ev = evaluate(FOURBAR, values, omega * tN, times, points=FOURBAR.coordinates, links=("coupler",))
@@ -494,15 +535,19 @@ def _search(ps: Poses, box: tuple, grid: int, count: int, req: Requirements) -> 
     return [((M[i[k]], A[i[k]]), (M[j[k]], A[j[k]])) for k in picked]
 
 
-def _population_timing(ps: Poses, M: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per driving dyad: the direction (±1) that meets the poses in order and the turn to the last pose [rad]
-    (NaN when neither direction does)."""
-    beta = np.stack([np.zeros(len(M))] + [np.angle((ps.move(k, A) - M) / (A - M)) for k in range(1, len(ps.p))], 1)
-    out_w, out_t = np.ones(len(M)), np.full(len(M), np.nan)
-    for omega in (-1.0, 1.0):
-        t = np.mod(omega * beta, TWO_PI)
-        t[:, 0] = 0.0
-        ok = np.all(np.diff(t, axis=1) > 1e-9, axis=1)
-        out_w = np.where(ok, omega, out_w)
-        out_t = np.where(ok, t[:, -1], out_t)
-    return out_w, out_t
+def _in_bounds(ps: Poses, req: Requirements, coords: np.ndarray) -> np.ndarray:
+    """Which four-bars (rows of normalised O2, A, B, O4, P) keep their ground pivots in ``pivots`` and their moving
+    links (crank, coupler's sides, rocker) within ``links`` [length]."""
+    world = ps.centre + ps.size * coords
+    ok = np.ones(len(coords), bool)
+    if req.pivots is not None:
+        x0, y0, x1, y1 = req.pivots
+        for k in (0, 3):
+            z = world[:, k]
+            ok &= (z.real >= x0) & (z.real <= x1) & (z.imag >= y0) & (z.imag <= y1)
+    if req.links is not None:
+        lo, hi = req.links
+        for a, b in ((0, 1), (1, 2), (2, 3), (1, 4), (2, 4)):
+            d = np.abs(world[:, a] - world[:, b])
+            ok &= (d >= lo) & (d <= hi)
+    return ok

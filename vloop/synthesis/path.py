@@ -28,8 +28,9 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from ..errors import SynthesisError
+from . import arguments as args
 from ._evaluate import evaluate
-from .candidates import Candidates, Task
+from .candidates import Candidates, Task, shortfall
 from .defects import Draft, Requirements, assess, population_transmission
 from .fit import match
 from .linkages import FOURBAR, STEPHENSON3, Topology
@@ -127,6 +128,39 @@ class _Problem:
     def n_coords(self) -> int:
         return 2 * len(self.top.coordinates)
 
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each coordinate's search bounds (normalised): within ``box`` sizes of the points, a ground pivot's
+        within the ``pivots`` region asked."""
+        lo, hi = np.full(self.n_coords, -self.box), np.full(self.n_coords, self.box)
+        if self.req.pivots is not None:
+            x0, y0, x1, y1 = self.req.pivots
+            a = (complex(x0, y0) - self.tg.centre) / self.tg.size
+            b = (complex(x1, y1) - self.tg.centre) / self.tg.size
+            for i, name in enumerate(self.top.coordinates):
+                if name in self.top.links[self.top.ground]:
+                    lo[2 * i : 2 * i + 2], hi[2 * i : 2 * i + 2] = (a.real, a.imag), (b.real, b.imag)
+        return lo, hi
+
+    def in_bounds(self, coords: np.ndarray) -> np.ndarray:
+        """Which rows of coordinates (V, 2·n) keep their ground pivots in the region and every moving link's
+        length (a plate's sides, the tracer's distances) within the range asked."""
+        lo, hi = self.limits()
+        inside = np.all((coords >= lo - 1e-12) & (coords <= hi + 1e-12), axis=1)
+        return inside & (self.link_excess(coords) <= 1e-12)
+
+    def link_excess(self, coords: np.ndarray) -> np.ndarray:
+        """How far (V,) the rows' moving links fall outside the ``links`` range: the sum of each length's relative
+        shortfall below its minimum and excess over its maximum (0 inside, or without a range)."""
+        out = np.zeros(len(coords))
+        if self.req.links is None:
+            return out
+        z = coords[:, 0::2] + 1j * coords[:, 1::2]
+        short, long_ = (v / self.tg.size for v in self.req.links)
+        for i, j in _link_pairs(self.top):
+            d = np.abs(z[:, i] - z[:, j])
+            out += np.maximum(0.0, short - d) / short + np.maximum(0.0, d - long_) / long_
+        return out
+
     def split(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Coordinates (S, 2·n) and input speeds (S,) of members X (S, genes)."""
         if self.tg.timing is not None:
@@ -147,6 +181,7 @@ class _Problem:
         if self.req.min_transmission > 0:
             mu = population_transmission(self.top, ev.points, self.times)
             cost = cost + np.maximum(0.0, self.req.min_transmission - np.nan_to_num(mu))
+        cost = cost + ORDER_PENALTY * self.link_excess(coords)  # graded: the evolution moves into the range
         return np.where(ev.completed & np.isfinite(cost), cost, INFEASIBLE)
 
 
@@ -176,10 +211,18 @@ def path(
     ``seed`` makes it repeatable. Returns up to ``count`` distinct candidates, polished, re-solved and checked
     (the input must turn fully)."""
     started = time.perf_counter()
+    args.common(name, units, requirements)
+    args.count(seed, "seed")
+    if progress is not None and not callable(progress):
+        raise SynthesisError(f"progress: must be a function of one message, got {progress!r:.40}", entry="progress")
+    args.rows(points, "points", 1, 10_000, (("x", args.MAX_LENGTH), ("y", args.MAX_LENGTH)))
+    if timing is not None:
+        args.angles(timing, "timing")
     tg = targets_of(points, timing)
     _check_options(linkage, tolerance, count, population, generations, samples, restarts, region)
     req = dataclasses.replace(requirements or Requirements(full_rotation=True), tolerance=tolerance)
-    task = Task("path", tg.size, False, points=tg.centre + tg.size * tg.z, units=units, timing=tg.timing)
+    task = Task("path", tg.size, False, points=tg.centre + tg.size * tg.z, units=units, timing=tg.timing,
+                scale="the points' size")  # fmt: skip
     cands, log, drafts = [], [], []
     for top in LINKAGES[linkage]:
         problem = _problem(top, tg, samples, req, region)
@@ -194,28 +237,20 @@ def path(
             progress(f"no {top.name} within {tolerance:g} of the size: trying a {LINKAGES[linkage][-1].name}")
     out = Candidates(task, cands, log=log).keep(name, count)
     out.seconds = time.perf_counter() - started
+    if len(out) < count:
+        out.note = shortfall("path", count, len(out))
     return out
 
 
 def _check_options(linkage, tolerance, count, population, generations, samples, restarts, region) -> None:
-    if linkage not in LINKAGES:
-        raise SynthesisError(f"[path] linkage must be one of {', '.join(LINKAGES)}, got {linkage!r:.40}")
-    checks = (
-        ("tolerance", tolerance, 1e-12, 1.0, float),
-        ("region", region, 0.1, 100.0, float),
-        ("count", count, 1, 100, int),
-        ("population", population, 5, 200, int),
-        ("generations", generations, 1, 100_000, int),
-        ("samples", samples, 16, 10_000, int),
-        ("restarts", restarts, 1, 100, int),
-    )
-    for key, v, lo, hi, kind in checks:
-        good = not isinstance(v, bool) and isinstance(v, (int, float) if kind is float else int)
-        if not good or not (lo <= v <= hi):
-            what = "a number" if kind is float else "an integer"
-            raise SynthesisError(
-                f"[path] {key} must be {what} from {lo:g} to {hi:g}, got {v!r:.40}", entry=f"path.{key}"
-            )
+    """Each search option's type and range (vloop.synthesis.arguments), before any work."""
+    args.choice(linkage, "linkage", tuple(LINKAGES))
+    args.limited(tolerance, "tolerance", "path.tolerance", open_low=True)
+    args.limited(region, "region", "path.region")
+    args.count(count, "count")
+    for key, v in (("population", population), ("generations", generations), ("samples", samples),
+                   ("restarts", restarts)):  # fmt: skip
+        args.count(v, key, f"path.{key}")
 
 
 def _problem(top: Topology, tg: Targets, samples: int, req: Requirements, region: float) -> _Problem:
@@ -232,7 +267,8 @@ def _search(p: _Problem, tolerance, count, seed, population, generations, restar
     one finds nothing; one that stagnates (its population gathered in a basin whose polish fails) hands its
     remaining generations to a new one; then, if still short, the polish of the best members of the last
     populations."""
-    bounds = [(-p.box, p.box)] * p.n_coords + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
+    lo, hi = p.limits()
+    bounds = list(zip(lo, hi, strict=True)) + ([] if p.tg.timing is not None else [(-1.0, 1.0)])
     members, energies, polished = [], [], []
     for start in p.seeds:
         out = _polish(p, *start)
@@ -368,7 +404,7 @@ def _acceptable(p: _Problem, coords: np.ndarray, omega: float) -> bool:
     """Whether a polished member still turns fully (the batch takes its whole turn) with its transmission angle
     at or above the limit asked (the polish minds only the distances)."""
     ev = evaluate(p.top, coords[None, :], np.array([omega]), p.times, points=p.top.coordinates)
-    if not ev.completed[0]:
+    if not ev.completed[0] or not p.in_bounds(coords[None, :])[0]:
         return False
     if p.req.min_transmission <= 0:
         return True
@@ -447,6 +483,15 @@ def _polish_start(p: _Problem, coords: np.ndarray, t: np.ndarray) -> tuple[np.nd
     """The polish's unknowns at the start and their bounds: joints within POLISH_REACH search regions (or as far
     out as the member's own, re-anchored, already are); instants within a turn."""
     reach = np.maximum(POLISH_REACH[p.top.name] * p.box, 1.05 * np.abs(coords))
+    if p.req.pivots is not None:  # a ground pivot stays in the region asked
+        lo_c, hi_c = p.limits()
+        ground = np.array([c in p.top.links[p.top.ground] for c in p.top.coordinates]).repeat(2)
+        low, high = np.where(ground, lo_c, -reach), np.where(ground, hi_c, reach)
+        coords = np.clip(coords, low, high)
+        if p.tg.timing is not None:
+            return coords, low, high
+        return (np.concatenate([coords, np.clip(t[1:], 0, TWO_PI)]), np.concatenate([low, np.zeros(len(t) - 1)]),
+                np.concatenate([high, np.full(len(t) - 1, TWO_PI)]))  # fmt: skip
     if p.tg.timing is not None:
         return np.clip(coords, -reach, reach), -reach, reach
     lo = np.concatenate([-reach, np.zeros(len(t) - 1)])
@@ -476,6 +521,19 @@ def _residual_jacobian(p: _Problem, omega: float, x: np.ndarray, nc: int) -> tup
     if p.tg.timing is None:
         cols = np.concatenate([cols, ev.velocities[p.top.tracer][0, at[1:], None] * np.eye(N)[:, 1:]], 1)
     return np.concatenate([r.real, r.imag]), np.nan_to_num(np.concatenate([cols.real, cols.imag], 0))
+
+
+def _link_pairs(top: Topology) -> list[tuple[int, int]]:
+    """Index pairs (into the coordinates) of every moving link's joints and of the tracer with its link's joints:
+    the lengths a ``links`` range bounds (as :func:`~vloop.synthesis.linkages.lengths` lists them)."""
+    at = {c: i for i, c in enumerate(top.coordinates)}
+    out = []
+    for name, joints in top.links.items():
+        if name != top.ground:
+            out += [(at[a], at[b]) for k, a in enumerate(joints) for b in joints[k + 1 :]]
+    for point, body in top.points.items():
+        out += [(at[j], at[point]) for j in top.links[body]]
+    return out
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:

@@ -10,6 +10,9 @@ import numpy as np
 
 from .candidates import Candidate, Candidates
 
+# each candidate's path and linkage in its own colour (Okabe–Ito, as the viewer); the targets in black
+CANDIDATE_COLOURS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9")
+
 
 def plot_result(result: Candidates, chosen: list[Candidate], folder: Path) -> list[Path]:
     """The method's picture for the chosen candidates (or the best few when none is a solution)."""
@@ -48,11 +51,15 @@ def _structural(shown: list[Candidate], path: Path) -> Path:
         s = c.extra.get("structural")
         if s is None:
             continue
-        ax.plot(s["x"], s["error"], label=f"{c.name} (max {c.structural_error:.3g})")
+        ax.plot(s["x"], s["error"], label=f"{c.name} (max {c.structural_error:.3g} of the y range)")
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel("x")
     ax.set_ylabel("error in y")
-    ax.legend(loc="best", fontsize=8)
+    if ax.get_legend_handles_labels()[1]:
+        ax.legend(loc="best", fontsize=8)
+    else:  # precision pairs without f: no structural error to draw
+        ax.text(0.5, 0.5, "no function given (precision pairs): no structural error", ha="center",
+                transform=ax.transAxes)  # fmt: skip
     return _save(plt, fig, path)
 
 
@@ -60,16 +67,18 @@ def _path(result: Candidates, shown: list[Candidate], path: Path) -> Path:
     from .. import solve
 
     plt, fig, ax = _figure("Tracer paths through the target points")
-    for c in shown:
+    for k, c in enumerate(shown):
+        colour = CANDIDATE_COLOURS[k % len(CANDIDATE_COLOURS)]
         turn = 2 * math.pi / abs(c.mechanism.drivers[0].v0)
         res = solve(c.mechanism, np.linspace(0.0, turn, 361))
-        ax.plot(res[f"{c.tracer}.x"], res[f"{c.tracer}.y"], lw=1.4, label=f"{c.name}: error {c.error:.2g} of the size")
-        _draw(ax, c, res, 0, alpha=0.5)
+        label = f"{c.name}: error {c.error:.2g} of {result.task.scale}" if math.isfinite(c.error) else c.name
+        ax.plot(res[f"{c.tracer}.x"], res[f"{c.tracer}.y"], lw=1.6, color=colour, label=label)
+        _draw(ax, c, res, 0, alpha=0.6, colour=colour)
     _targets(ax, result.task.points)
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize=8)
-    ax.set_xlabel(f"x [{result.task.units}]")
-    ax.set_ylabel(f"y [{result.task.units}]")
+    ax.set_xlabel(f"x [{drawable(result.task.units)}]")
+    ax.set_ylabel(f"y [{drawable(result.task.units)}]")
     return _save(plt, fig, path)
 
 
@@ -92,18 +101,28 @@ def _poses(result: Candidates, c: Candidate, path: Path) -> Path:
     _targets(ax, pts)
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize=8)
-    ax.set_xlabel(f"x [{result.task.units}]")
-    ax.set_ylabel(f"y [{result.task.units}]")
+    ax.set_xlabel(f"x [{drawable(result.task.units)}]")
+    ax.set_ylabel(f"y [{drawable(result.task.units)}]")
     return _save(plt, fig, path)
 
 
+def drawable(text: str) -> str:
+    """Text as written (never math: "$" escaped), each character the font lacks shown as "?" (no missing-glyph
+    warning)."""
+    from matplotlib import font_manager, ft2font
+
+    font = ft2font.FT2Font(font_manager.findfont(font_manager.FontProperties()))
+    out = "".join(ch if ch.isprintable() and font.get_char_index(ord(ch)) else "?" for ch in text)
+    return out.replace("$", r"\$")
+
+
 def _targets(ax, pts: np.ndarray) -> None:
-    ax.plot(pts.real, pts.imag, "x", color="C3", ms=9, mew=2, label="targets")
+    ax.plot(pts.real, pts.imag, "x", color="k", ms=9, mew=2, label="targets", zorder=5)
     for k, z in enumerate(pts):
-        ax.annotate(str(k + 1), (z.real, z.imag), textcoords="offset points", xytext=(6, 6), color="C3")
+        ax.annotate(str(k + 1), (z.real, z.imag), textcoords="offset points", xytext=(6, 6), color="k")
 
 
-def _draw(ax, c: Candidate, res, k: int, alpha: float) -> None:
+def _draw(ax, c: Candidate, res, k: int, alpha: float, colour: str = "0.3") -> None:
     """The linkage at sample k: each link as a polygon of its joints."""
     mech = c.mechanism
     for lk in mech.links.values():
@@ -116,7 +135,7 @@ def _draw(ax, c: Candidate, res, k: int, alpha: float) -> None:
             [*xs, xs[0]] if len(xs) > 2 else xs,
             [*ys, ys[0]] if len(ys) > 2 else ys,
             "-o",
-            color="0.3",
+            color=colour,
             ms=3,
             lw=1.5,
             alpha=alpha,
@@ -124,4 +143,4 @@ def _draw(ax, c: Candidate, res, k: int, alpha: float) -> None:
     for p in mech.points.values():
         corners = [mech.links[p.link].joints[0], p.name, mech.links[p.link].joints[1]]
         xs, ys = [res[f"{j}.x"][k] for j in corners], [res[f"{j}.y"][k] for j in corners]
-        ax.plot(xs, ys, "-", color="0.5", lw=1, alpha=alpha)
+        ax.plot(xs, ys, "-", color=colour, lw=1, alpha=0.6 * alpha)

@@ -19,17 +19,24 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import SynthesisError
 from ..files.fileformat import dumps
 from ..files.output import OutputSet
 from .candidates import Candidate, Candidates
+
+# the set's fixed names (the candidates' files are listed in its record)
+OWNS = ("candidates.csv", "candidates.parquet", "structural_error.png", "path.png", "poses.png")
+RECORD = ".vloop-synth-outputs"
 
 
 def write(
     result: Candidates, folder: str | Path, *, files: int = 3, plot: bool = False, html: bool = False
 ) -> list[Path]:
-    """Write the output set into ``folder`` (see the module docstring); returns the published paths."""
+    """Write the output set into ``folder`` (see the module docstring); returns the published paths. A folder used
+    by an earlier synthesis keeps none of its files that this one does not write (a record lists them)."""
+    _arguments(result, folder, files, plot, html)
     chosen = result.solutions[:files]
-    with OutputSet(folder) as out:
+    with OutputSet(folder, owns=OWNS, record=RECORD) as out:
         table = result.table().replace([np.inf, -np.inf], np.nan)
         table["file"] = [f"{c.name}.toml" if c in chosen else "" for c in result.items]
         table.to_csv(out.path("candidates.csv"), index=False, na_rep="")
@@ -44,6 +51,22 @@ def write(
             for c in chosen:
                 _page(result, c, out.path(f"{c.name}.html"))
     return out.published
+
+
+def _arguments(result: Any, folder: Any, files: Any, plot: Any, html: Any) -> None:
+    """Each argument checked before anything is written (the names become file names inside ``folder``)."""
+    from ..files.options import folder as folder_path
+    from . import arguments as args
+
+    if not isinstance(result, Candidates):
+        raise SynthesisError(f"result: must be what a synthesis returns (Candidates), got {type(result).__name__}")
+    folder_path(str(folder) if isinstance(folder, Path) else folder, "folder")
+    args.count(files, "files", "files")
+    for key, v in (("plot", plot), ("html", html)):
+        if not isinstance(v, bool):
+            raise SynthesisError(f"{key}: must be True or False, got {v!r:.40}", entry=key)
+    for c in result.items:
+        args.name(c.name, "candidate name")
 
 
 def _parquet(table: Any, path: Path) -> None:
@@ -68,7 +91,7 @@ def toml_text(c: Candidate) -> str:
     if c.angle_errors is not None:
         lines.append(f"#   angle error there = [{fmt(f'{e:.3g}' for e in c.angle_errors)}] rad")
     if c.structural_error is not None and math.isfinite(c.structural_error):
-        lines.append(f"# largest structural error over the range: {c.structural_error:.4g} (y units)")
+        lines.append(f"# largest structural error over the range: {c.structural_error:.4g} of the y range")
     mu = math.degrees(c.min_transmission)
     lines.append(f"# Grashof: {c.grashof or 'no four-bar loop'}; minimum transmission angle {mu:.1f}°")
     return "\n".join(lines) + "\n" + dumps(c.mechanism)

@@ -24,6 +24,9 @@ from typing import Any
 from ..errors import MechanismError, SynthesisError
 from ..files.schema import Key, Problems, Section, check_keys, integer, name_problem, real, show
 from ..files.schema import markdown as schema_markdown
+from . import arguments as args
+from .arguments import LIMITS
+from .candidates import shortfall
 from .defects import Requirements
 
 MAX_SPEC_BYTES = 4 * 2**20
@@ -59,6 +62,22 @@ SECTIONS: tuple[Section, ...] = (
                 0.5236,
             ),
             Key("full_rotation", "bool", "true for path, else false", "", "the input must turn fully", True),
+            Key(
+                "pivots",
+                "[xmin, ymin, xmax, ymax]",
+                "none",
+                "length",
+                "a solution's ground pivots lie in this region (the search keeps them there)",
+                [-500.0, -500.0, 500.0, 500.0],
+            ),
+            Key(
+                "links",
+                "[min, max]",
+                "none",
+                "length",
+                "every moving link's length (a plate's sides) lies in this range (the search keeps them there)",
+                [10.0, 800.0],
+            ),
         ),
     ),
     Section(
@@ -90,7 +109,7 @@ SECTIONS: tuple[Section, ...] = (
             Key("precision", "list of x", "none", "", "the precision points' x instead of a spacing", [1.1, 1.5, 1.9]),
             Key("pairs", "list of [input, output]", "none", "rad, rad or length", "precision pairs instead of f", None),
             Key("linkage", '"fourbar" or "slider-crank"', '"fourbar"', "", "the generator", "slider-crank"),
-            Key("ground", "number > 0", "1", "length", "the four-bar's ground pivot distance O2O4", 100.0),
+            Key("ground", "number 1e-50..1e50", "1", "length", "the four-bar's ground pivot distance O2O4", 100.0),
             Key("samples", "integer 2..100000", "201", "", "x values the structural error is measured at", 401),
         ),
     ),
@@ -152,7 +171,7 @@ SECTIONS: tuple[Section, ...] = (
             ),
             Key(
                 "tolerance",
-                "0 < number ≤ 1",
+                "1e-12 < number ≤ 1",
                 "0.01",
                 "",
                 "error that counts as reached, fraction of the points' size",
@@ -197,6 +216,8 @@ def load(path: str | Path) -> SynthSpec:
     """Read and check a synthesis file. Raises a VloopError naming the file and the entry."""
     from ..files.fileformat import _read_text_file, parse_toml
 
+    if not isinstance(path, (str, Path)) or not str(path).strip():
+        raise SynthesisError(f"path: must be a synthesis file's path, got {show(path)}", entry="path")
     path = Path(path)
     data = parse_toml(_read_text_file(path, MAX_SPEC_BYTES, what="synthesis file", entry=str(path)), str(path))
     return from_dict(data, source=str(path), default_name=path.stem)
@@ -223,8 +244,8 @@ def from_dict(data: Any, *, source: str = "<synthesis>", default_name: str = "sy
     if others:
         probs.add("synthesis", f"method is {method!r}, but the file has a [{others[0]}] section")
     common = {
-        "seed": integer(data, "seed", "synthesis", 0, 2**63 - 1, probs, 0),
-        "candidates": integer(data, "candidates", "synthesis", 1, 100, probs, 5),
+        "seed": integer(data, "seed", "synthesis", *_limits("seed"), probs, 0),
+        "candidates": integer(data, "candidates", "synthesis", *_limits("count"), probs, 5),
         "files": integer(data, "files", "synthesis", 0, 100, probs, 3),
     }
     req = _requirements(data, method, probs)
@@ -248,7 +269,14 @@ def _requirements(data: dict, method: str, probs: Problems) -> Requirements:
     if not isinstance(full, bool):
         probs.add("synthesis", f"'full_rotation' must be true or false, got {show(full)}")
         full = False
-    return Requirements(full, mu)
+    bounds: dict[str, Any] = {}
+    for key, check in (("pivots", args.pivots), ("links", args.links)):
+        if key in data:
+            try:
+                bounds[key] = check(data[key], key)
+            except SynthesisError as exc:
+                probs.add("synthesis", f"'{key}' {str(exc).split(': ', 1)[-1]}")
+    return Requirements(full, mu, **bounds)
 
 
 def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
@@ -264,7 +292,7 @@ def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
             parse(d["expression"])
             opts["f"] = d["expression"]
         except SynthesisError as exc:
-            probs.add(e, str(exc).split("] ", 1)[-1])
+            probs.add(e, "'expression': " + str(exc).split(": ", 1)[-1])
     elif "pairs" not in d:
         probs.add(e, "give 'expression' (with x, input, output) or 'pairs'")
     for key, arg in (("x", "x_range"), ("y", "y_range"), ("input", "input_range"), ("output", "output_range")):
@@ -274,9 +302,9 @@ def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
         missing = [k for k in ("x", "input", "output") if k not in d]
         if missing:
             probs.add(e, f"the expression needs {', '.join(missing)}")
-    for key, lo, hi in (("points", 3, 1000), ("samples", 2, 100_000)):
+    for key in ("points", "samples"):
         if key in d:
-            opts[key] = integer(d, key, e, lo, hi, probs, None)
+            opts[key] = integer(d, key, e, *_limits(f"function.{key}"), probs, None)
     for key, choices in (("spacing", ("chebyshev", "even")), ("linkage", ("fourbar", "slider-crank"))):
         if key in d:
             opts[key] = _choice(d[key], key, choices, e, probs)
@@ -284,8 +312,9 @@ def _read_function(d: dict, probs: Problems) -> dict[str, Any]:
         opts["precision"] = _numbers(d["precision"], "precision", e, probs)
     if "ground" in d:
         g = real(d["ground"], "ground", e, probs)
-        if g is not None and not g > 0:
-            probs.add(e, f"'ground' must be a positive length, got {g:g}")
+        lo, hi = LIMITS["function.ground"]
+        if g is not None and not lo <= g <= hi:
+            probs.add(e, f"'ground' must be a length from {lo:g} to {hi:g}, got {g:g}")
         opts["ground"] = g
     return opts
 
@@ -297,7 +326,7 @@ def _read_motion(d: dict, probs: Problems) -> dict[str, Any]:
     if "region" in d:
         opts["region"] = _numbers(d["region"], "region", e, probs, n=4)
     if "grid" in d:
-        opts["grid"] = integer(d, "grid", e, 2, 40, probs, None)
+        opts["grid"] = integer(d, "grid", e, *_limits("motion.grid"), probs, None)
     if "dyads" in d:
         raw = d["dyads"]
         if not isinstance(raw, list) or len(raw) != 2:
@@ -332,15 +361,11 @@ def _read_path(d: dict, probs: Problems) -> dict[str, Any]:
         opts["timing"] = _numbers(d["timing"], "timing", e, probs)
     if "linkage" in d:
         opts["linkage"] = _choice(d["linkage"], "linkage", ("auto", "fourbar", "sixbar"), e, probs)
-    for key, lo, hi in (
-        ("population", 5, 200),
-        ("generations", 1, 100_000),
-        ("samples", 16, 10_000),
-        ("restarts", 1, 100),
-    ):
+    for key in ("population", "generations", "samples", "restarts"):
         if key in d:
-            opts[key] = integer(d, key, e, lo, hi, probs, None)
-    for key, lo, hi in (("tolerance", 0.0, 1.0), ("region", 0.1, 100.0)):
+            opts[key] = integer(d, key, e, *_limits(f"path.{key}"), probs, None)
+    for key in ("tolerance", "region"):
+        lo, hi = LIMITS[f"path.{key}"]
         if key in d:
             v = real(d[key], key, e, probs)
             if v is not None and not (lo < v <= hi if key == "tolerance" else lo <= v <= hi):
@@ -350,6 +375,16 @@ def _read_path(d: dict, probs: Problems) -> dict[str, Any]:
 
 
 _READERS = {"function": _read_function, "motion": _read_motion, "path": _read_path}
+# the functions' argument names as the file's keys (a message from a function names the file's key)
+FILE_KEYS = {
+    "f": "expression", "x_range": "x", "y_range": "y", "input_range": "input", "output_range": "output",
+    "count": "candidates",
+}  # fmt: skip
+
+
+def _limits(key: str) -> tuple[int, int]:
+    lo, hi = LIMITS[key]
+    return int(lo), int(hi)
 
 
 # ---------------------------------------------------------------- values
@@ -395,18 +430,37 @@ def _rows(v: Any, width: int, key: str, entry: str, probs: Problems, lo: int, hi
 
 
 def run(spec: SynthSpec, progress: Any = None) -> Any:
-    """Synthesize what a spec asks (:func:`vloop.synthesis.function`, ``motion`` or ``path``)."""
+    """Synthesize what a spec asks (:func:`vloop.synthesis.function`, ``motion`` or ``path``); a problem the
+    functions find is named as the file's entry."""
+    if not isinstance(spec, SynthSpec):
+        raise SynthesisError(f"spec: must be a SynthSpec (vloop.synthesis.load), got {show(spec)}", entry="spec")
+    if progress is not None and not callable(progress):
+        raise SynthesisError(f"progress: must be a function of one message, got {show(progress)}", entry="progress")
+    try:
+        out = _run(spec, progress)
+    except SynthesisError as exc:
+        text = str(exc)
+        key, _, rest = text.partition(": ")
+        if not text.startswith("[") and rest and key.isidentifier():
+            sep = " " if rest.startswith("must") else ": "
+            text = f"[{spec.method}] '{FILE_KEYS.get(key, key)}'{sep}{rest}"
+        raise SynthesisError(f"{spec.source}: {text}", entry=exc.entry) from None
+    if spec.title:
+        for c in out:
+            c.mechanism = dataclasses.replace(c.mechanism, title=f"{spec.title} ({c.name})")
+    if len(out) < spec.candidates:
+        dyads, poses = bool(spec.options.get("dyads")), len(spec.options.get("poses") or ())
+        out.note = shortfall(spec.method, spec.candidates, len(out), dyads=dyads, poses=poses)
+    return out
+
+
+def _run(spec: SynthSpec, progress: Any) -> Any:
     from . import function, motion, path
 
     common = {"name": spec.name, "units": spec.units, "requirements": spec.requirements}
     opts = dict(spec.options)
     if spec.method == "function":
-        out = function(**opts, **common)
-    elif spec.method == "motion":
-        out = motion(**opts, count=spec.candidates, **common)
-    else:
-        out = path(**opts, count=spec.candidates, seed=spec.seed, progress=progress, **common)
-    if spec.title:
-        for c in out:
-            c.mechanism = dataclasses.replace(c.mechanism, title=f"{spec.title} ({c.name})")
-    return out
+        return function(**opts, **common)
+    if spec.method == "motion":
+        return motion(**opts, count=spec.candidates, **common)
+    return path(**opts, count=spec.candidates, seed=spec.seed, progress=progress, **common)

@@ -64,8 +64,13 @@ def configuration(mech: Mechanism, at: Any) -> Result:
 def export(mech: Mechanism, folder: str | Path, at: Any, fmt: str) -> Path:
     """Write ``folder/<name>.svg|pdf`` (the drawing at ``at`` [s]) or ``folder/<name>.dxf`` (parts and assembly);
     returns the path. ``folder`` should be an OutputSet's stage (the CLI's), so the file appears whole or not."""
+    from ..files.options import folder_path, instance
+    from ..files.output import ensure_folder
+
+    instance(mech, "mech", Mechanism, "a Mechanism (vloop.load)")
     if fmt not in FORMATS:
         raise ExportError(f"{mech.name}: --format {show(fmt)}: one of {', '.join(FORMATS)}", entry="format")
+    folder = ensure_folder(folder_path(folder))
     res = configuration(mech, at)
     path = Path(folder) / f"{_file_name(mech.name)}.{fmt}"
     if fmt == "dxf":

@@ -20,6 +20,7 @@
     over: { loops: true, vel: false, acc: false, paths: false, forces: false, labels: true },
     hiddenLoops: new Set(), numbersAt: 0, stats: { frames: 0, drawMs: new Float64Array(600), k: 0 },
   };
+  if ((D.targets || []).length) S.over.paths = true; // a synthesis's page: its targets (and paths) shown at once
   let C = {}; // column name -> Float64Array over samples
   let T = null; // time [s]
   let N = 0;
