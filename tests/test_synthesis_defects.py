@@ -5,7 +5,7 @@ chosen by hand), its arcs of input angles by the law of cosines written here (|A
 [(b − c)², (b + c)²]), and three coupler poses at crank angles placed by hand on a chosen arc and assembly side.
 Motion generation gets the four-bar's own ground pivots as the free choices, so its own-pivot candidate is the
 drawn linkage; the test asserts the defect's name, and where the candidate's run reaches a pose, that the
-closed form (validators/analytic_fourbar.py) puts the coupler there at the instant the candidate states.
+closed form (validators/analytic/fourbar.py) puts the coupler there at the instant the candidate states.
 
 * circuit — positions on different circuits (a crank-rocker's two assemblies; a rocker-driven Grashof
   linkage's two arcs);
@@ -26,7 +26,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import vloop.synthesis as syn
-from validators import analytic_fourbar
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.synthesis.circuits import classify, screen
 from vloop.synthesis.linkages import FOURBAR
 

@@ -3,7 +3,7 @@ path.png, the targets shown at once on a candidate's page, bounds kept by the se
 mixes two runs, outputs checked before the search, no warning on success.
 
 References: the precision positions and error scales are computed here (Chebyshev x, log10, the closed form
-validators/analytic_fourbar.py), the figure's artists read back from matplotlib, the page read by Chromium.
+validators/analytic/fourbar.py), the figure's artists read back from matplotlib, the page read by Chromium.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import pytest
 
 import vloop
 import vloop.synthesis as syn
-from validators import analytic_fourbar
+from validators.analytic import fourbar as analytic_fourbar
 from vloop.cli import main
 
 from .test_synthesis import MOTION_POSES, PATH_POINTS
