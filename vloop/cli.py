@@ -585,7 +585,7 @@ def _num(x: Any, factor: float, spec: str) -> str:
     """A number for the summary in display units; "n/a" where there is none (a missing or non-finite value)."""
     try:
         v = float(x) * factor
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         return "n/a"
     return format(v, spec) if np.isfinite(v) else "n/a"
 

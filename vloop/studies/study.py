@@ -127,7 +127,7 @@ def _output_tables(outputs: Any) -> list:
 def _check_times(times: Any) -> np.ndarray:
     try:
         t = np.asarray(times, float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise MechanismError("times must be a 1-D array of numbers [s]", entry="time") from None
     if t.ndim != 1 or not len(t) or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
         raise MechanismError("times must be a non-empty, finite, strictly increasing 1-D array [s]", entry="time")

@@ -112,7 +112,7 @@ def synthesize(kind: str, points: list, count: int, seed: int, units: str) -> di
 def _num(x: Any) -> float | None:
     try:
         return float(x)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         return None
 
 

@@ -247,7 +247,7 @@ def _setup(f, x_range, input_range, output_range, y_range, points, spacing, prec
 def _pair(v: object, what: str) -> tuple[float, float]:
     try:
         a, b = (float(x) for x in v)  # type: ignore[union-attr]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise SynthesisError(f"[function] {what} must be two numbers [start, stop], got {v!r:.60}") from None
     if not (math.isfinite(a) and math.isfinite(b)) or a == b:
         raise SynthesisError(f"[function] {what} must be two different finite numbers, got [{a:g}, {b:g}]")

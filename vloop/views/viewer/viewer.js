@@ -20,7 +20,6 @@
     over: { loops: true, vel: false, acc: false, paths: false, forces: false, labels: true },
     hiddenLoops: new Set(), numbersAt: 0, stats: { frames: 0, drawMs: new Float64Array(600), k: 0 },
   };
-  if ((D.targets || []).length) S.over.paths = true; // a synthesis's page: its targets (and paths) shown at once
   let C = {}; // column name -> Float64Array over samples
   let T = null; // time [s]
   let N = 0;
@@ -1138,6 +1137,7 @@
     layout = layoutOf(D);
     if (same && plots.length) return refresh(opts, ms);
     reset();
+    if ((D.targets || []).length) S.over.paths = true; // a synthesis's page: its targets (and paths) shown at once
     buildScene();
     buildLoopLegend();
     if (!S.wired) { wireControls(); wireView(); }
