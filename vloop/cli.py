@@ -725,7 +725,7 @@ def _parser_validate(sub: Any) -> None:
         "--engines",
         type=_engines,
         default=("vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"),
-        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic (at least two that "
+        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic, mujoco (at least two that "
         "compare: a validation that compares nothing is refused)",
     )
     v.add_argument("--out", type=_type("out"), default="validation", help="output folder (default: validation)")
