@@ -102,8 +102,10 @@ def assemble(model: Any, data: Any, layout: Layout, mech: Mechanism, t: float) -
                 break
     gap, jac = rows.equality(data)
     if np.max(np.abs(gap), initial=0.0) > ASSEMBLY_TOL * size:
-        raise MechanismError(f"{mech.name}: mujoco cannot assemble the mechanism at t = {t:g} s "
-                             f"(cut-pin gap {np.max(np.abs(gap)) / size:.3g} of its size)")
+        raise MechanismError(
+            f"{mech.name}: mujoco cannot assemble the mechanism at t = {t:g} s "
+            f"(cut-pin gap {np.max(np.abs(gap)) / size:.3g} of its size)"
+        )
     k = np.array([1.0 if d.kind == "crank" else layout.scale for d in mech.drivers])
     a = np.vstack([jac, rows.tendon])
     data.qvel[:] = np.linalg.lstsq(a, np.concatenate([np.zeros(len(gap)), xd * k]), rcond=None)[0]
@@ -162,7 +164,9 @@ def simulate(model: Any, data: Any, layout: Layout, mech: Mechanism, t: np.ndarr
             raise MotionError(
                 f"{mech.name}: mujoco cannot follow the input at sample {k}, t = {tk:g} s (cut-pin gap {gap:.3g} of "
                 f"its size, input lag {lag:.3g}): a limit position, or the loops cannot close",
-                time=float(tk), sample=k, partial=_result(mech, t[:k], rows, health, reader),
+                time=float(tk),
+                sample=k,
+                partial=_result(mech, t[:k], rows, health, reader),
             )
         rows.append(row)
         health["violation"].append(gap)
@@ -227,8 +231,9 @@ class _Reader:
         return out, float(np.max(np.abs(gap), initial=0.0)) / size, float(np.max(lag, initial=0.0))
 
 
-def _result(mech: Mechanism, t: np.ndarray, rows: list[dict[str, float]], health: dict[str, list[float]],
-            reader: _Reader) -> Result:
+def _result(
+    mech: Mechanism, t: np.ndarray, rows: list[dict[str, float]], health: dict[str, list[float]], reader: _Reader
+) -> Result:
     n = len(rows)
     names = list(rows[0]) if rows else []
     cols = {c: np.array([r[c] for r in rows]) for c in names}
@@ -258,10 +263,11 @@ def allowance(mech: Mechanism, health: dict[str, np.ndarray], cols: dict[str, np
 
 def _ratio(mech: Mechanism, cols: dict[str, np.ndarray]) -> float:
     """The largest rate of any output per unit rate of the input over the run (dimensionless, lengths per size)."""
-    _, xd, _ = evaluate_all(mech, np.zeros(1)) if not cols else (None, None, None)
     omegas = [np.abs(v) for c, v in cols.items() if c.endswith(".omega")]
     speeds = [np.abs(v) / mech.scale for c, v in cols.items() if c.endswith((".vx", ".vy", ".v"))]
     peak = max((float(np.max(a)) for a in omegas + speeds if a.size), default=1.0)
-    inputs = [np.abs(cols[f"{d.target}.omega"]) for d in mech.drivers if d.kind == "crank" and f"{d.target}.omega" in cols]
+    inputs = [
+        np.abs(cols[f"{d.target}.omega"]) for d in mech.drivers if d.kind == "crank" and f"{d.target}.omega" in cols
+    ]
     base = max((float(np.max(a)) for a in inputs if a.size), default=0.0)
     return peak / base if base > 0 else 1.0

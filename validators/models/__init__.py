@@ -79,7 +79,9 @@ def _load_ctrl(mech: Mechanism) -> list[float]:
         if ld.profile is None:
             out.append(1.0)
         else:
-            row = [float(np.interp(0.0, ld.profile.t, ld.profile.values[:, c])) for c in range(ld.profile.values.shape[1])]
+            row = [
+                float(np.interp(0.0, ld.profile.t, ld.profile.values[:, c])) for c in range(ld.profile.values.shape[1])
+            ]
             out += row if ld.kind == "force" else row[:1]
     return out
 

@@ -117,12 +117,24 @@ def from_data(d: dict[str, Any]) -> Mechanism:
         return Profile(arr["t"], arr["x"], arr["v"], arr["a"])
 
     bodies = {
-        n: Body(n, b["kind"], tuple(b["joints"]), tuple(b["origin"]), b["theta0"],
-                {j: tuple(xy) for j, xy in b["local"].items()}, b.get("guide"))
+        n: Body(
+            n,
+            b["kind"],
+            tuple(b["joints"]),
+            tuple(b["origin"]),
+            b["theta0"],
+            {j: tuple(xy) for j, xy in b["local"].items()},
+            b.get("guide"),
+        )
         for n, b in d["bodies"].items()
     }
     return Mechanism(
-        d["name"], d["units"], d["scale"], d["ground"], {j: tuple(xy) for j, xy in d["joints"].items()}, bodies,
+        d["name"],
+        d["units"],
+        d["scale"],
+        d["ground"],
+        {j: tuple(xy) for j, xy in d["joints"].items()},
+        bodies,
         {n: Slider(n, s["joint"], s["guide"], tuple(s["axis"])) for n, s in d["sliders"].items()},
         dict(d["points"]),
         tuple(Driver(**{**v, "profile": profile(v.get("profile"))}) for v in d["drivers"]),
@@ -144,21 +156,32 @@ def describe(mech: Any) -> dict[str, Any]:
         "ground": mech.ground,
         "joints": {j: [float(x), float(y)] for j, (x, y) in mech.joints.items()},
         "bodies": {
-            n: {"kind": b.kind, "joints": list(b.joints), "origin": [float(c) for c in b.origin],
-                "theta0": float(b.theta0), "local": {j: [float(c) for c in xy] for j, xy in b.local.items()},
-                "guide": b.guide}
+            n: {
+                "kind": b.kind,
+                "joints": list(b.joints),
+                "origin": [float(c) for c in b.origin],
+                "theta0": float(b.theta0),
+                "local": {j: [float(c) for c in xy] for j, xy in b.local.items()},
+                "guide": b.guide,
+            }
             for n, b in mech.bodies().items()
         },
-        "sliders": {n: {"joint": s.joint, "guide": s.guide, "axis": [float(c) for c in s.axis]}
-                    for n, s in mech.sliders.items()},
+        "sliders": {
+            n: {"joint": s.joint, "guide": s.guide, "axis": [float(c) for c in s.axis]} for n, s in mech.sliders.items()
+        },
         "points": {n: p.link for n, p in mech.points.items()},
         "drivers": [
-            {"kind": d.kind, "target": d.target, "x0": float(d.x0), "v0": float(d.v0), "a0": float(d.a0),
-             "pivot": d.pivot,
-             "profile": None if d.profile is None else {k: arr(getattr(d.profile, k)) for k in ("t", "x", "v", "a")}}
+            {
+                "kind": d.kind,
+                "target": d.target,
+                "x0": float(d.x0),
+                "v0": float(d.v0),
+                "a0": float(d.a0),
+                "pivot": d.pivot,
+                "profile": None if d.profile is None else {k: arr(getattr(d.profile, k)) for k in ("t", "x", "v", "a")},
+            }
             for d in mech.drivers
         ],
         "times": arr(mech.times),
         "bodies_at": {j: list(mech.bodies_at(j)) for j in mech.joints},
     }
-

@@ -151,26 +151,33 @@ def _ground(mech: Mechanism, bodies: dict[str, Body], k: float, size: float) -> 
     for j, xy in g.local.items():
         x, y = np.asarray(xy) * k
         if len(mech.bodies_at(j)) > 1:
-            out.append(f'<geom type="cylinder" pos="{_v(x, y, -ROD * size)}" size="{1.5 * ROD * size:.6g} '
-                       f'{ROD * size:.6g}" rgba="0.4 0.4 0.4 1"/>')
+            out.append(
+                f'<geom type="cylinder" pos="{_v(x, y, -ROD * size)}" size="{1.5 * ROD * size:.6g} '
+                f'{ROD * size:.6g}" rgba="0.4 0.4 0.4 1"/>'
+            )
         out.append(f'<site name={quoteattr(f"{mech.ground}/{j}")} pos="{_v(x, y, 0)}"/>')
     for sl in mech.sliders.values():
         if sl.guide == mech.ground:
             x, y = np.asarray(mech.joints[sl.joint]) * k
             a = math.atan2(sl.axis[1], sl.axis[0])
-            out.append(f'<geom type="box" pos="{_v(x, y, -ROD * size)}" quat="{_q(a)}" '
-                       f'size="{_v(2.5 * BLOCK_SIZE * size, 0.25 * ROD * size, 0.25 * ROD * size)}" rgba="0.4 0.4 0.4 1"/>')
+            out.append(
+                f'<geom type="box" pos="{_v(x, y, -ROD * size)}" quat="{_q(a)}" '
+                f'size="{_v(2.5 * BLOCK_SIZE * size, 0.25 * ROD * size, 0.25 * ROD * size)}" rgba="0.4 0.4 0.4 1"/>'
+            )
     return out
 
 
-def _joint(mech: Mechanism, bodies: dict[str, Body], parent: str, child: str, edge, k: float) -> tuple[str, str, str, float]:
+def _joint(
+    mech: Mechanism, bodies: dict[str, Body], parent: str, child: str, edge, k: float
+) -> tuple[str, str, str, float]:
     """(the child's pos and quat in its parent's frame, its joint element, the slide sign) for one tree edge."""
     P, C = bodies[parent], bodies[child]
     turn = C.theta0 - P.theta0
     name = f"{child}@{edge.joint}"
     if edge.kind == "pin":
         pos = np.asarray(P.local[edge.joint]) - _rot(turn) @ np.asarray(C.local[edge.joint])
-        xml = f'<joint name={quoteattr(name)} type="hinge" axis="0 0 1" pos="{_v(*np.asarray(C.local[edge.joint]) * k, 0)}"/>'
+        at = np.asarray(C.local[edge.joint]) * k
+        xml = f'<joint name={quoteattr(name)} type="hinge" axis="0 0 1" pos="{_v(at[0], at[1], 0)}"/>'
         return _v(*pos * k, 0), xml, name, 1.0
     if child == edge.b:  # a block below its guide: along its own x axis (the slider's)
         pos = _rot(P.theta0).T @ (np.asarray(mech.joints[edge.joint]) - np.asarray(P.origin))
@@ -234,16 +241,21 @@ def build(mech: Mechanism) -> tuple[str, Layout]:
 
     def body_xml(name: str, depth: int) -> list[str]:
         p, e = plan.parent[name]
-        pos, joint, jname, sign = _joint(mech, bodies, p, name, e, k)
+        pos, joint, _, sign = _joint(mech, bodies, p, name, e, k)
         layout.sign[name] = sign
         turn = bodies[name].theta0 - bodies[p].theta0
         m, com, inertia = mass[name]
         pad = "  " * depth
         lines = [f'{pad}<body name={quoteattr(name)} pos="{pos}" quat="{_q(turn)}">', f"{pad}  {joint}"]
-        lines.append(f'{pad}  <inertial pos="{_v(com[0], com[1], 0)}" mass="{m:.17g}" diaginertia="{_v(inertia, inertia, inertia)}"/>')
+        lines.append(
+            f'{pad}  <inertial pos="{_v(com[0], com[1], 0)}" mass="{m:.17g}" '
+            f'diaginertia="{_v(inertia, inertia, inertia)}"/>'
+        )
         lines += [f"{pad}  {g}" for g in _geoms(bodies[name], k, size)]
-        lines += [f'{pad}  <site name={quoteattr(f"{name}/{j}")} pos="{_v(*np.asarray(xy) * k, 0)}"/>'
-                  for j, xy in bodies[name].local.items()]
+        lines += [
+            f'{pad}  <site name={quoteattr(f"{name}/{j}")} pos="{_v(*np.asarray(xy) * k, 0)}"/>'
+            for j, xy in bodies[name].local.items()
+        ]
         for c in children.get(name, []):
             lines += body_xml(c, depth + 1)
         return [*lines, f"{pad}</body>"]
@@ -280,28 +292,39 @@ def build(mech: Mechanism) -> tuple[str, Layout]:
     layout.armature = armature
     actuators += _loads(mech, layout, bodies, k, tendons)
     equality = [
-        f'    <connect name={quoteattr(f"cut {j}: {a}-{b}")} site1={quoteattr(f"{a}/{j}")} site2={quoteattr(f"{b}/{j}")} '
+        f"    <connect name={quoteattr(f'cut {j}: {a}-{b}')} site1={quoteattr(f'{a}/{j}')} "
+        f"site2={quoteattr(f'{b}/{j}')} "
         f'solref="{SOLREF.format(tc=2 * layout.timestep)}" solimp="{SOLIMP}"/>'
         for j, a, b in plan.cuts
     ]
     layout.cuts = [f"cut {j}: {a}-{b}" for j, a, b in plan.cuts]
     g = (0.0, 0.0) if mech.gravity is None else mech.gravity  # m/s²: the model is in metres where gravity is given
-    text = "\n".join([
-        f"<mujoco model={quoteattr(mech.name)}>",
-        f"  <!-- {_comment(mech.title or mech.name)}: written by vloop export at t = 0; units "
-        f"{'m, kg, s' if k != 1.0 or mech.units.strip().lower() == 'm' else mech.units + ', kg, s'} -->",
-        '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="{layout.timestep:.17g}" gravity="{_v(g[0], g[1], 0)}" integrator="RK4" '
-        'solver="Newton" tolerance="1e-14" iterations="100" jacobian="dense" cone="pyramidal"/>',
-        '  <default><geom contype="0" conaffinity="0"/><site size="' + f'{0.5 * ROD * size:.6g}' + '" rgba="0.2 0.2 0.2 1"/></default>',
-        "  <worldbody>",
-        *world,
-        "  </worldbody>",
-        "  <tendon>", *tendons, "  </tendon>",
-        "  <equality>", *equality, "  </equality>",
-        "  <actuator>", *actuators, "  </actuator>",
-        "</mujoco>",
-    ])
+    text = "\n".join(
+        [
+            f"<mujoco model={quoteattr(mech.name)}>",
+            f"  <!-- {_comment(mech.title or mech.name)}: written by vloop export at t = 0; units "
+            f"{'m, kg, s' if k != 1.0 or mech.units.strip().lower() == 'm' else mech.units + ', kg, s'} -->",
+            '  <compiler angle="radian" autolimits="true"/>',
+            f'  <option timestep="{layout.timestep:.17g}" gravity="{_v(g[0], g[1], 0)}" integrator="RK4" '
+            'solver="Newton" tolerance="1e-14" iterations="100" jacobian="dense" cone="pyramidal"/>',
+            '  <default><geom contype="0" conaffinity="0"/><site size="'
+            + f"{0.5 * ROD * size:.6g}"
+            + '" rgba="0.2 0.2 0.2 1"/></default>',
+            "  <worldbody>",
+            *world,
+            "  </worldbody>",
+            "  <tendon>",
+            *tendons,
+            "  </tendon>",
+            "  <equality>",
+            *equality,
+            "  </equality>",
+            "  <actuator>",
+            *actuators,
+            "  </actuator>",
+            "</mujoco>",
+        ]
+    )
     return _with_armature(text, armature), layout
 
 
@@ -339,7 +362,8 @@ def _loads(mech: Mechanism, layout: Layout, bodies: dict[str, Body], k: float, t
             ref = f"{mech.ground}/{next(iter(bodies[mech.ground].local))}"  # a world site: its axes are the world's
             gears = [ld.value] if ld.profile is None else [(1.0, 0.0), (0.0, 1.0)]
             out += [
-                f'    <general name={quoteattr(name + ("" if len(gears) == 1 else " " + "xy"[n]))} site={quoteattr(site)} '
+                f"    <general name={quoteattr(name + ('' if len(gears) == 1 else ' ' + 'xy'[n]))} "
+                f"site={quoteattr(site)} "
                 f'refsite={quoteattr(ref)} gear="{_v(fx, fy, 0, 0, 0, 0)}"/>'
                 for n, (fx, fy) in enumerate(gears)
             ]

@@ -95,17 +95,19 @@ def _common(mech: Mechanism) -> str:
     import vloop.drivers as drivers
 
     data = pprint.pformat(description.describe(mech), width=116, sort_dicts=False)
-    return "\n\n".join([
-        "# ---------------------------------------------------------------- 1. the mechanism (the file's t = 0)",
-        f"DATA = {data}",
-        "# ---------------------------------------------------------------- 2. description and inputs",
-        "class MechanismError(ValueError):\n    \"\"\"The mechanism cannot be modelled or assembled.\"\"\"\n\n"
-        "    def __init__(self, message: str, **where: Any) -> None:\n        super().__init__(message)",
-        _segments(description, ["Body", "Slider", "Profile", "Driver", "Mechanism", "from_data"]),
-        "# the inputs x(t), ẋ(t), ẍ(t), as every engine of vloop evaluates them (vloop/drivers.py)",
-        _segments(drivers),
-        "MECHANISM = from_data(DATA)",
-    ])
+    return "\n\n".join(
+        [
+            "# ---------------------------------------------------------------- 1. the mechanism (the file's t = 0)",
+            f"DATA = {data}",
+            "# ---------------------------------------------------------------- 2. description and inputs",
+            'class MechanismError(ValueError):\n    """The mechanism cannot be modelled or assembled."""\n\n'
+            "    def __init__(self, message: str, **where: Any) -> None:\n        super().__init__(message)",
+            _segments(description, ["Body", "Slider", "Profile", "Driver", "Mechanism", "from_data"]),
+            "# the inputs x(t), ẋ(t), ẍ(t), as every engine of vloop evaluates them (vloop/drivers.py)",
+            _segments(drivers),
+            "MECHANISM = from_data(DATA)",
+        ]
+    )
 
 
 FOOTER = '''
@@ -201,7 +203,7 @@ def run(mech: Mechanism, times: np.ndarray) -> tuple[np.ndarray, dict[str, np.nd
             t0 = max(t0, float(inp.driver.profile.t[0]))
     q, ok, it = kin.newton(np.zeros(kin.n), t0, max_iter=100, damped=True)
     if not ok:
-        raise MechanismError(f"{mech.name}: Newton on Exudyn's constraint equations did not assemble it at t = {t0:g} s")
+        raise MechanismError(f"{mech.name}: Newton on Exudyn's constraints did not assemble it at t = {t0:g} s")
     state = kin.state(q, t0, it)
     states, stopped = [], ""
     for k, tk in enumerate(times):
@@ -258,19 +260,50 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
     """The Pinocchio script of ``mech`` (``script``: its file name, ``source``: where the mechanism came from)."""
     from .. import pinocchio, tolerances
 
-    names = ["_wrap", "TWO_PI", "Edge", "TreePlan", "_UnionFind", "plan_tree", "_se3", "_pose", "_Row",
-             "PinocchioModel", "build_model", "_slider_row", "_Work", "Inputs", "RESIDUAL_TOL", "MAX_CRANK_STEP",
-             "MAX_SLIDER_STEP", "CROSS_JUMP", "_NoConvergence", "_State", "_Solver", "_inputs_fn", "_assembly_time",
-             "_assemble", "_continuous_angle"]
-    model = "\n\n".join([
-        "# ---------------------------------------------------------------- 3. the model and its numerics",
-        "# (validators/pinocchio.py, verbatim; the condition number from validators/tolerances.py)",
-        _segments(tolerances, ["condition_number"]),
-        _segments(pinocchio, names),
-    ])
-    head = HEADER.format(title=mech.title or mech.name, what="the Pinocchio model vloop's validators build",
-                         fmt="pinocchio", source=source, script=script, needs="Pinocchio (pip install pin)",
-                         units=mech.units)
+    names = [
+        "_wrap",
+        "TWO_PI",
+        "Edge",
+        "TreePlan",
+        "_UnionFind",
+        "plan_tree",
+        "_se3",
+        "_pose",
+        "_Row",
+        "PinocchioModel",
+        "build_model",
+        "_slider_row",
+        "_Work",
+        "Inputs",
+        "RESIDUAL_TOL",
+        "MAX_CRANK_STEP",
+        "MAX_SLIDER_STEP",
+        "CROSS_JUMP",
+        "_NoConvergence",
+        "_State",
+        "_Solver",
+        "_inputs_fn",
+        "_assembly_time",
+        "_assemble",
+        "_continuous_angle",
+    ]
+    model = "\n\n".join(
+        [
+            "# ---------------------------------------------------------------- 3. the model and its numerics",
+            "# (validators/pinocchio.py, verbatim; the condition number from validators/tolerances.py)",
+            _segments(tolerances, ["condition_number"]),
+            _segments(pinocchio, names),
+        ]
+    )
+    head = HEADER.format(
+        title=mech.title or mech.name,
+        what="the Pinocchio model vloop's validators build",
+        fmt="pinocchio",
+        source=source,
+        script=script,
+        needs="Pinocchio (pip install pin)",
+        units=mech.units,
+    )
     return head + _common(mech) + "\n\n\n" + model + PINOCCHIO_RUN + FOOTER.format(csv=_csv_name(script))
 
 
@@ -278,19 +311,37 @@ def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
     """The Exudyn script of ``mech``: validators/exudyn_model.py's construction, validators/exudyn.py's Newton."""
     from .. import exudyn, exudyn_model, tolerances
 
-    names = ["FD_TURN", "_FD_OFFSETS", "_FD_WEIGHTS", "MAX_MOVE", "JUMP_RATIO", "JUMP_FLOOR", "_settings",
-             "ConstraintEquations", "_State", "_Kinematics"]
-    model = "\n\n".join([
-        "# ---------------------------------------------------------------- 3. the model and its numerics",
-        "# (validators/exudyn_model.py and the kinematic engine of validators/exudyn.py, verbatim)",
-        _segments(tolerances, ["condition_number"]),
-        _segments(exudyn_model),
-        "em = sys.modules[__name__]  # the engine's code names the model module 'em'",
-        _segments(exudyn, names),
-    ])
-    head = HEADER.format(title=mech.title or mech.name, what="the Exudyn model vloop's validators build",
-                         fmt="exudyn", source=source, script=script, needs="Exudyn (pip install exudyn)",
-                         units=mech.units)
+    names = [
+        "FD_TURN",
+        "_FD_OFFSETS",
+        "_FD_WEIGHTS",
+        "MAX_MOVE",
+        "JUMP_RATIO",
+        "JUMP_FLOOR",
+        "_settings",
+        "ConstraintEquations",
+        "_State",
+        "_Kinematics",
+    ]
+    model = "\n\n".join(
+        [
+            "# ---------------------------------------------------------------- 3. the model and its numerics",
+            "# (validators/exudyn_model.py and the kinematic engine of validators/exudyn.py, verbatim)",
+            _segments(tolerances, ["condition_number"]),
+            _segments(exudyn_model),
+            "em = sys.modules[__name__]  # the engine's code names the model module 'em'",
+            _segments(exudyn, names),
+        ]
+    )
+    head = HEADER.format(
+        title=mech.title or mech.name,
+        what="the Exudyn model vloop's validators build",
+        fmt="exudyn",
+        source=source,
+        script=script,
+        needs="Exudyn (pip install exudyn)",
+        units=mech.units,
+    )
     return head + _common(mech) + "\n\n\n" + model + EXUDYN_RUN + FOOTER.format(csv=_csv_name(script))
 
 

@@ -1,0 +1,198 @@
+"""vloop export --format mjcf|exudyn|pinocchio: models a user takes to another engine, checked against vloop.
+
+References:
+
+* MJCF: the written file loaded by MuJoCo itself (``MjModel.from_xml_path``), reset to its keyframe ``t0`` and
+  simulated under its driver; its positions against ``vloop.solve``'s within the MuJoCo engine's stated
+  tolerance (validators/tolerances.py: 1e-6 of the size for positions, 1e-6 rad for angles);
+* the scripts: run as a user runs them (``python -I SCRIPT --out FILE.csv`` in a subprocess, so neither vloop nor
+  validators is imported from this checkout), their CSV against ``vloop.solve`` within the validators' stated
+  tolerances of Pinocchio (1e-9) and Exudyn's kinematic engine (1e-8), by ``vloop.compare``;
+* the MuJoCo engine in the harness: ``vloop validate --engines vloop,mujoco`` on a run that stops at a limit
+  position (MuJoCo stops at the sample vloop stops at).
+"""
+
+from __future__ import annotations
+
+import inspect
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import vloop
+from vloop.cli import main
+from vloop.compare import compare
+
+from .conftest import MECHANISMS, mechanism_files
+
+mujoco = pytest.importorskip("mujoco", reason="MJCF export needs mujoco (pip install -e '.[models]')")
+
+FEW = ["fourbar_textbook_example", "slider_crank_offset", "inverted_slider_crank"]  # pins, a slider, a moving guide
+
+
+def _export(stem: str, fmt: str, out: Path) -> Path:
+    assert main(["export", str(MECHANISMS / f"{stem}.toml"), "--format", fmt, "--out", str(out)]) == 0
+    (path,) = [p for p in out.iterdir() if p.suffix in (".xml", ".py")]
+    return path
+
+
+def _mjcf_against_vloop(stem: str, tmp_path: Path, samples: int | None) -> None:
+    from validators.models.mjcf import build
+    from validators.mujoco import simulate
+
+    mech = vloop.load(MECHANISMS / f"{stem}.toml")
+    try:
+        ref = vloop.solve(mech)
+    except vloop.MotionError as exc:  # a run that stops at a limit: compared where it runs
+        ref = exc.partial
+    t = ref.t if samples is None else ref.t[:samples]
+    path = _export(stem, "mjcf", tmp_path)
+    model = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    _, layout = build(mech)  # the names the file was written with (the same construction)
+    res = simulate(model, data, layout, mech, t)
+    size = mech.scale
+    for c in res.columns:
+        if c.endswith((".x", ".y", ".s")):
+            assert np.max(np.abs(res[c] - ref[c][: len(t)])) <= 1e-6 * size, c
+        elif c.endswith(".theta"):
+            assert np.max(np.abs(res[c] - ref[c][: len(t)])) <= 1e-6, c
+    assert np.max(res.health["violation"]) <= 1e-6
+
+
+@pytest.mark.parametrize("stem", FEW)
+def test_mjcf_loads_and_follows_vloop(stem: str, tmp_path: Path) -> None:
+    _mjcf_against_vloop(stem, tmp_path, 30)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", mechanism_files(), ids=lambda p: p.stem)
+def test_mjcf_of_every_catalog_mechanism_follows_vloop(path: Path, tmp_path: Path) -> None:
+    _mjcf_against_vloop(path.stem, tmp_path, None)
+
+
+def test_mjcf_keyframe_is_assembled_and_a_constant_speed_input_runs_by_itself(tmp_path: Path) -> None:
+    """With no controller at all, the keyframe's set point and ctrl turn the crank at the file's speed."""
+    import dataclasses
+
+    from validators.models import export
+    from validators.models.mjcf import length_scale
+
+    mech = vloop.load(MECHANISMS / "fourbar_crank_rocker_open.toml")
+    drv = dataclasses.replace(mech.drivers[0], a0=0.0)  # the file's crank speeds up; this one turns steadily
+    mech = dataclasses.replace(mech, drivers=(drv,))
+    model = mujoco.MjModel.from_xml_path(str(export(mech, tmp_path, "mjcf")))
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    mujoco.mj_forward(model, data)
+    eq = data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    assert np.max(np.abs(data.efc_pos[eq])) <= 1e-12 * mech.scale  # the cut pins closed at t = 0
+    crank = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, drv.target)
+    steps = 2000
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    t = steps * model.opt.timestep
+    xm = data.xmat[crank]
+    theta = np.arctan2(xm[3], xm[0])
+    want = drv.x0 + drv.v0 * t
+    assert abs((theta - want + np.pi) % (2 * np.pi) - np.pi) <= 1e-6
+    ref = vloop.solve(mech, times=np.array([t]))
+    for p in mech.joints:
+        site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{mech.body_of_point(p)}/{p}")
+        got = data.site_xpos[site][:2] / length_scale(mech)  # the model is in metres
+        assert np.hypot(*(got - [ref[f"{p}.x"][0], ref[f"{p}.y"][0]])) <= 1e-6 * mech.scale, p
+
+
+def _script_against_vloop(stem: str, fmt: str, tmp_path: Path) -> None:
+    from validators.tolerances import tolerance
+
+    pytest.importorskip("pinocchio" if fmt == "pinocchio" else "exudyn")
+    script = _export(stem, fmt, tmp_path / "out")
+    text = script.read_text(encoding="utf-8")
+    assert "import vloop" not in text and "from vloop" not in text and "validators" not in text.split('"""')[2]
+    run = subprocess.run(
+        [sys.executable, "-I", str(script), "--out", "run.csv"], cwd=tmp_path, capture_output=True, text=True,
+        timeout=600,
+    )
+    mech = vloop.load(MECHANISMS / f"{stem}.toml")
+    try:
+        ref = vloop.solve(mech)
+    except vloop.MotionError as exc:
+        ref = exc.partial
+    assert run.returncode in (0, 1), run.stderr
+    got = vloop.Result.read_csv(tmp_path / "run.csv", mechanism=mech.name, engine=fmt)
+    assert abs(len(got) - len(ref)) <= 1 and len(got) >= 0.9 * len(ref), (len(got), len(ref), run.stdout)
+    n = min(len(got), len(ref))
+    if n < len(ref):
+        n = int(0.9 * n)  # next to a limit every engine's rates grow without bound (the harness's rule)
+    assert set(ref.columns) - {c for c in ref.columns if c.startswith("health")} <= set(got.columns)
+    tol = tolerance("pinocchio" if fmt == "pinocchio" else "exudyn-kinematic", "vloop")
+    cmp = compare(got.head(n), ref.head(n), tol.rtol, floor=tol.floor)
+    assert cmp.passed, cmp.message(limit=3)
+
+
+@pytest.mark.parametrize(("stem", "fmt"), [("fourbar_textbook_example", "pinocchio"),
+                                           ("inverted_slider_crank", "exudyn")])
+def test_scripts_run_as_a_user_would_and_match_vloop(stem: str, fmt: str, tmp_path: Path) -> None:
+    _script_against_vloop(stem, fmt, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fmt", ["pinocchio", "exudyn"])
+@pytest.mark.parametrize("path", mechanism_files(), ids=lambda p: p.stem)
+def test_scripts_of_every_catalog_mechanism_match_vloop(path: Path, fmt: str, tmp_path: Path) -> None:
+    _script_against_vloop(path.stem, fmt, tmp_path)
+
+
+def test_scripts_carry_the_validators_construction_verbatim(tmp_path: Path) -> None:
+    """One implementation: the model-building code in the script is the validators' own source."""
+    from validators import exudyn, exudyn_model, pinocchio
+    from validators.models import export
+
+    mech = vloop.load(MECHANISMS / "sixbar_watt2.toml")
+    pin_text = export(mech, tmp_path, "pinocchio").read_text(encoding="utf-8")
+    exu_text = export(mech, tmp_path, "exudyn").read_text(encoding="utf-8")
+    for fn in (pinocchio.plan_tree, pinocchio.build_model, pinocchio._Solver):
+        assert inspect.getsource(fn) in pin_text
+    for fn in (exudyn_model.build, exudyn_model.DriverInput, exudyn._Kinematics, exudyn.ConstraintEquations):
+        assert inspect.getsource(fn) in exu_text
+
+
+def test_mujoco_engine_stops_where_vloop_stops_in_the_harness(tmp_path: Path, capsys) -> None:
+    """A run into a limit position: MuJoCo's servo cannot turn the input past it, and the engine says so."""
+    import json
+
+    from validators.engines import ENGINES
+
+    assert "mujoco" in ENGINES
+    path = MECHANISMS / "fourbar_nongrashof_past_limit.toml"
+    code = main(["validate", str(path), "--engines", "vloop,mujoco", "--out", str(tmp_path), "--no-report"])
+    assert code == 0, capsys.readouterr().out
+    summary = json.loads(next(tmp_path.rglob("summary.json")).read_text())
+    text = json.dumps(summary)
+    assert "mujoco" in text and '"passed": true' in text.replace(" ", "").replace('"passed":true', '"passed": true')
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--format", "mjcf", "--at", "0.5"],
+        ["--format", "pinocchio", "--kerf", "0.1"],
+        ["--format", "svg"],
+        ["--format", "dxf", "--at", "0.5", "--kerf", "abc"],
+        ["--format", "dxf", "--at", "0.5", "--pin", "0"],
+        ["--format", "dxf", "--at", "0.5", "--pin", "1", "--width", "0.5"],
+        ["--format", "svg", "--at", "0.5", "--kerf", "0.1"],
+        ["--format", "dxf", "--at", "0.5", "--dimensions"],
+    ],
+)
+def test_export_options_for_another_format_are_one_line_and_exit_2(argv: list[str], tmp_path: Path, capsys) -> None:
+    out = tmp_path / "o"
+    assert main(["export", str(MECHANISMS / "eightbar.toml"), *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert not out.exists() or not any(out.iterdir())
