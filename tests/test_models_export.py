@@ -115,7 +115,10 @@ def _script_against_vloop(stem: str, fmt: str, tmp_path: Path) -> None:
     text = script.read_text(encoding="utf-8")
     assert "import vloop" not in text and "from vloop" not in text and "validators" not in text.split('"""')[2]
     run = subprocess.run(
-        [sys.executable, "-I", str(script), "--out", "run.csv"], cwd=tmp_path, capture_output=True, text=True,
+        [sys.executable, "-I", str(script), "--out", "run.csv"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
         timeout=600,
     )
     mech = vloop.load(MECHANISMS / f"{stem}.toml")
@@ -135,8 +138,9 @@ def _script_against_vloop(stem: str, fmt: str, tmp_path: Path) -> None:
     assert cmp.passed, cmp.message(limit=3)
 
 
-@pytest.mark.parametrize(("stem", "fmt"), [("fourbar_textbook_example", "pinocchio"),
-                                           ("inverted_slider_crank", "exudyn")])
+@pytest.mark.parametrize(
+    ("stem", "fmt"), [("fourbar_textbook_example", "pinocchio"), ("inverted_slider_crank", "exudyn")]
+)
 def test_scripts_run_as_a_user_would_and_match_vloop(stem: str, fmt: str, tmp_path: Path) -> None:
     _script_against_vloop(stem, fmt, tmp_path)
 

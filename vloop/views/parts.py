@@ -140,26 +140,57 @@ def _members(
 def label_place(
     name: str, holes: list[np.ndarray], pin: float, width: float, plate: bool
 ) -> tuple[np.ndarray, float, float] | None:
-    """(centre, angle [rad], height) of a link's name clear of every hole by pin/4: along the longest edge between
-    two holes (or at a plate's centre), the largest height up to width/2 that fits; None if none fits."""
+    """(centre, angle [rad], height) of a link's name on the part, clear of every hole (and slot) by pin/4 and
+    inside the outline: at a plate's centre, or along an edge between two holes (its middle first, then nearer
+    its ends, on it or beside it), longest edges first; the largest height up to width/2 that fits; None if none
+    fits."""
     if len(holes) < 2:
         return None
     pts = np.array(holes)
     h = hull(pts)
     sides = [(h[i], h[(i + 1) % len(h)]) for i in range(len(h) if len(h) > 2 else 1)]
-    places = [((a + b) / 2, math.atan2(*(b - a)[::-1]), float(np.linalg.norm(b - a))) for a, b in sides]
-    places.sort(key=lambda p: -p[2])
-    if plate:
-        places.insert(0, (pts.mean(axis=0), places[0][1], places[0][2]))
-    for centre, angle, _ in places:
-        if math.cos(angle) < -1e-9 or (abs(math.cos(angle)) <= 1e-9 and math.sin(angle) < 0):
-            angle += math.pi  # read left to right
-        height = 0.5 * width
-        while height > 0.05 * width:
-            if clearance(centre, angle, height, len(name), pts) >= pin / 2 + pin / 4:
+    sides.sort(key=lambda ab: -float(np.linalg.norm(ab[1] - ab[0])))
+    places = [(pts.mean(axis=0), sides[0][1] - sides[0][0])] if plate else []
+    for a, b in sides:
+        n = np.array([-(b - a)[1], (b - a)[0]]) / max(float(np.linalg.norm(b - a)), 1e-300)
+        places += [
+            (a + f * (b - a) + d * width * n, b - a) for d in (0.0, 0.28, -0.28) for f in (0.5, 0.3, 0.7, 0.2, 0.8)
+        ]
+    height = 0.5 * width
+    while height > 0.05 * width:
+        for centre, d in places:
+            angle = math.atan2(d[1], d[0])
+            if math.cos(angle) < -1e-9 or (abs(math.cos(angle)) <= 1e-9 and math.sin(angle) < 0):
+                angle += math.pi  # read left to right
+            fits = clearance(centre, angle, height, len(name), pts) >= 0.75 * pin
+            if fits and _inside(_corners(centre, angle, height, len(name)), h, 0.45 * width):
                 return centre, angle % (2 * math.pi), height
-            height *= 0.8
+        height *= 0.85
     return None
+
+
+def _corners(centre: np.ndarray, angle: float, height: float, chars: int) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    half = np.array([0.5 * CHAR * height * max(chars, 1), 0.5 * height])
+    box = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+    return centre + box @ np.array([[c, s], [-s, c]])
+
+
+def _inside(points: np.ndarray, h: np.ndarray, r: float) -> bool:
+    """Whether every point lies within ``r`` of the convex polygon (or segment) ``h``."""
+    for p in points:
+        if len(h) > 2 and all(_cross(h[(i + 1) % len(h)] - h[i], p - h[i]) >= 0 for i in range(len(h))):
+            continue
+        ends = [(h[i], h[(i + 1) % len(h)]) for i in range(len(h) if len(h) > 2 else 1)]
+        if min(_to_segment(p, a, b) for a, b in ends) > r:
+            return False
+    return True
+
+
+def _to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    d = b - a
+    t = min(max(float((p - a) @ d) / max(float(d @ d), 1e-300), 0.0), 1.0)
+    return float(np.linalg.norm(p - (a + t * d)))
 
 
 def clearance(centre: np.ndarray, angle: float, height: float, chars: int, holes: np.ndarray) -> float:
@@ -255,8 +286,8 @@ def _part(
         msp.add_circle(tuple(c), pin / 4, dxfattribs=engrave)
         for d in (np.array([pin / 2, 0.0]), np.array([0.0, pin / 2])):
             msp.add_line(tuple(c - d), tuple(c + d), dxfattribs=engrave)
-    holes = [*pivots.values(), *(p for s in slots for p in s)]
-    place = label_place(name, holes, pin, width, plate=len(holes) > 2)
+    holes = [*pivots.values(), *(p for a, b in slots for p in _along(a, b, pin / 4))]
+    place = label_place(name, holes, pin, width, plate=len(pivots) + len(slots) > 2)
     if place is not None:
         centre, angle, height = place
         text = msp.add_text(name, height=height, rotation=math.degrees(angle), dxfattribs=engrave)
@@ -268,6 +299,12 @@ def _MIDDLE_CENTER() -> Any:
     from ezdxf.enums import TextEntityAlignment
 
     return TextEntityAlignment.MIDDLE_CENTER
+
+
+def _along(a: np.ndarray, b: np.ndarray, step: float) -> list[np.ndarray]:
+    """Points from ``a`` to ``b`` at most ``step`` apart (a slot's centre line, for keeping labels off it)."""
+    n = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
+    return [a + (b - a) * i / n for i in range(n + 1)]
 
 
 def _moved(vertices: list[tuple[float, float, float]], shift: np.ndarray) -> list[tuple[float, float, float]]:
