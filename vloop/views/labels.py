@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 PAD = 2.0  # px between a label's box and anything else
-RINGS = (0.9, 1.4, 2.0, 2.8, 3.8, 5.0)  # candidate distances from the anchor, in label heights
-DIRECTIONS = 16
+RINGS = (0.9, 1.4, 2.0, 2.8, 3.8, 5.0, 6.5, 8.0)  # candidate distances from the anchor, in label heights
+DIRECTIONS = 24
 
 
 def clean(text: str) -> str:
@@ -41,14 +41,39 @@ class Obstacles:
     circles: list[tuple[np.ndarray, float]] = field(default_factory=list)
     polygons: list[np.ndarray] = field(default_factory=list)
     boxes: list[np.ndarray] = field(default_factory=list)  # (x0, y0, x1, y1)
+    _arrays: tuple[np.ndarray, ...] | None = None  # segments and circles as arrays (made at the first query)
 
-    def hits(self, box: np.ndarray) -> int:
-        """How many obstacles ``box`` (x0, y0, x1, y1) meets."""
-        n = sum(_box_circle(box, c, r + PAD) for c, r in self.circles)
-        n += sum(_box_segment(box, a, b, hw + PAD) for a, b, hw in self.segments)
-        n += sum(_box_polygon(box, p) for p in self.polygons)
-        n += sum(_box_box(box, b) for b in self.boxes)
+    def hits(self, boxes: np.ndarray) -> np.ndarray:
+        """How many obstacles each of ``boxes`` (K × (x0, y0, x1, y1)) meets."""
+        if self._arrays is None:
+            self._arrays = _stack(self)
+        sa, sb, sw, cc, cr = self._arrays
+        boxes = np.asarray(boxes, float).reshape(-1, 4)
+        n = np.count_nonzero(_box_circles(boxes, cc, cr + PAD), axis=1)
+        n += np.count_nonzero(_box_segments(boxes, sa, sb, sw + PAD), axis=1)
+        centres = 0.5 * (boxes[:, :2] + boxes[:, 2:])
+        for poly in self.polygons:
+            n += _inside(centres, poly)
+        if self.boxes:
+            b = np.array(self.boxes)
+            n += np.count_nonzero(
+                (boxes[:, None, 0] < b[None, :, 2] + PAD)
+                & (b[None, :, 0] < boxes[:, None, 2] + PAD)
+                & (boxes[:, None, 1] < b[None, :, 3] + PAD)
+                & (b[None, :, 1] < boxes[:, None, 3] + PAD),
+                axis=1,
+            )
         return n
+
+
+def _stack(obs: Obstacles) -> tuple[np.ndarray, ...]:
+    seg = obs.segments
+    a = np.array([s[0] for s in seg]).reshape(-1, 2)
+    b = np.array([s[1] for s in seg]).reshape(-1, 2)
+    w = np.array([s[2] for s in seg], float)
+    c = np.array([x[0] for x in obs.circles]).reshape(-1, 2)
+    r = np.array([x[1] for x in obs.circles], float)
+    return a, b, w, c, r
 
 
 def obstacles(ax: Any, skip: tuple[str, ...] = ("label",)) -> Obstacles:
@@ -94,18 +119,16 @@ def place(ax: Any, text: str, anchor: tuple[float, float], obs: Obstacles, rende
     bb = art.get_window_extent(renderer)
     w, h = bb.width, bb.height
     a = ax.transData.transform(anchor)
+    phi = math.pi / 4 + 2 * math.pi * np.arange(DIRECTIONS) / DIRECTIONS  # up and to the right first
     best, best_hits = None, math.inf
     for ring in RINGS:
-        r = ring * max(h, 8.0) + 0.5 * w * 0.6
-        for k in range(DIRECTIONS):
-            phi = math.pi / 4 + 2 * math.pi * k / DIRECTIONS  # up and to the right first
-            c = a + r * np.array([math.cos(phi), math.sin(phi)])
-            box = np.array([c[0] - w / 2, c[1] - h / 2, c[0] + w / 2, c[1] + h / 2])
-            hits = obs.hits(box)
-            if hits < best_hits:
-                best, best_hits = (c - a, box), hits
-            if hits == 0:
-                break
+        r = ring * max(h, 8.0) + 0.3 * w
+        c = a + r * np.column_stack([np.cos(phi), np.sin(phi)])
+        boxes = np.column_stack([c[:, 0] - w / 2, c[:, 1] - h / 2, c[:, 0] + w / 2, c[:, 1] + h / 2])
+        hits = obs.hits(boxes)
+        k = int(np.argmin(hits))  # the first of the least crowded
+        if hits[k] < best_hits:
+            best, best_hits = (c[k] - a, boxes[k]), int(hits[k])
         if best_hits == 0:
             break
     offset, box = best
@@ -114,40 +137,37 @@ def place(ax: Any, text: str, anchor: tuple[float, float], obs: Obstacles, rende
     return art
 
 
-def _box_box(a: np.ndarray, b: np.ndarray) -> bool:
-    return bool(a[0] < b[2] + PAD and b[0] < a[2] + PAD and a[1] < b[3] + PAD and b[1] < a[3] + PAD)
+def _box_circles(boxes: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(K, M): whether box k meets circle m."""
+    x0, y0, x1, y1 = (boxes[:, i, None] for i in range(4))
+    dx = np.maximum(np.maximum(x0 - c[None, :, 0], 0.0), c[None, :, 0] - x1)
+    dy = np.maximum(np.maximum(y0 - c[None, :, 1], 0.0), c[None, :, 1] - y1)
+    return dx * dx + dy * dy < r[None, :] ** 2
 
 
-def _box_circle(box: np.ndarray, c: np.ndarray, r: float) -> bool:
-    dx = max(box[0] - c[0], 0.0, c[0] - box[2])
-    dy = max(box[1] - c[1], 0.0, c[1] - box[3])
-    return dx * dx + dy * dy < r * r
+def _box_segments(boxes: np.ndarray, a: np.ndarray, b: np.ndarray, grow: np.ndarray) -> np.ndarray:
+    """(K, N): whether segment n meets box k grown by ``grow[n]`` (Liang–Barsky clipping, all at once)."""
+    lo = boxes[:, None, :2] - grow[None, :, None]
+    hi = boxes[:, None, 2:] + grow[None, :, None]
+    d = np.broadcast_to(b - a, lo.shape)
+    a = np.broadcast_to(a, lo.shape)
+    t0, t1 = np.zeros(lo.shape[:2]), np.ones(lo.shape[:2])
+    ok = np.ones(lo.shape[:2], bool)
+    for axis in (0, 1):
+        for p, q in ((-d[..., axis], a[..., axis] - lo[..., axis]), (d[..., axis], hi[..., axis] - a[..., axis])):
+            zero = p == 0
+            ok &= ~(zero & (q < 0))
+            t = q / np.where(zero, 1.0, p)
+            t0 = np.where(~zero & (p < 0), np.maximum(t0, t), t0)
+            t1 = np.where(~zero & (p > 0), np.minimum(t1, t), t1)
+    return ok & (t0 <= t1)
 
 
-def _box_segment(box: np.ndarray, a: np.ndarray, b: np.ndarray, grow: float) -> bool:
-    """Whether segment a-b meets the box grown by ``grow`` (Liang–Barsky clipping)."""
-    x0, y0, x1, y1 = box[0] - grow, box[1] - grow, box[2] + grow, box[3] + grow
-    d = b - a
-    t0, t1 = 0.0, 1.0
-    for p, q in ((-d[0], a[0] - x0), (d[0], x1 - a[0]), (-d[1], a[1] - y0), (d[1], y1 - a[1])):
-        if p == 0:
-            if q < 0:
-                return False
-            continue
-        t = q / p
-        if p < 0:
-            t0 = max(t0, t)
-        else:
-            t1 = min(t1, t)
-        if t0 > t1:
-            return False
-    return True
-
-
-def _box_polygon(box: np.ndarray, poly: np.ndarray) -> bool:
-    """Whether the box's centre lies inside the polygon (its edges are segments of their own)."""
-    cx, cy = 0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3])
-    x, y = poly[:, 0], poly[:, 1]
-    xj, yj = np.roll(x, 1), np.roll(y, 1)
-    cross = ((y > cy) != (yj > cy)) & (cx < (xj - x) * (cy - y) / np.where(yj - y == 0, 1e-300, yj - y) + x)
-    return bool(np.count_nonzero(cross) % 2)
+def _inside(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Whether each point lies inside the polygon (even-odd rule)."""
+    x, y = poly[None, :, 0], poly[None, :, 1]
+    xj, yj = np.roll(poly[:, 0], 1)[None, :], np.roll(poly[:, 1], 1)[None, :]
+    px, py = points[:, 0, None], points[:, 1, None]
+    dy = np.where(yj - y == 0, 1e-300, yj - y)
+    crossing = ((y > py) != (yj > py)) & (px < (xj - x) * (py - y) / dy + x)
+    return np.count_nonzero(crossing, axis=1) % 2 == 1
