@@ -201,3 +201,30 @@ def test_export_options_for_another_format_are_one_line_and_exit_2(argv: list[st
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_files_masses_gravity_and_loads_go_into_every_model(tmp_path: Path) -> None:
+    """MJCF: each body's mass, inertia and centre as the file states them (kg, kg·m², metres), gravity, one motor
+    per load; the scripts: the same mass table the validators' force engines read, and the loads."""
+    import runpy
+
+    from validators.forces_common import mass_table
+    from validators.models import export
+
+    mech = vloop.load(MECHANISMS / "sixbar_watt2_dynamics.toml")
+    model = mujoco.MjModel.from_xml_path(str(export(mech, tmp_path, "mjcf")))
+    assert np.allclose(model.opt.gravity[:2], mech.gravity, rtol=0, atol=1e-15)
+    for name, (mass, com, inertia) in mass_table(mech).items():
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        assert model.body_mass[b] == pytest.approx(mass, rel=1e-15)
+        assert model.body_inertia[b][2] == pytest.approx(inertia, rel=1e-15)
+        assert np.allclose(model.body_ipos[b][:2], com * 1.0, rtol=0, atol=1e-15)  # the file is in metres
+    motors = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, i) for i in range(model.nu)]
+    assert sum(m.startswith("load ") for m in motors) == len(mech.loads) >= 1
+    for fmt in ("pinocchio", "exudyn"):
+        ns = runpy.run_path(str(export(mech, tmp_path, fmt)), run_name="not_main")
+        got = ns["MECHANISM"]
+        assert got.gravity == mech.gravity and len(got.loads) == len(mech.loads)
+        for name, (mass, com, inertia) in mass_table(mech).items():
+            m2, c2, i2 = got.masses_table[name]
+            assert (m2, i2) == (mass, inertia) and np.array_equal(c2, com)

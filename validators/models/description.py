@@ -69,6 +69,26 @@ class Driver:
         return f"{self.symbol} = {x:.{digits}g}" + (" rad" if self.kind == "crank" else f" {units}")
 
 
+@dataclass(frozen=True)
+class LoadProfile:
+    """A tabulated load: times [s] and rows of ``columns`` (fx, fy [N] or torque [N·m]), linear between rows."""
+
+    t: np.ndarray
+    values: np.ndarray
+    columns: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Load:
+    """A force (fx, fy) [N, world] at ``point`` of ``body``, or a torque τ [N·m, CCW] on it; or a table of them."""
+
+    kind: str
+    body: str
+    value: Any
+    point: str | None = None
+    profile: LoadProfile | None = None
+
+
 @dataclass
 class Mechanism:
     """What the model-building code reads of a mechanism (the names of :class:`vloop.mechanism.Mechanism`)."""
@@ -84,6 +104,10 @@ class Mechanism:
     drivers: tuple[Driver, ...]
     times: np.ndarray
     by_joint: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    masses_table: dict[str, tuple[float, np.ndarray, float]] = field(default_factory=dict)  # kg, body frame, kg·m²
+    gravity: tuple[float, float] | None = None  # m/s²
+    loads: tuple[Load, ...] = ()
+    length_factor: float = 1.0  # metres per length unit
 
     @property
     def body_names(self) -> tuple[str, ...]:
@@ -140,6 +164,25 @@ def from_data(d: dict[str, Any]) -> Mechanism:
         tuple(Driver(**{**v, "profile": profile(v.get("profile"))}) for v in d["drivers"]),
         np.asarray(d["times"], float),
         {j: tuple(bs) for j, bs in d["bodies_at"].items()},
+        {b: (m, np.asarray(c, float), i) for b, (m, c, i) in d.get("masses", {}).items()},
+        None if d.get("gravity") is None else tuple(d["gravity"]),
+        tuple(
+            Load(
+                ld["kind"],
+                ld["body"],
+                None if ld["value"] is None else (tuple(ld["value"]) if ld["kind"] == "force" else ld["value"]),
+                ld["point"],
+                None
+                if ld["profile"] is None
+                else LoadProfile(
+                    np.asarray(ld["profile"]["t"], float),
+                    np.asarray(ld["profile"]["values"], float),
+                    tuple(ld["profile"]["columns"]),
+                ),
+            )
+            for ld in d.get("loads", [])
+        ),
+        d.get("length_factor", 1.0),
     )
 
 
@@ -184,4 +227,39 @@ def describe(mech: Any) -> dict[str, Any]:
         ],
         "times": arr(mech.times),
         "bodies_at": {j: list(mech.bodies_at(j)) for j in mech.joints},
+        **_dynamics(mech),
+    }
+
+
+def _dynamics(mech: Any) -> dict[str, Any]:
+    """Masses (body -> [kg, centre of mass in the body frame, kg·m²]), gravity [m/s²], loads, metres per unit."""
+    if not (mech.masses or mech.gravity or mech.loads):
+        return {}
+    from vloop.model import LENGTH_UNITS
+
+    from ..forces_common import mass_table
+
+    def value(v: Any) -> Any:
+        return None if v is None else ([float(x) for x in v] if isinstance(v, tuple) else float(v))
+
+    return {
+        "masses": {b: [float(m), [float(x) for x in c], float(i)] for b, (m, c, i) in mass_table(mech).items()},
+        "gravity": None if mech.gravity is None else [float(x) for x in mech.gravity],
+        "loads": [
+            {
+                "kind": ld.kind,
+                "body": ld.body,
+                "value": value(ld.value),
+                "point": ld.point,
+                "profile": None
+                if ld.profile is None
+                else {
+                    "t": [float(x) for x in ld.profile.t],
+                    "values": np.asarray(ld.profile.values, float).tolist(),
+                    "columns": list(ld.profile.columns),
+                },
+            }
+            for ld in mech.loads
+        ],
+        "length_factor": LENGTH_UNITS.get(mech.units.strip().lower(), 1.0),
     }

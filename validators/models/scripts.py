@@ -94,6 +94,8 @@ def _common(mech: Mechanism) -> str:
     """Sections 1 and 2: the data, the description classes, vloop's input functions."""
     import vloop.drivers as drivers
 
+    from .. import forces_common
+
     data = pprint.pformat(description.describe(mech), width=116, sort_dicts=False)
     return "\n\n".join(
         [
@@ -102,7 +104,15 @@ def _common(mech: Mechanism) -> str:
             "# ---------------------------------------------------------------- 2. description and inputs",
             'class MechanismError(ValueError):\n    """The mechanism cannot be modelled or assembled."""\n\n'
             "    def __init__(self, message: str, **where: Any) -> None:\n        super().__init__(message)",
-            _segments(description, ["Body", "Slider", "Profile", "Driver", "Mechanism", "from_data"]),
+            _segments(
+                description, ["Body", "Slider", "Profile", "Driver", "LoadProfile", "Load", "Mechanism", "from_data"]
+            ),
+            "# the file's masses and loads, as the validators' force engines read them (validators/forces_common.py)",
+            "def mass_table(mech: Mechanism) -> dict[str, tuple[float, np.ndarray, float]]:\n"
+            '    """body -> (mass [kg], centre of mass in the body frame [length], inertia about it [kg·m²])."""\n'
+            "    return mech.masses_table",
+            'def factor(mech: Mechanism) -> float:\n    """Metres per length unit."""\n    return mech.length_factor',
+            _segments(forces_common, ["load_series"]),
             "# the inputs x(t), ẋ(t), ẍ(t), as every engine of vloop evaluates them (vloop/drivers.py)",
             _segments(drivers),
             "MECHANISM = from_data(DATA)",
@@ -143,6 +153,8 @@ def run(mech: Mechanism, times: np.ndarray) -> tuple[np.ndarray, dict[str, np.nd
     import pinocchio as pin
 
     pm = build_model(mech)
+    if mech.masses_table or mech.gravity:
+        _add_dynamics(pm, mech)  # the file's inertias and gravity (Pinocchio's dynamics; the kinematics ignore them)
     solver = _Solver(pm, tol=1e-10, max_iter=50, max_bisect=8, max_cond=1e12)
     inputs = _inputs_fn(mech)
     t_a = _assembly_time(mech)
@@ -193,7 +205,7 @@ EXUDYN_RUN = '''
 def run(mech: Mechanism, times: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray], str]:
     """(times solved, columns, why it stopped or ""): Newton on Exudyn's constraint equations, continued from
     the t = 0 assembly sample after sample (the validators' exudyn-kinematic engine)."""
-    model = build(mech)
+    model = build_with_loads(mech) if (mech.masses_table or mech.gravity or mech.loads) else build(mech)
     kin = _Kinematics(model)
     for inp in model.driver_inputs:
         inp.prefetch(np.asarray(times, float))
@@ -258,7 +270,7 @@ def run(mech: Mechanism, times: np.ndarray) -> tuple[np.ndarray, dict[str, np.nd
 
 def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
     """The Pinocchio script of ``mech`` (``script``: its file name, ``source``: where the mechanism came from)."""
-    from .. import pinocchio, tolerances
+    from .. import pinocchio, pinocchio_forces, tolerances
 
     names = [
         "_wrap",
@@ -293,6 +305,8 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
             "# (validators/pinocchio.py, verbatim; the condition number from validators/tolerances.py)",
             _segments(tolerances, ["condition_number"]),
             _segments(pinocchio, names),
+            "# the file's inertias and gravity (validators/pinocchio_forces.py)",
+            _segments(pinocchio_forces, ["_add_dynamics"]),
         ]
     )
     head = HEADER.format(
@@ -309,7 +323,7 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
 
 def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
     """The Exudyn script of ``mech``: validators/exudyn_model.py's construction, validators/exudyn.py's Newton."""
-    from .. import exudyn, exudyn_model, tolerances
+    from .. import exudyn, exudyn_forces, exudyn_model, tolerances
 
     names = [
         "FD_TURN",
@@ -331,6 +345,9 @@ def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
             _segments(exudyn_model),
             "em = sys.modules[__name__]  # the engine's code names the model module 'em'",
             _segments(exudyn, names),
+            "# the file's masses, gravity and loads (validators/exudyn_forces.py; its build is build_with_loads here)",
+            _segments(exudyn_forces, ["_force_function", "_torque_function"]),
+            _segments(exudyn_forces, ["build"]).replace("def build(", "def build_with_loads(", 1),
         ]
     )
     head = HEADER.format(
