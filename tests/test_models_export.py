@@ -228,3 +228,18 @@ def test_the_files_masses_gravity_and_loads_go_into_every_model(tmp_path: Path) 
         for name, (mass, com, inertia) in mass_table(mech).items():
             m2, c2, i2 = got.masses_table[name]
             assert (m2, i2) == (mass, inertia) and np.array_equal(c2, com)
+
+
+def test_mujoco_stops_at_the_sample_vloop_stops_and_writes_nothing(tmp_path: Path, monkeypatch) -> None:
+    """Into a limit position the servo cannot turn the input further: the engine stops there, with vloop, and
+    keeps MuJoCo's instability warnings to itself (no MUJOCO_LOG.TXT in the working folder)."""
+    from validators import mujoco as engine
+
+    monkeypatch.chdir(tmp_path)
+    mech = vloop.load(MECHANISMS / "fourbar_nongrashof_past_limit.toml")
+    with pytest.raises(vloop.MotionError) as ours:
+        vloop.solve(mech)
+    with pytest.raises(vloop.MotionError) as theirs:
+        engine.solve(mech)
+    assert theirs.value.sample == ours.value.sample and "cannot follow the input" in str(theirs.value)
+    assert list(tmp_path.iterdir()) == []

@@ -20,6 +20,7 @@ fraction of the mechanism's size — and the comparison allows what the solver's
 
 from __future__ import annotations
 
+import collections
 import math
 from typing import Any
 
@@ -40,10 +41,23 @@ LOST = 1e-6
 ASSEMBLY_TOL = 1e-13  # Newton's assembly: largest cut-pin gap, fraction of the size (round-off is ~1e-16)
 
 
+WARNINGS: collections.deque[str] = collections.deque(maxlen=100)  # MuJoCo's last warnings
+
+
+def quiet() -> None:
+    """Keep MuJoCo's warnings in :data:`WARNINGS` (its default prints them and writes MUJOCO_LOG.TXT into the
+    working folder; a run writes nothing outside its output folder). An unstable simulation is caught by the
+    run's own gap and lag."""
+    import mujoco
+
+    mujoco.set_mju_user_warning(WARNINGS.append)
+
+
 def load(mech: Mechanism) -> tuple[Any, Any, Layout]:
     """(MjModel, MjData, Layout) of ``mech`` from its MJCF text."""
     import mujoco
 
+    quiet()
     text, layout = build(mech)
     model = mujoco.MjModel.from_xml_string(text)
     return model, mujoco.MjData(model), layout

@@ -54,6 +54,7 @@ def mjcf_text(mech: Mechanism) -> str:
     from .. import mujoco as engine
     from .mjcf import build
 
+    engine.quiet()
     text, layout = build(mech)
     model = mj.MjModel.from_xml_string(text)
     data = mj.MjData(model)
