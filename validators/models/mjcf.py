@@ -227,30 +227,62 @@ def timestep(mech: Mechanism) -> float:
 def build(mech: Mechanism) -> tuple[str, Layout]:
     """The MJCF text of ``mech`` (no keyframe) and its :class:`Layout`."""
     k = length_scale(mech)
-    size = mech.scale * k
-    bodies = mech.bodies()
     pivots = {d.pivot for d in mech.drivers if d.kind == "crank"}
     plan = plan_tree(mech, cut_preference=[j for j in mech.joints if j not in pivots])  # inputs next to the ground
-    layout = Layout(k, plan, {}, {}, timestep=timestep(mech))
+    joint_of = {c: f"{c}@{plan.parent[c][1].joint}" for c in plan.order[1:]}
+    layout = Layout(k, plan, joint_of, {}, timestep=timestep(mech))
     mass = masses(mech, k)
+    world = _world(mech, layout, mass)
+    tendons, actuators = _drives(mech, layout, mass)
+    actuators += _loads(mech, layout, mech.bodies(), k, tendons)
+    equality = [
+        f"    <connect name={quoteattr(f'cut {j}: {a}-{b}')} site1={quoteattr(f'{a}/{j}')} "
+        f"site2={quoteattr(f'{b}/{j}')} "
+        f'solref="{SOLREF.format(tc=2 * layout.timestep)}" solimp="{SOLIMP}"/>'
+        for j, a, b in plan.cuts
+    ]
+    layout.cuts = [f"cut {j}: {a}-{b}" for j, a, b in plan.cuts]
+    g = (0.0, 0.0) if mech.gravity is None else mech.gravity  # m/s²: the model is in metres where gravity is given
+    units = "m, kg, s" if k != 1.0 or mech.units.strip().lower() == "m" else f"{mech.units}, kg, s"
+    text = "\n".join(
+        [
+            f"<mujoco model={quoteattr(mech.name)}>",
+            f"  <!-- {_comment(mech.title or mech.name)}: written by vloop export at t = 0; "
+            f"units {_comment(units)} -->",
+            '  <compiler angle="radian" autolimits="true"/>',
+            f'  <option timestep="{layout.timestep:.17g}" gravity="{_v(g[0], g[1], 0)}" integrator="RK4" '
+            'solver="Newton" tolerance="1e-14" iterations="100" jacobian="dense" cone="pyramidal"/>',
+            f'  <default><geom contype="0" conaffinity="0"/><site size="{0.5 * ROD * mech.scale * k:.6g}" '
+            'rgba="0.2 0.2 0.2 1"/></default>',
+            *("  <worldbody>", *world, "  </worldbody>"),
+            *("  <tendon>", *tendons, "  </tendon>"),
+            *("  <equality>", *equality, "  </equality>"),
+            *("  <actuator>", *actuators, "  </actuator>"),
+            "</mujoco>",
+        ]
+    )
+    return _with_armature(text, layout.armature), layout
+
+
+def _world(mech: Mechanism, layout: Layout, mass: dict[str, tuple[float, np.ndarray, float]]) -> list[str]:
+    """The worldbody's lines: the ground's geometry and sites, then the tree of bodies, each inside its parent."""
+    k, plan, bodies = layout.scale, layout.plan, mech.bodies()
+    size = mech.scale * k
     children: dict[str, list[str]] = {}
     for c in plan.order[1:]:
         children.setdefault(plan.parent[c][0], []).append(c)
-    for c in plan.order[1:]:
-        layout.joint_of[c] = f"{c}@{plan.parent[c][1].joint}"
 
     def body_xml(name: str, depth: int) -> list[str]:
         p, e = plan.parent[name]
-        pos, joint, _, sign = _joint(mech, bodies, p, name, e, k)
-        layout.sign[name] = sign
-        turn = bodies[name].theta0 - bodies[p].theta0
+        pos, joint, _, layout.sign[name] = _joint(mech, bodies, p, name, e, k)
         m, com, inertia = mass[name]
         pad = "  " * depth
-        lines = [f'{pad}<body name={quoteattr(name)} pos="{pos}" quat="{_q(turn)}">', f"{pad}  {joint}"]
-        lines.append(
+        lines = [
+            f'{pad}<body name={quoteattr(name)} pos="{pos}" quat="{_q(bodies[name].theta0 - bodies[p].theta0)}">',
+            f"{pad}  {joint}",
             f'{pad}  <inertial pos="{_v(com[0], com[1], 0)}" mass="{m:.17g}" '
-            f'diaginertia="{_v(inertia, inertia, inertia)}"/>'
-        )
+            f'diaginertia="{_v(inertia, inertia, inertia)}"/>',
+        ]
         lines += [f"{pad}  {g}" for g in _geoms(bodies[name], k, size)]
         lines += [
             f'{pad}  <site name={quoteattr(f"{name}/{j}")} pos="{_v(*np.asarray(xy) * k, 0)}"/>'
@@ -263,11 +295,18 @@ def build(mech: Mechanism) -> tuple[str, Layout]:
     world = [f"    {g}" for g in _ground(mech, bodies, k, size)]
     for c in children.get(plan.root, []):
         world += body_xml(c, 2)
+    return world
 
-    tendons, actuators = [], []
+
+def _drives(
+    mech: Mechanism, layout: Layout, mass: dict[str, tuple[float, np.ndarray, float]]
+) -> tuple[list[str], list[str]]:
+    """Each input's tendon and its two actuators (the set point's servo, the rate's feed-forward); the driven
+    joints' armatures, offsets and tendons into ``layout``."""
+    bodies, size = mech.bodies(), mech.scale * layout.scale
     rotary = sum(m * size**2 + i for m, _, i in mass.values())  # the mechanism's inertia scale [kg·m²]
     omega = layout.omega = SERVO_OMEGA / layout.timestep
-    armature: dict[str, float] = {}
+    tendons, actuators = [], []
     for i, d in enumerate(mech.drivers):
         if d.kind == "crank":
             coef = _path(layout, mech, d.target)
@@ -278,7 +317,7 @@ def build(mech: Mechanism) -> tuple[str, Layout]:
             layout.offsets.append(_slider_s0(mech, bodies, d.target))
             inertia = ARMATURE * rotary / size**2  # per metre of travel
         layout.tendons.append(coef)
-        armature[next(iter(coef))] = inertia  # the driven body's own joint carries the flywheel
+        layout.armature[next(iter(coef))] = inertia  # the driven body's own joint carries the flywheel
         tname = f"input {i} {d.symbol}"
         tendons.append(f"    <fixed name={quoteattr(tname)}>" + _tendon(coef) + "</fixed>")
         kp, kv = inertia * omega**2, 2.0 * inertia * omega  # critically damped
@@ -289,43 +328,7 @@ def build(mech: Mechanism) -> tuple[str, Layout]:
         actuators.append(
             f'    <velocity name={quoteattr(f"drive {d.target} rate")} tendon={quoteattr(tname)} kv="{kv:.17g}"/>'
         )
-    layout.armature = armature
-    actuators += _loads(mech, layout, bodies, k, tendons)
-    equality = [
-        f"    <connect name={quoteattr(f'cut {j}: {a}-{b}')} site1={quoteattr(f'{a}/{j}')} "
-        f"site2={quoteattr(f'{b}/{j}')} "
-        f'solref="{SOLREF.format(tc=2 * layout.timestep)}" solimp="{SOLIMP}"/>'
-        for j, a, b in plan.cuts
-    ]
-    layout.cuts = [f"cut {j}: {a}-{b}" for j, a, b in plan.cuts]
-    g = (0.0, 0.0) if mech.gravity is None else mech.gravity  # m/s²: the model is in metres where gravity is given
-    text = "\n".join(
-        [
-            f"<mujoco model={quoteattr(mech.name)}>",
-            f"  <!-- {_comment(mech.title or mech.name)}: written by vloop export at t = 0; units "
-            f"{'m, kg, s' if k != 1.0 or mech.units.strip().lower() == 'm' else mech.units + ', kg, s'} -->",
-            '  <compiler angle="radian" autolimits="true"/>',
-            f'  <option timestep="{layout.timestep:.17g}" gravity="{_v(g[0], g[1], 0)}" integrator="RK4" '
-            'solver="Newton" tolerance="1e-14" iterations="100" jacobian="dense" cone="pyramidal"/>',
-            '  <default><geom contype="0" conaffinity="0"/><site size="'
-            + f"{0.5 * ROD * size:.6g}"
-            + '" rgba="0.2 0.2 0.2 1"/></default>',
-            "  <worldbody>",
-            *world,
-            "  </worldbody>",
-            "  <tendon>",
-            *tendons,
-            "  </tendon>",
-            "  <equality>",
-            *equality,
-            "  </equality>",
-            "  <actuator>",
-            *actuators,
-            "  </actuator>",
-            "</mujoco>",
-        ]
-    )
-    return _with_armature(text, armature), layout
+    return tendons, actuators
 
 
 def _slide_of(layout: Layout, mech: Mechanism, slider: str) -> tuple[str, float]:
