@@ -81,9 +81,10 @@ _FLOOR = 1e-9
 # time constant two steps) and a servo on the input, RK4 at a step that moves the input 1 mrad (or 1e-3 of the size).
 # Positions carry the constraints' gap and the servo's lag, both O(h²) and both reported per sample (the run's
 # allowance adds them, through the linkage's largest velocity ratio); the rates carry the step's O(h) error.
-# Measured on the catalog (max error / peak): ≤ 3.6e-8 positions and 1.3e-7 angles (4.2e-7 next to a limit
-# position), ≤ 2.7e-5 rates (6.2e-5 next to a limit). Allowed: 1e-6 of the peak for positions and angles (the
-# aim: 1e-6 of the size), 1e-4 for rates (a tenth of the input's move per step); no accelerations or forces.
+# Measured on the catalog (max error / size, rad): ≤ 3.6e-8 positions and 1.3e-7 angles (4.2e-7 and 7.8e-7 next
+# to a limit position), ≤ 2.7e-5 of the peak for rates (6.2e-5 next to a limit). Allowed: 1e-6 of the peak for
+# positions and angles (the aim: 1e-6 of the size), 1e-4 for rates (a tenth of the input's move per step); no
+# accelerations or forces.
 _MUJOCO_RTOL = {"angle": 1e-6, "position": 1e-6, "angular velocity": 1e-4, "velocity": 1e-4}
 _MUJOCO_RTOL |= {g: 1e-4 for g in GROUPS if g not in _MUJOCO_RTOL}  # groups it has no column of (never compared)
 _MUJOCO = Tolerance(
