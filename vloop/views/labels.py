@@ -108,7 +108,7 @@ def place(ax: Any, text: str, anchor: tuple[float, float], obs: Obstacles, rende
         clean(text),
         anchor,
         xytext=(0, 0),
-        textcoords="offset pixels",
+        textcoords="offset points",  # not pixels: the offset must hold at any dpi (an SVG or PDF is saved at 72)
         ha="center",
         va="center",
         annotation_clip=False,
@@ -132,7 +132,7 @@ def place(ax: Any, text: str, anchor: tuple[float, float], obs: Obstacles, rende
         if best_hits == 0:
             break
     offset, box = best
-    art.xyann = (float(offset[0]), float(offset[1]))
+    art.xyann = tuple(float(x) * 72.0 / ax.figure.dpi for x in offset)
     obs.boxes.append(box)
     return art
 
