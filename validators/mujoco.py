@@ -152,6 +152,7 @@ def simulate(model: Any, data: Any, layout: Layout, mech: Mechanism, t: np.ndarr
     driver at every step (at most the model's timestep, each sample on a step)."""
     import mujoco
 
+    quiet()
     h_max = float(model.opt.timestep)
     reader = _Reader(model, mech, layout)
     rows: list[dict[str, float]] = []
