@@ -123,8 +123,7 @@ def test_scale_bar_is_drawn_to_scale_and_dimensions_are_the_stated_lengths() -> 
 @pytest.mark.parametrize(
     "title",
     [
-        "price $5 and $10",
-        "bell \x07 escape \x1b end \ufffe\uffff",
+        "price $5 and $10, bell \x07 escape \x1b end \ufffe\uffff",
         "emoji 🦾 and 漢字 \ud800 < & >",
         pytest.param("$\\frac{1}{0}$ units $", marks=pytest.mark.slow),
         pytest.param("a < b & c > d \"q\" 'r'", marks=pytest.mark.slow),
@@ -136,7 +135,7 @@ def test_any_title_is_drawn_as_written_and_the_svg_is_xml(title: str, tmp_path: 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         svg = export(mech, tmp_path, 0.2, "svg")
-        if "\x07" in title:
+        if "$" in title:
             assert export(mech, tmp_path, 0.2, "pdf").read_bytes()[:5] == b"%PDF-"
     root = ET.fromstring(svg.read_text(encoding="utf-8"))
     words = " ".join("".join(t.itertext()) for t in root.iter("{http://www.w3.org/2000/svg}text"))
