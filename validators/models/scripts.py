@@ -96,7 +96,7 @@ def _common(mech: Mechanism) -> str:
 
     from .. import forces_common
 
-    data = pprint.pformat(description.describe(mech), width=116, sort_dicts=False)
+    data = pprint.pformat(description.describe(mech), width=116, sort_dicts=False, compact=True)
     return "\n\n".join(
         [
             "# ---------------------------------------------------------------- 1. the mechanism (the file's t = 0)",
