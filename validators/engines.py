@@ -143,7 +143,21 @@ class ExudynDynamic(_Exudyn):
     options: ClassVar[dict[str, Any]] = {"max_steps": DYNAMIC_STEPS}
 
 
-ENGINES: dict[str, Engine] = {e.name: e for e in (Vloop(), Analytic(), Pinocchio(), ExudynKinematic(), ExudynDynamic())}
+class MuJoCo(Engine):
+    """MuJoCo's simulation of the exported MJCF under its driver (:mod:`validators.mujoco`): positions and rates
+    (no accelerations, no forces); optional (``--engines …,mujoco``)."""
+
+    name = "mujoco"
+
+    def solve(self, mech: Mechanism, times: np.ndarray | None = None, **options: Any) -> Result:
+        from . import mujoco
+
+        return mujoco.solve(mech, times, **options)
+
+
+ENGINES: dict[str, Engine] = {
+    e.name: e for e in (Vloop(), Analytic(), Pinocchio(), ExudynKinematic(), ExudynDynamic(), MuJoCo())
+}
 
 
 def engine(name: str) -> Engine:

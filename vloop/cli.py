@@ -502,16 +502,51 @@ def cmd_assemble(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    """The mechanism at time --at: a drawing (SVG, PDF) or its links as parts (DXF), published as one set."""
+    """The mechanism at time --at: a drawing (SVG, PDF) or its links as parts (DXF); or its model for another
+    engine at t = 0 (MJCF, an Exudyn or a Pinocchio script). Published as one set."""
     from .files.output import OutputSet
-    from .views.export import export, time_at
+    from .views.export import export, options, time_at
 
     mech = _load(args)
+    if args.format in MODEL_FORMATS:
+        return _export_model(args, mech)
+    if args.at is None:
+        raise VloopError(f"export: --at T (a time in seconds) is needed for --format {args.format}", entry="at")
     at = time_at(mech, args.at)  # before any work: a bad time is one line, nothing written
+    given = {k: getattr(args, k) for k in ("pin", "width", "kerf", "dimensions")}
+    opts = options(mech, args.format, **given)
     out = _out_folder(args, mech)
     with OutputSet(out) as files:
-        export(mech, files.stage, at, args.format)
+        export(mech, files.stage, at, args.format, **opts)
     print(f"{mech.name} at t = {at:g} s: wrote " + ", ".join(str(f) for f in files.published))
+    return 0
+
+
+MODEL_FORMATS = ("mjcf", "exudyn", "pinocchio")
+
+
+def _export_model(args: argparse.Namespace, mech: Any) -> int:
+    """--format mjcf|exudyn|pinocchio: the model at t = 0 (validators.models; its engine's package needed)."""
+    from validators.models import NEEDS, export
+
+    from .files.output import OutputSet
+
+    module, package = NEEDS[args.format]
+    try:
+        __import__(module)
+    except ImportError:
+        message = f"export: --format {args.format} needs {package}: pip install {package}"
+        raise VloopError(message, entry="format") from None
+    drawing = ("pin", "width", "kerf", "dimensions")
+    if args.at is not None or any(getattr(args, k) not in (None, False) for k in drawing):
+        raise VloopError(
+            f"export: --format {args.format} writes the model at t = 0: --at, --pin, --width, --kerf and "
+            "--dimensions are for drawings and parts",
+            entry="format",
+        )
+    with OutputSet(_out_folder(args, mech)) as files:
+        export(mech, files.stage, args.format, source=str(args.file))
+    print(f"{mech.name}: wrote " + ", ".join(str(f) for f in files.published))
     return 0
 
 
@@ -712,11 +747,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _parser_export(sub: Any) -> None:
-    e = sub.add_parser("export", help="a drawing of the mechanism at time T (SVG, PDF) or its links as parts (DXF)")
+    e = sub.add_parser(
+        "export",
+        help="a drawing at time T (SVG, PDF), the links as parts (DXF), or the model for "
+        "MuJoCo (MJCF), Exudyn or Pinocchio (a script)",
+    )
     _add_file(e)
-    e.add_argument("--at", required=True, metavar="T", help="the instant [s], within the file's run")
-    e.add_argument("--format", choices=["svg", "pdf", "dxf"], default="svg", help="svg or pdf (drawing), dxf (parts)")
+    e.add_argument("--at", metavar="T", help="the instant [s], within the file's run (drawings and parts)")
+    e.add_argument(
+        "--format",
+        choices=["svg", "pdf", "dxf", *MODEL_FORMATS],
+        default="svg",
+        help="svg or pdf (drawing), dxf (parts), mjcf (MuJoCo), exudyn or pinocchio (a Python script)",
+    )
     e.add_argument("--out", type=_type("out"), help="output folder (default: out/NAME)")
+    e.add_argument("--pin", metavar="D", help="dxf: pin (hole) diameter [file units] (default 2 %% of the size)")
+    e.add_argument("--width", metavar="W", help="dxf: link width [file units] (default three pin diameters)")
+    e.add_argument("--kerf", metavar="K", help="dxf: the cutter's beam width [file units] (default 0)")
+    e.add_argument("--dimensions", action="store_true", help="svg, pdf: dimension every link's length")
     e.set_defaults(func=cmd_export)
 
 
@@ -840,7 +888,7 @@ def _parser_validate(sub: Any) -> None:
         "--engines",
         type=_engines,
         default=("vloop", "analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"),
-        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic (at least two that "
+        help="comma-separated: vloop, analytic, pinocchio, exudyn-kinematic, exudyn-dynamic, mujoco (at least two that "
         "compare: a validation that compares nothing is refused)",
     )
     v.add_argument("--out", type=_type("out"), default="validation", help="output folder (default: validation)")

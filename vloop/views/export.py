@@ -1,13 +1,14 @@
 """Drawings of a mechanism at one instant (SVG, PDF) and its links as parts for fabrication (DXF).
 
 * :func:`figure` draws the mechanism at time t to scale: ground pivots hatched, links as bars and plates,
-  pins, slider blocks on their rails (a ground guide) or in their slots (a moving guide), tracer points, joint
-  and link labels. SVG and PDF through matplotlib (text stays text in the SVG; no date in either, so a drawing
-  is the same file every time).
-* :func:`write_dxf` writes each link as a part in its own frame — its centre lines between its pivots and a hole
-  at every pivot, on a layer of its own (``PART-<link>``), the ground's pivots as a frame template — laid out
-  side by side, and the mechanism's centre lines at time t on layer ``ASSEMBLY``; in the file's length units
-  (``$INSUNITS``). Needs ezdxf (``pip install vloop[export]``).
+  pins, slider blocks on their rails (a ground guide) or in their slots (a moving guide), tracer points, a scale
+  bar, and on request every link's length dimensioned; then the joint, link and slider names, each placed clear
+  of the geometry and of the names before it (:mod:`.labels`). Titles and names are drawn as written (never
+  parsed as math, control characters dropped). SVG and PDF through matplotlib (text stays text in the SVG; no
+  date in either, so a drawing is the same file every time).
+* :func:`write_dxf` (:mod:`.parts`) writes each link as a part to cut: its outline, pivot holes, slots, and on
+  an engrave layer its name and tracer points; and the mechanism's centre lines at time t. Needs ezdxf
+  (``pip install vloop[export]``).
 
 Positions come from the mechanism's own Result at t (solved for that one instant), slider blocks turned
 by their θ columns; every length is in the file's units.
@@ -16,6 +17,7 @@ by their θ columns; every length is in the file's units.
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -23,20 +25,16 @@ import numpy as np
 
 from ..compiler import compile_system
 from ..core.solver import solve
-from ..errors import VloopError
 from ..files.schema import show
 from ..model import Mechanism
 from ..result import Result
 from .geometry import BLOCK_SIZE
+from .labels import clean, obstacles, place
+from .parts import DXF_UNITS, HOLE, ExportError, sizes, write_dxf
 
 FORMATS = ("svg", "pdf", "dxf")
 PIN = 0.012  # pin radius in a drawing, fraction of the mechanism's size
-HOLE = 0.02  # default pivot hole diameter in a DXF part, fraction of the mechanism's size
-DXF_UNITS = {"in": 1, "ft": 2, "mm": 4, "cm": 5, "m": 6, "km": 7}  # $INSUNITS codes (0: unitless)
-
-
-class ExportError(VloopError):
-    """A drawing or part file cannot be made as asked (the message names the option and the value)."""
+__all__ = ["DXF_UNITS", "FORMATS", "HOLE", "ExportError", "configuration", "export", "figure", "options", "write_dxf"]
 
 
 def time_at(mech: Mechanism, at: Any) -> float:
@@ -61,8 +59,47 @@ def configuration(mech: Mechanism, at: Any) -> Result:
     return solve(compile_system(mech), np.array([time_at(mech, at)]))
 
 
-def export(mech: Mechanism, folder: str | Path, at: Any, fmt: str) -> Path:
-    """Write ``folder/<name>.svg|pdf`` (the drawing at ``at`` [s]) or ``folder/<name>.dxf`` (parts and assembly);
+def options(
+    mech: Mechanism, fmt: str, pin: Any = None, width: Any = None, kerf: Any = None, dimensions: bool = False
+) -> dict[str, Any]:
+    """The options of ``fmt`` from their text (the command line's), checked before any work: ``pin``, ``width``,
+    ``kerf`` for parts (dxf), ``dimensions`` for drawings (svg, pdf)."""
+    if fmt == "dxf":
+        if dimensions:
+            raise ExportError("--dimensions is for drawings (--format svg or pdf)", entry="dimensions")
+        p, w, k = sizes(mech, _number("--pin", pin), _number("--width", width), _number("--kerf", kerf) or 0.0)
+        return {"pin": p, "width": w, "kerf": k}
+    given = [n for n, v in (("--pin", pin), ("--width", width), ("--kerf", kerf)) if v is not None]
+    if given:
+        raise ExportError(f"{', '.join(given)}: for parts (--format dxf), not drawings", entry=given[0].lstrip("-"))
+    return {"dimensions": bool(dimensions)}
+
+
+def _number(name: str, text: Any) -> float | None:
+    if text is None:
+        return None
+    try:
+        value = float(text) if not isinstance(text, bool) else math.nan
+    except (TypeError, ValueError, OverflowError):
+        raise ExportError(f"{name} {show(text)}: not a number", entry=name.lstrip("-")) from None
+    if not math.isfinite(value):
+        raise ExportError(f"{name} {show(text)}: not a finite number", entry=name.lstrip("-"))
+    return value
+
+
+def export(
+    mech: Mechanism,
+    folder: str | Path,
+    at: Any,
+    fmt: str,
+    *,
+    pin: Any = None,
+    width: Any = None,
+    kerf: Any = 0.0,
+    dimensions: bool = False,
+) -> Path:
+    """Write ``folder/<name>.svg|pdf`` (the drawing at ``at`` [s], link lengths dimensioned if ``dimensions``) or
+    ``folder/<name>.dxf`` (parts with pin diameter ``pin``, link ``width`` and ``kerf``, and the assembly);
     returns the path. ``folder`` should be an OutputSet's stage (the CLI's), so the file appears whole or not."""
     from ..files.options import folder_path, instance
     from ..files.output import ensure_folder
@@ -71,12 +108,14 @@ def export(mech: Mechanism, folder: str | Path, at: Any, fmt: str) -> Path:
     if fmt not in FORMATS:
         raise ExportError(f"{mech.name}: --format {show(fmt)}: one of {', '.join(FORMATS)}", entry="format")
     folder = ensure_folder(folder_path(folder))
+    if fmt == "dxf":
+        sizes(mech, pin, width, kerf)  # before the solve: a bad size is one line
     res = configuration(mech, at)
     path = Path(folder) / f"{_file_name(mech.name)}.{fmt}"
     if fmt == "dxf":
-        write_dxf(mech, res, path)
+        write_dxf(mech, res, path, hole=pin, width=width, kerf=kerf)
     else:
-        write_drawing(mech, res, path)
+        write_drawing(mech, res, path, dimensions=dimensions)
     return path
 
 
@@ -89,23 +128,28 @@ def _file_name(name: str) -> str:
 # ---------------------------------------------------------------- the drawing
 
 
-def write_drawing(mech: Mechanism, res: Result, path: str | Path) -> Path:
+def write_drawing(mech: Mechanism, res: Result, path: str | Path, dimensions: bool = False) -> Path:
     """The drawing of :func:`figure` as SVG or PDF (by the suffix), the same bytes for the same mechanism."""
     import matplotlib
 
     path = Path(path)
-    fig = figure(mech, res)
+    fig = figure(mech, res, dimensions=dimensions)
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "vloop", "pdf.compression": 6}):
         meta = dict.fromkeys(("Date", "Creator", "Format", "Type") if path.suffix == ".svg" else ("CreationDate",))
-        fig.savefig(path, format=path.suffix[1:], metadata=meta, bbox_inches="tight")  # no date: the same bytes
+        with warnings.catch_warnings():  # a name's character the font lacks is drawn as a box, not warned about
+            warnings.filterwarnings("ignore", message="Glyph .* missing", category=UserWarning)
+            fig.savefig(path, format=path.suffix[1:], metadata=meta, bbox_inches="tight")  # no date: the same bytes
     return path
 
 
-def figure(mech: Mechanism, res: Result, k: int = 0) -> Any:
-    """A matplotlib Figure of the mechanism at sample ``k`` of ``res``, to scale (lengths in the file's units)."""
+def figure(mech: Mechanism, res: Result, k: int = 0, dimensions: bool = False) -> Any:
+    """A matplotlib Figure of the mechanism at sample ``k`` of ``res``, to scale (lengths in the file's units),
+    with a scale bar; every link's length dimensioned if ``dimensions``; names placed clear of the geometry."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.0, 5.0))
+    FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     pos = {n: (float(res[f"{n}.x"][k]), float(res[f"{n}.y"][k])) for n in mech.tracked_points}
     size = mech.scale
@@ -113,12 +157,47 @@ def figure(mech: Mechanism, res: Result, k: int = 0) -> Any:
     _draw_links(ax, mech, pos)
     _draw_sliders(ax, mech, res, k, pos, size)
     _draw_pins(ax, mech, pos, size)
+    notes = _dimension_lines(ax, mech, pos) if dimensions else []
+    _scale_bar(ax, mech)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.margins(0.08)
+    ax.set_xlim(*ax.get_xlim())
+    ax.set_ylim(*ax.get_ylim())
     ax.axis("off")
-    ax.set_title(f"{mech.title or mech.name} — t = {float(res.t[k]):g} s ({mech.units})", fontsize=10)
+    title = f"{clean(mech.title or mech.name)} — t = {float(res.t[k]):g} s ({clean(mech.units)})"
+    ax.set_title(title, fontsize=10, parse_math=False)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Glyph .* missing", category=UserWarning)
+        _names(ax, mech, pos, notes)
     return fig
+
+
+def _names(ax: Any, mech: Mechanism, pos: dict, notes: list[tuple[str, tuple[float, float]]]) -> None:
+    """Every name (and dimension), each at the nearest place clear of the geometry and of the names before it."""
+    ax.apply_aspect()
+    renderer = ax.figure.canvas.get_renderer()
+    obs = obstacles(ax)
+    for text, at in notes:
+        place(ax, text, at, obs, renderer, fontsize=7, color="0.3")
+    for j in mech.tracked_points:
+        place(ax, j, pos[j], obs, renderer, fontsize=9)
+    for name, lk in mech.links.items():
+        if not lk.ground:
+            place(ax, name, _link_anchor(mech, name, pos), obs, renderer, fontsize=8, style="italic", color="#0072B2")
+    for name, sl in mech.sliders.items():
+        place(ax, name, pos[sl.joint], obs, renderer, fontsize=8, style="italic", color="#D55E00")
+
+
+def _members(mech: Mechanism, name: str) -> list[str]:
+    return [*mech.links[name].joints, *(p for p, pt in mech.points.items() if pt.link == name)]
+
+
+def _link_anchor(mech: Mechanism, name: str, pos: dict) -> tuple[float, float]:
+    """Where a link's name is sought from: a bar's middle, a plate's centre."""
+    xy = np.array([pos[m] for m in _members(mech, name)])
+    c = xy.mean(axis=0)
+    return float(c[0]), float(c[1])
 
 
 def _draw_ground(ax: Any, mech: Mechanism, pos: dict, size: float) -> None:
@@ -138,13 +217,13 @@ def _draw_ground(ax: Any, mech: Mechanism, pos: dict, size: float) -> None:
 
 
 def _draw_links(ax: Any, mech: Mechanism, pos: dict) -> None:
-    """Binary links as bars, links with more members (joints and tracer points) as plates, with their names."""
+    """Binary links as bars, links with more members (joints and tracer points) as plates."""
     from matplotlib.patches import Polygon
 
     for name, lk in mech.links.items():
         if lk.ground:
             continue
-        members = [*lk.joints, *(p for p, pt in mech.points.items() if pt.link == name)]
+        members = _members(mech, name)
         xy = np.array([pos[m] for m in members])
         if len(members) == 2:
             ax.plot(xy[:, 0], xy[:, 1], color="#0072B2", lw=3, solid_capstyle="round", zorder=2)
@@ -152,9 +231,6 @@ def _draw_links(ax: Any, mech: Mechanism, pos: dict) -> None:
             c = xy.mean(axis=0)
             order = np.argsort(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]))
             ax.add_patch(Polygon(xy[order], closed=True, fc="#56B4E9", ec="#0072B2", alpha=0.5, lw=2, zorder=2))
-        c = xy.mean(axis=0)
-        label = {"xytext": (0, 6), "textcoords": "offset points", "ha": "center", "fontsize": 8, "zorder": 5}
-        ax.annotate(name, c, style="italic", color="#0072B2", **label)
 
 
 def _draw_sliders(ax: Any, mech: Mechanism, res: Result, k: int, pos: dict, size: float) -> None:
@@ -180,12 +256,10 @@ def _draw_sliders(ax: Any, mech: Mechanism, res: Result, k: int, pos: dict, size
         block = Rectangle((-w / 2, -h / 2), w, h, fc="#E69F00", ec="k", lw=1, zorder=3)
         block.set_transform(Affine2D().rotate(th).translate(x, y) + ax.transData)
         ax.add_patch(block)
-        label = {"xytext": (0, -14), "textcoords": "offset points", "ha": "center", "fontsize": 8, "zorder": 5}
-        ax.annotate(name, (x, y), style="italic", color="#D55E00", **label)
 
 
 def _draw_pins(ax: Any, mech: Mechanism, pos: dict, size: float) -> None:
-    """Pins as open circles, tracer points as dots, every one named."""
+    """Pins as open circles, tracer points as dots."""
     from matplotlib.patches import Circle
 
     r = PIN * size
@@ -195,74 +269,63 @@ def _draw_pins(ax: Any, mech: Mechanism, pos: dict, size: float) -> None:
             ax.add_patch(Circle((x, y), 0.5 * r, fc="k", zorder=4))
         else:
             ax.add_patch(Circle((x, y), r, fc="white", ec="k", lw=1.2, zorder=4))
-        ax.annotate(j, (x, y), xytext=(5, 5), textcoords="offset points", fontsize=9, zorder=5)
 
 
-# ---------------------------------------------------------------- parts for fabrication (DXF)
-
-
-def write_dxf(mech: Mechanism, res: Result, path: str | Path, hole: float | None = None, k: int = 0) -> Path:
-    """Each link as a part (centre lines and pivot holes of diameter ``hole``, default 2 % of the mechanism's size,
-    in its own frame: its first joint at the part's origin, its second on +x), the ground's pivots as a frame
-    template, laid out to the right of the assembly's centre lines at sample ``k`` of ``res`` (layer ASSEMBLY)."""
-    try:
-        import ezdxf
-    except ImportError:
-        raise ExportError("DXF export needs ezdxf: pip install 'vloop[export]'", entry="format") from None
-    hole = HOLE * mech.scale if hole is None else hole
-    if isinstance(hole, bool) or not isinstance(hole, (int, float)) or not 0 < hole < mech.scale:
-        raise ExportError(f"{mech.name}: hole {show(hole)}: a diameter greater than 0 and below the mechanism's size")
-    doc = ezdxf.new("R2010", setup=True)
-    doc.header["$INSUNITS"] = DXF_UNITS.get(mech.units.strip().lower(), 0)
-    doc.header["$MEASUREMENT"] = 0 if mech.units.strip().lower() in ("in", "ft") else 1
-    msp = doc.modelspace()
-    pos = {n: (float(res[f"{n}.x"][k]), float(res[f"{n}.y"][k])) for n in mech.tracked_points}
-    _assembly(doc, msp, mech, pos)
-    xs = [x for x, _ in pos.values()]
-    ys = [y for _, y in pos.values()]
-    x0, top, gap = max(xs) + 0.5 * mech.scale, max(ys), 3 * hole + 0.1 * mech.scale
-    for name, local in _parts(mech):
-        layer = f"PART-{name}"
-        doc.layers.add(layer)
-        lo = np.min(np.array(list(local.values())), axis=0)
-        hi = np.max(np.array(list(local.values())), axis=0)
-        shift = np.array([x0, top]) - np.array([lo[0], hi[1]])
-        at = {j: tuple(np.array(xy) + shift) for j, xy in local.items()}
-        joints = list(at)
-        for a, b in _edges(joints):
-            msp.add_line(at[a], at[b], dxfattribs={"layer": layer, "linetype": "CENTER"})
-        for j in joints:
-            msp.add_circle(at[j], hole / 2, dxfattribs={"layer": layer})
-        msp.add_text(name, height=hole, dxfattribs={"layer": layer}).set_placement(at[joints[0]])
-        top -= hi[1] - lo[1] + gap
-    doc.saveas(path)
-    return Path(path)
-
-
-def _assembly(doc: Any, msp: Any, mech: Mechanism, pos: dict) -> None:
-    """The links' centre lines and pins at the drawn instant, world coordinates."""
-    doc.layers.add("ASSEMBLY")
+def _dimension_lines(ax: Any, mech: Mechanism, pos: dict) -> list[tuple[str, tuple[float, float]]]:
+    """Each link's lengths (a bar's, a plate's sides between its joints) as dimension lines beside it, offset
+    away from the link's (or, for a bar, the mechanism's) centre; returns the values and where to write them."""
+    centre = np.mean([pos[j] for j in mech.joints], axis=0)
+    off = 0.08 * mech.scale
+    notes = []
     for lk in mech.links.values():
-        joints = [j for j in lk.joints if not lk.ground or len(mech.bodies_at(j)) > 1]
-        for a, b in _edges(joints):
-            msp.add_line(pos[a], pos[b], dxfattribs={"layer": "ASSEMBLY"})
-    for j in mech.joints:
-        msp.add_point(pos[j], dxfattribs={"layer": "ASSEMBLY"})
+        if lk.ground or len(lk.joints) < 2:
+            continue
+        xy = {j: np.asarray(pos[j]) for j in lk.joints}
+        inside = np.mean(list(xy.values()), axis=0) if len(xy) > 2 else centre
+        pairs = list(zip(lk.joints, lk.joints[1:] + lk.joints[:1], strict=True))[: 1 if len(xy) == 2 else None]
+        for a, b in pairs:
+            p, q = xy[a], xy[b]
+            d = q - p
+            n = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-300)
+            if n @ ((p + q) / 2 - inside) < 0:
+                n = -n
+            p2, q2 = p + off * n, q + off * n
+            for e in (p, q):
+                ax.plot(
+                    [e[0] + 0.15 * off * n[0], e[0] + 1.15 * off * n[0]],
+                    [e[1] + 0.15 * off * n[1], e[1] + 1.15 * off * n[1]],
+                    color="0.55",
+                    lw=0.5,
+                )
+            ax.plot([p2[0], q2[0]], [p2[1], q2[1]], color="0.35", lw=0.7, marker="|", markersize=6, markevery=[0, 1])
+            notes.append((f"{float(np.hypot(*d)):.4g}", (float((p2 + q2)[0] / 2), float((p2 + q2)[1] / 2))))
+    return notes
 
 
-def _parts(mech: Mechanism) -> list[tuple[str, dict[str, tuple[float, float]]]]:
-    """Every link's pivots in its own frame (the ground's in the world frame), links with two or more joints."""
-    bodies = mech.bodies()
-    out = []
-    for name, lk in mech.links.items():
-        joints = [j for j in lk.joints if not lk.ground or len(mech.bodies_at(j)) > 1]
-        if len(joints) >= 2:
-            out.append((name, {j: bodies[name].local[j] for j in joints}))
-    return out
+def scale_length(span: float) -> float:
+    """A round length (1, 2 or 5 times a power of ten) of at most a quarter of ``span``."""
+    target = span / 4
+    power = 10.0 ** math.floor(math.log10(target))
+    return max(m * power for m in (1, 2, 5) if m * power <= target * (1 + 1e-12))
 
 
-def _edges(joints: list[str]) -> list[tuple[str, str]]:
-    """Centre lines between a part's pivots: a bar's one, a plate's outline through its joints in order."""
-    if len(joints) == 2:
-        return [(joints[0], joints[1])]
-    return [(joints[i], joints[(i + 1) % len(joints)]) for i in range(len(joints))] if len(joints) > 2 else []
+def _scale_bar(ax: Any, mech: Mechanism) -> None:
+    """A bar of a round length below the drawing's left end, its length written under it (to scale)."""
+    lim = ax.dataLim
+    span = max(lim.width, lim.height, mech.scale)
+    length = scale_length(span)
+    x0, y = lim.x0, lim.y0 - 0.12 * span
+    tick = 0.015 * span
+    ax.plot([x0, x0 + length], [y, y], color="k", lw=1.5, gid="scalebar", solid_capstyle="butt")
+    for x in (x0, x0 + length):
+        ax.plot([x, x], [y - tick, y + tick], color="k", lw=1.0, gid="scalebar")
+    ax.text(
+        x0 + length / 2,
+        y - 2 * tick,
+        f"{length:g} {clean(mech.units)}",
+        ha="center",
+        va="top",
+        fontsize=8,
+        parse_math=False,
+        gid="scalebar",
+    )
