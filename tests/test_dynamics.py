@@ -14,6 +14,7 @@ Where each tolerance comes from:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.integrate import quad
 from scipy.optimize import brentq
 
 import vloop
@@ -274,12 +276,47 @@ def test_a_limit_position_stops_the_motion_cleanly(tmp_path: Path) -> None:
     assert "limit position" in str(info.value) and f"{lim:.6f}"[:7] in str(info.value)
     assert 0 < len(sim.t) < 501 and np.all(np.isfinite(sim.result["l3.theta"]))
     assert sim.result["l2.theta"][-1] < lim
+    # the stop is the limit itself (the kinematic run's root of the dyad's discriminant), to 1e-9 rad
+    t_stop, at = sim.stop
+    assert abs(at - lim) < 1e-9 and abs(info.value.limit_value[0] - lim) < 1e-9
+    assert f"t = {t_stop:.10g} s" in str(info.value) and f"{len(sim.t)} earlier samples kept" in str(info.value)
+    # when: from rest at θ₂ = 0 under T = 5 N·m, ½·J(θ)·ω² = T·θ, so t = ∫ dθ/ω = ∫ √(J/(2Tθ)) dθ up to the limit,
+    # J from the closed-form four-bar (validators.analytic), the ends' 1/√ taken out by θ = lim·sin²φ: quad to
+    # ~1e-13; the integrator (rtol 1e-10 by default) and the tables (1e-9 at worst, near the limit) give ~1e-10 s
+    assert abs(t_stop - _time_to_the_limit(mech, lim, 5.0)) < 1e-8
+    assert sim.t[-1] <= t_stop < sim.t[-1] + 0.01  # every row before the stop kept
+    # the energy balance holds on the rows up to the limit (the last ones on the tables in u): 1e-8 of the work
+    assert np.abs(sim.energy["residual"]).max() < 1e-8 * sim.energy["work_input"][-1]
     (tmp_path / "ng.toml").write_text(NONGRASHOF)
     out = _cli(tmp_path, "simulate", "ng.toml", "--out", "o")
     assert out.returncode == 2 and "limit position" in out.stderr and "Traceback" not in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     rows = (tmp_path / "o" / "results.csv").read_text().splitlines()
     assert len(rows) == len(sim.t) + 1  # the header, the rows (as vloop run writes them)
+
+
+def _time_to_the_limit(mech: vloop.Mechanism, lim: float, torque: float) -> float:
+    """Time [s] from rest at θ₂ = 0 to the limit under a constant torque, by the energy equation and the
+    closed-form four-bar's velocities at unit input rate (centres of mass at mid-link, the file's masses)."""
+    from validators.analytic import fourbar
+
+    d = mech.drivers[0]
+    unit = dataclasses.replace(mech, drivers=(dataclasses.replace(d, v0=1.0, a0=0.0, profile=None),))
+
+    def inertia(q: float) -> float:
+        r = fourbar.solve(unit, np.array([q]))
+        total = 0.0
+        for link, (p, s) in (("l2", ("O2", "A")), ("l3", ("A", "B")), ("l4", ("O4", "B"))):
+            vx, vy = 0.5 * (r[f"{p}.vx"] + r[f"{s}.vx"]), 0.5 * (r[f"{p}.vy"] + r[f"{s}.vy"])
+            mp = mech.masses[link]
+            total += float((mp.mass * (vx**2 + vy**2) + mp.inertia * r[f"{link}.omega"] ** 2)[0])
+        return total
+
+    def integrand(phi: float) -> float:  # dθ/√(θ·(lim − θ)) = 2 dφ
+        q = lim * math.sin(phi) ** 2
+        return 2.0 * math.sqrt(inertia(q) * (lim - q) / (2.0 * torque))
+
+    return quad(integrand, 0.0, 0.5 * math.pi, epsabs=1e-13, epsrel=1e-13, limit=200)[0]
 
 
 def _cli(folder: Path, *args: str) -> subprocess.CompletedProcess:
