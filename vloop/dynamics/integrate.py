@@ -66,6 +66,8 @@ def simulate(
     times = np.asarray(_rows(mech, dyn) if times is None else times, float)
     if len(times) == 0 or times[0] < 0 or np.any(np.diff(times) <= 0):
         raise MechanismError(f"{mech.name}: [time] for a simulation: increasing times from t ≥ 0", entry="time")
+    if len(mech.drivers) == 2:
+        return _simulate_two(mech, dyn, times)
     model = compile_model(mech, dyn)
     ode, message = _integrate(model, times)
     sim = _outputs(model, ode, message)
@@ -87,10 +89,10 @@ def _rows(mech: Mechanism, dyn: Dynamics) -> np.ndarray:
 
 
 def _check(mech: Mechanism) -> None:
-    """One input, known units, and some inertia: else a MechanismError naming what is missing."""
-    if len(mech.drivers) != 1:
+    """One or two inputs and known units: else a MechanismError naming what is missing."""
+    if len(mech.drivers) not in (1, 2):
         raise MechanismError(
-            f"{mech.name}: forward dynamics needs one input (this mechanism has {len(mech.drivers)} drivers)",
+            f"{mech.name}: forward dynamics needs one or two inputs (this mechanism has {len(mech.drivers)} drivers)",
             entry="dynamics",
         )
     try:
@@ -281,6 +283,28 @@ def _outputs(model: Model, ode: Any, message: str) -> Simulation:
     result = Result(mech.name, "vloop.simulate", t, cols, dict(exact.health), meta)
     turns = _whole_turns(ode, model) if model.tables.period is not None else np.zeros(0)
     return Simulation(mech, result, energy, model, np.asarray(turns, float), message, ode)
+
+
+def _simulate_two(mech: Mechanism, dyn: Dynamics, times: np.ndarray) -> Simulation:
+    """A two-input mechanism (vloop.dynamics.twoinput): the rows' exact kinematics with both inputs tabulated as
+    integrated (q, q̇, q̈ at every row), and the energy (kinetic and gravity; no work is done on it)."""
+    from .. import solve
+    from .twoinput import integrate
+
+    model, ode = integrate(mech, dyn, times)
+    t, y = ode.t, ode.y
+    qdd = np.array([model.rhs(ti, yi)[2:] for ti, yi in zip(t, y.T, strict=True)]).T
+    drivers = tuple(
+        dataclasses.replace(d, profile=Profile(t, y[i], y[2 + i], qdd[i], source="simulate"))
+        for i, d in enumerate(model.aug.drivers)
+    )
+    exact = solve(dataclasses.replace(model.aug, drivers=drivers, times=t, dynamics=None), t)
+    zeros = np.zeros_like(t)
+    energy = _energy(model, exact, np.vstack([zeros, zeros, zeros, zeros, zeros]))  # type: ignore[arg-type]
+    cols = {k: v for k, v in exact.columns.items() if not k.startswith(G_PREFIX)}
+    meta = {**exact.meta, "dynamics": {"method": dyn.method, "calls": model.calls}}
+    result = Result(mech.name, "vloop.simulate", t, cols, dict(exact.health), meta)
+    return Simulation(mech, result, energy, model, ode=ode)  # type: ignore[arg-type]
 
 
 def _whole_turns(ode: Any, model: Model) -> np.ndarray:
