@@ -130,6 +130,11 @@ class Motion:
         self.qdd = np.concatenate([r[1] for r in rows]) if rows else np.zeros(0)
 
     @property
+    def nfev(self) -> int:
+        """Right-hand side evaluations over the pieces."""
+        return sum(int(ode.nfev) for _, ode in self.pieces)
+
+    @property
     def t_events(self) -> list:
         return self.pieces[0][1].t_events
 
