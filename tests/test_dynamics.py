@@ -244,6 +244,19 @@ def test_a_slider_input_in_centimetres_with_a_spring_conserves_energy() -> None:
     assert np.ptp(sim.energy["springs"]) > 0 and sim.result["blk.s"].min() > 21.6  # swings inside its limits
 
 
+def test_a_slider_input_pushed_to_its_dead_centre_stops_there() -> None:
+    """The same piston pushed outwards by 50 N (no spring): it stops where crank and rod are collinear,
+    s = a + b = 10 + √1000 cm (by hand: A at distance 10 from O2, |AB| = √(30² + 10²)), the rows before kept and
+    the energy balance closed on them (integrator at 1e-12: 1e-9 of the work is wide)."""
+    with pytest.raises(vloop.MotionError) as info:
+        simulate(vloop.loads(SLIDER_INPUT), torque=50.0, springs=())
+    sim = info.value.partial
+    t_stop, at = sim.stop
+    assert abs(at - (10.0 + math.sqrt(1000.0))) < 1e-9 and "s_blk = 41.6227766 cm" in str(info.value)
+    assert 0 < len(sim.t) and sim.t[-1] <= t_stop < sim.t[-1] + 0.01 and np.all(np.isfinite(sim.result["rod.theta"]))
+    assert np.abs(sim.energy["residual"]).max() < 1e-9 * sim.energy["work_input"][-1]
+
+
 NONGRASHOF = """
 name = "ng"
 units = "m"
