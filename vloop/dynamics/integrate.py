@@ -194,6 +194,8 @@ def _integrate(model: Model, times: np.ndarray) -> tuple[Motion, str]:
             q_lim, sigma = tab.limits[side] * model.qscale, (-1.0, 1.0)[side]
             motion.stop = (t0, (q_lim - sigma * y[0] * y[0]) / model.qscale)
             return motion, _limit_message(model, motion)
+        if t0 >= float(times[-1]):  # (a switch at the last row: nothing is left to integrate)
+            return Motion(model, pieces), ""
         if side is None:
             side = k
             y[:2] = _to_side(model, side, y[0], y[1])
