@@ -438,29 +438,37 @@ def _fivebar() -> vloop.Mechanism:
     return vloop.from_dict(raw)
 
 
-def test_a_fivebar_released_from_rest_starts_as_its_closed_form_says() -> None:
-    """From rest h = 0, so q̈(0) = J⁻¹·Q with J_ij = Σ m·∂r_G/∂qᵢ·∂r_G/∂qⱼ + I·∂φ/∂qᵢ·∂φ/∂qⱼ and Q_i = Σ m·g·∂r_G/∂qᵢ:
-    the velocity coefficients from the closed-form five-bar (validators.analytic) at unit rate on each input, the
-    centres of mass at mid-link. Round-off of a 2×2 solve: 1e-9 relative is wide."""
+@pytest.mark.parametrize("rates", [(0.0, 0.0), (5.0, -3.0)])
+def test_a_fivebar_starts_as_its_closed_form_says(rates: tuple[float, float]) -> None:
+    """q̈(0) = J⁻¹·(Q − h) with J_ij = Σ m·∂r_G/∂qᵢ·∂r_G/∂qⱼ + I·∂φ/∂qᵢ·∂φ/∂qⱼ, Q_i = Σ m·g·∂r_G/∂qᵢ and
+    h_i = Σ m·∂r_G/∂qᵢ·a₀ + I·∂φ/∂qᵢ·α₀ (a₀, α₀: the accelerations at the rates q̇ with q̈ = 0; h = 0 from rest):
+    every coefficient from the closed-form five-bar (validators.analytic) at the drawing, the centres of mass at
+    mid-link. Round-off of a 2×2 solve: 1e-9 relative is wide."""
     from validators.analytic import fivebar
 
     mech = _fivebar()
-    coef = []
-    for i in range(2):
-        drivers = tuple(dataclasses.replace(d, v0=float(i == k)) for k, d in enumerate(mech.drivers))
-        coef.append(fivebar.solve(dataclasses.replace(mech, drivers=drivers), np.zeros(1)))
-    J, Q = np.zeros((2, 2)), np.zeros(2)
+    mech = dataclasses.replace(
+        mech, drivers=tuple(dataclasses.replace(d, v0=w) for d, w in zip(mech.drivers, rates, strict=True))
+    )
+    runs = []
+    for unit in ((1.0, 0.0), (0.0, 1.0), rates):
+        drivers = tuple(dataclasses.replace(d, v0=w, a0=0.0) for d, w in zip(mech.drivers, unit, strict=True))
+        runs.append(fivebar.solve(dataclasses.replace(mech, drivers=drivers), np.zeros(1)))
+    J, Q, h = np.zeros((2, 2)), np.zeros(2), np.zeros(2)
     for link, (m, inertia) in FIVEBAR_MASSES.items():
         p, s = FIVEBAR_JOINTS[link]
-        v = np.array([[0.5 * (r[f"{p}.v{c}"][0] + r[f"{s}.v{c}"][0]) for c in "xy"] for r in coef])
-        w = np.array([r[f"{link}.omega"][0] for r in coef])
+        v = np.array([[0.5 * (r[f"{p}.v{c}"][0] + r[f"{s}.v{c}"][0]) for c in "xy"] for r in runs[:2]])
+        w = np.array([r[f"{link}.omega"][0] for r in runs[:2]])
+        a0 = np.array([0.5 * (runs[2][f"{p}.a{c}"][0] + runs[2][f"{s}.a{c}"][0]) for c in "xy"])
         J += m * v @ v.T + inertia * np.outer(w, w)
         Q += m * v @ np.array([0.0, -9.81])
-    expected = np.linalg.solve(J, Q)
+        h += m * v @ a0 + inertia * w * runs[2][f"{link}.alpha"][0]
+    expected = np.linalg.solve(J, Q - h)
     sim = simulate(mech, np.array([0.0, 0.01]), **TIGHT)
     got = np.array([sim.result["l2.alpha"][0], sim.result["l5.alpha"][0]])
     assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
     assert np.abs(expected).min() > 0.1  # both inputs do accelerate: the test sees the coupling
+    assert (np.abs(h).max() > 1.0) == any(rates)  # with rates, the Christoffel terms are in play
     with pytest.raises(vloop.MechanismError, match="two inputs takes gravity and the masses only"):
         simulate(mech, np.array([0.0, 0.01]), torque=1.0)
 
