@@ -14,6 +14,7 @@ Where each tolerance comes from:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.integrate import quad
 from scipy.optimize import brentq
 
 import vloop
@@ -242,6 +244,19 @@ def test_a_slider_input_in_centimetres_with_a_spring_conserves_energy() -> None:
     assert np.ptp(sim.energy["springs"]) > 0 and sim.result["blk.s"].min() > 21.6  # swings inside its limits
 
 
+def test_a_slider_input_pushed_to_its_dead_centre_stops_there() -> None:
+    """The same piston pushed outwards by 50 N (no spring): it stops where crank and rod are collinear,
+    s = a + b = 10 + √1000 cm (by hand: A at distance 10 from O2, |AB| = √(30² + 10²)), the rows before kept and
+    the energy balance closed on them (integrator at 1e-12: 1e-9 of the work is wide)."""
+    with pytest.raises(vloop.MotionError) as info:
+        simulate(vloop.loads(SLIDER_INPUT), torque=50.0, springs=())
+    sim = info.value.partial
+    t_stop, at = sim.stop
+    assert abs(at - (10.0 + math.sqrt(1000.0))) < 1e-9 and "s_blk = 41.6227766 cm" in str(info.value)
+    assert 0 < len(sim.t) and sim.t[-1] <= t_stop < sim.t[-1] + 0.01 and np.all(np.isfinite(sim.result["rod.theta"]))
+    assert np.abs(sim.energy["residual"]).max() < 1e-9 * sim.energy["work_input"][-1]
+
+
 NONGRASHOF = """
 name = "ng"
 units = "m"
@@ -274,12 +289,47 @@ def test_a_limit_position_stops_the_motion_cleanly(tmp_path: Path) -> None:
     assert "limit position" in str(info.value) and f"{lim:.6f}"[:7] in str(info.value)
     assert 0 < len(sim.t) < 501 and np.all(np.isfinite(sim.result["l3.theta"]))
     assert sim.result["l2.theta"][-1] < lim
+    # the stop is the limit itself (the kinematic run's root of the dyad's discriminant), to 1e-9 rad
+    t_stop, at = sim.stop
+    assert abs(at - lim) < 1e-9 and abs(info.value.limit_value[0] - lim) < 1e-9
+    assert f"t = {t_stop:.10g} s" in str(info.value) and f"{len(sim.t)} earlier samples kept" in str(info.value)
+    # when: from rest at θ₂ = 0 under T = 5 N·m, ½·J(θ)·ω² = T·θ, so t = ∫ dθ/ω = ∫ √(J/(2Tθ)) dθ up to the limit,
+    # J from the closed-form four-bar (validators.analytic), the ends' 1/√ taken out by θ = lim·sin²φ: quad to
+    # ~1e-13; the integrator (rtol 1e-10 by default) and the tables (1e-9 at worst, near the limit) give ~1e-10 s
+    assert abs(t_stop - _time_to_the_limit(mech, lim, 5.0)) < 1e-8
+    assert sim.t[-1] <= t_stop < sim.t[-1] + 0.01  # every row before the stop kept
+    # the energy balance holds on the rows up to the limit (the last ones on the tables in u): 1e-8 of the work
+    assert np.abs(sim.energy["residual"]).max() < 1e-8 * sim.energy["work_input"][-1]
     (tmp_path / "ng.toml").write_text(NONGRASHOF)
     out = _cli(tmp_path, "simulate", "ng.toml", "--out", "o")
     assert out.returncode == 2 and "limit position" in out.stderr and "Traceback" not in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     rows = (tmp_path / "o" / "results.csv").read_text().splitlines()
     assert len(rows) == len(sim.t) + 1  # the header, the rows (as vloop run writes them)
+
+
+def _time_to_the_limit(mech: vloop.Mechanism, lim: float, torque: float) -> float:
+    """Time [s] from rest at θ₂ = 0 to the limit under a constant torque, by the energy equation and the
+    closed-form four-bar's velocities at unit input rate (centres of mass at mid-link, the file's masses)."""
+    from validators.analytic import fourbar
+
+    d = mech.drivers[0]
+    unit = dataclasses.replace(mech, drivers=(dataclasses.replace(d, v0=1.0, a0=0.0, profile=None),))
+
+    def inertia(q: float) -> float:
+        r = fourbar.solve(unit, np.array([q]))
+        total = 0.0
+        for link, (p, s) in (("l2", ("O2", "A")), ("l3", ("A", "B")), ("l4", ("O4", "B"))):
+            vx, vy = 0.5 * (r[f"{p}.vx"] + r[f"{s}.vx"]), 0.5 * (r[f"{p}.vy"] + r[f"{s}.vy"])
+            mp = mech.masses[link]
+            total += float((mp.mass * (vx**2 + vy**2) + mp.inertia * r[f"{link}.omega"] ** 2)[0])
+        return total
+
+    def integrand(phi: float) -> float:  # dθ/√(θ·(lim − θ)) = 2 dφ
+        q = lim * math.sin(phi) ** 2
+        return 2.0 * math.sqrt(inertia(q) * (lim - q) / (2.0 * torque))
+
+    return quad(integrand, 0.0, 0.5 * math.pi, epsabs=1e-13, epsrel=1e-13, limit=200)[0]
 
 
 def _cli(folder: Path, *args: str) -> subprocess.CompletedProcess:
@@ -322,12 +372,16 @@ def test_a_mechanism_without_inertia_is_refused_with_one_line(tmp_path: Path, ca
     assert "has no inertia" in err and len(err.strip().splitlines()) == 1
 
 
-def test_two_inputs_are_refused_with_one_line(tmp_path: Path, capsys) -> None:
+def test_two_inputs_with_what_this_version_does_not_take_get_one_line(tmp_path: Path, capsys) -> None:
     text = (ROOT / "mechanisms" / "fivebar_two_cranks.toml").read_text() + "\n[dynamics]\ntorque = 1.0\n"
     (tmp_path / "five.toml").write_text(text)
     assert main(["simulate", str(tmp_path / "five.toml"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert "one input" in err and len(err.strip().splitlines()) == 1
+    assert "two inputs takes gravity and the masses only" in err and len(err.strip().splitlines()) == 1
+    (tmp_path / "light.toml").write_text(text.replace("torque = 1.0", ""))  # no masses: no equation of motion
+    assert main(["simulate", str(tmp_path / "light.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "no inertia" in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
 def test_the_section_reads_back_from_its_toml() -> None:
@@ -362,3 +416,68 @@ def test_simulate_writes_what_run_writes_plus_torque_and_energy(tmp_path: Path) 
     assert energy == ["t", "kinetic", "gravity", "springs", "work_input", "work_loads", "work_dampers", "residual"]
     for name in ("health.csv", "energy.png", "links.png", "fourbar_textbook_dynamics.html"):
         assert (tmp_path / "o" / name).is_file(), name
+
+
+# ---------------------------------------------------------------- two inputs
+#
+# The catalog's five-bar (two cranks, one RRR dyad on their pins; it assembles whatever the inputs do) with
+# masses on its four links and gravity, released from rest at the drawing.
+FIVEBAR_MASSES = {"l2": (1.0, 0.4), "l3": (2.0, 6.0), "l4": (1.5, 3.2), "l5": (1.0, 0.4)}
+FIVEBAR_JOINTS = {"l2": ("O2", "A"), "l3": ("A", "C"), "l4": ("D", "C"), "l5": ("O5", "D")}
+
+
+def _fivebar() -> vloop.Mechanism:
+    import tomllib
+
+    raw = tomllib.loads((ROOT / "mechanisms" / "fivebar_two_cranks.toml").read_text())
+    raw["gravity"] = [0.0, -9.81]
+    for link, (m, inertia) in FIVEBAR_MASSES.items():
+        raw["links"][link].update(mass=m, inertia=inertia)
+    for d in raw["drivers"]:
+        d.update(omega=0.0, alpha=0.0)
+    return vloop.from_dict(raw)
+
+
+@pytest.mark.parametrize("rates", [(0.0, 0.0), (5.0, -3.0)])
+def test_a_fivebar_starts_as_its_closed_form_says(rates: tuple[float, float]) -> None:
+    """q̈(0) = J⁻¹·(Q − h) with J_ij = Σ m·∂r_G/∂qᵢ·∂r_G/∂qⱼ + I·∂φ/∂qᵢ·∂φ/∂qⱼ, Q_i = Σ m·g·∂r_G/∂qᵢ and
+    h_i = Σ m·∂r_G/∂qᵢ·a₀ + I·∂φ/∂qᵢ·α₀ (a₀, α₀: the accelerations at the rates q̇ with q̈ = 0; h = 0 from rest):
+    every coefficient from the closed-form five-bar (validators.analytic) at the drawing, the centres of mass at
+    mid-link. Round-off of a 2×2 solve: 1e-9 relative is wide."""
+    from validators.analytic import fivebar
+
+    mech = _fivebar()
+    mech = dataclasses.replace(
+        mech, drivers=tuple(dataclasses.replace(d, v0=w) for d, w in zip(mech.drivers, rates, strict=True))
+    )
+    runs = []
+    for unit in ((1.0, 0.0), (0.0, 1.0), rates):
+        drivers = tuple(dataclasses.replace(d, v0=w, a0=0.0) for d, w in zip(mech.drivers, unit, strict=True))
+        runs.append(fivebar.solve(dataclasses.replace(mech, drivers=drivers), np.zeros(1)))
+    J, Q, h = np.zeros((2, 2)), np.zeros(2), np.zeros(2)
+    for link, (m, inertia) in FIVEBAR_MASSES.items():
+        p, s = FIVEBAR_JOINTS[link]
+        v = np.array([[0.5 * (r[f"{p}.v{c}"][0] + r[f"{s}.v{c}"][0]) for c in "xy"] for r in runs[:2]])
+        w = np.array([r[f"{link}.omega"][0] for r in runs[:2]])
+        a0 = np.array([0.5 * (runs[2][f"{p}.a{c}"][0] + runs[2][f"{s}.a{c}"][0]) for c in "xy"])
+        J += m * v @ v.T + inertia * np.outer(w, w)
+        Q += m * v @ np.array([0.0, -9.81])
+        h += m * v @ a0 + inertia * w * runs[2][f"{link}.alpha"][0]
+    expected = np.linalg.solve(J, Q - h)
+    sim = simulate(mech, np.array([0.0, 0.01]), **TIGHT)
+    got = np.array([sim.result["l2.alpha"][0], sim.result["l5.alpha"][0]])
+    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+    assert np.abs(expected).min() > 0.1  # both inputs do accelerate: the test sees the coupling
+    assert (np.abs(h).max() > 1.0) == any(rates)  # with rates, the Christoffel terms are in play
+    with pytest.raises(vloop.MechanismError, match="two inputs takes gravity and the masses only"):
+        simulate(mech, np.array([0.0, 0.01]), torque=1.0)
+
+
+@pytest.mark.slow
+def test_a_fivebar_swinging_under_gravity_conserves_energy() -> None:
+    """3 s of the five-bar falling and swinging from rest: kinetic + gravity constant to 1e-9 of its range
+    (DOP853 at 1e-12; the loop solve at every call is exact to round-off)."""
+    sim = simulate(_fivebar(), np.linspace(0.0, 3.0, 61), **TIGHT)
+    e = sim.energy
+    assert np.ptp(e["kinetic"]) > 10.0  # it does swing
+    assert np.abs(e["residual"]).max() <= 1e-9 * np.ptp(e["kinetic"])

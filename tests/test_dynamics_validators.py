@@ -10,18 +10,22 @@ peak for vloop's own integration (validators/dynamics_check.py says where each n
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
+import jsonschema
 import pytest
 
 import vloop
-from validators import dynamics_check
+from validators import dynamics_check, harness
+from vloop.cli import main
 from vloop.model import Dynamics, Spring
 
 MECH = Path(__file__).resolve().parents[1] / "mechanisms"
+SCHEMA = json.loads((Path(harness.__file__).parent / "summary.schema.json").read_text())
 
 
-def _check(mech: vloop.Mechanism, span: float) -> None:
+def _check(mech: vloop.Mechanism, span: float) -> list[dynamics_check.Row]:
     rows = dynamics_check.compare(mech, span)
     engines = {r.engine for r in rows}
     assert engines == set(dynamics_check.STEPS)
@@ -29,10 +33,40 @@ def _check(mech: vloop.Mechanism, span: float) -> None:
     assert not bad, bad[:3]
     # the engines did see the motion: their own errors are real numbers, well above the floor
     assert max(r.correction for r in rows if r.engine == "exudyn-simulate") > 0
+    return rows
 
 
 def test_the_textbook_fourbar_with_its_motor_and_damper() -> None:
-    _check(vloop.load(MECH / "fourbar_textbook_dynamics.toml"), 0.05)
+    rows = _check(vloop.load(MECH / "fourbar_textbook_dynamics.toml"), 0.05)
+    # summary.json's "dynamics" of the mechanism: per engine its worst column (largest worst/tolerance), valid
+    entries = dynamics_check.summary_entries(rows)
+    jsonschema.validate(entries, {"$ref": "#/$defs/mechanism/properties/dynamics", "$defs": SCHEMA["$defs"]})
+    assert [e["engine"] for e in entries] == list(dynamics_check.STEPS)
+    for e in entries:
+        mine = [r for r in rows if r.engine == e["engine"]]
+        worst = max(mine, key=lambda r: r.worst / r.tolerance)
+        assert (e["column"], e["worst"], e["tolerance"], e["columns"]) == (worst.column, worst.worst, worst.tolerance,
+                                                                         len(mine))  # fmt: skip
+        assert e["verdict"] == "pass" and e["worst"] <= e["tolerance"]
+    summary = {"passed": True, "mechanisms": [{"file": "a.toml"}, {"file": "b.toml"}]}
+    dynamics_check.add_to_summary(summary, {"b.toml": entries})
+    assert "dynamics" not in summary["mechanisms"][0] and summary["mechanisms"][1]["dynamics"] == entries
+    dynamics_check.add_to_summary(summary, {"a.toml": [{**entries[0], "verdict": "fail"}]})
+    assert summary["passed"] is False  # as the exit code: a failed dynamics comparison fails the validation
+
+
+@pytest.mark.slow
+def test_validate_writes_the_dynamics_verdict_into_the_summary(tmp_path: Path) -> None:
+    """`vloop validate` on a file with [dynamics]: the verdict printed, in summary.json (valid) and the exit code."""
+    path = MECH / "fourbar_textbook_dynamics.toml"
+    code = main(["validate", str(path), "--engines", "vloop,pinocchio", "--out", str(tmp_path), "--no-report"])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    jsonschema.validate(summary, SCHEMA)
+    (mech,) = summary["mechanisms"]
+    (entry,) = mech["dynamics"]
+    assert entry["engine"] == "pinocchio-simulate" and entry["columns"] == 6  # θ and ω of l2, l3, l4
+    assert entry["verdict"] == "pass" and 0 <= entry["worst"] <= entry["tolerance"]
+    assert code == 0 and summary["passed"] is True
 
 
 @pytest.mark.slow

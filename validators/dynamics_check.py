@@ -116,3 +116,35 @@ def lines(name: str, rows: list[Row]) -> list[str]:
             f"of {worst.tolerance:.2g}; the engine's own correction {worst.correction:.2g})"
         )
     return out
+
+
+def summary_entries(rows: list[Row]) -> list[dict]:
+    """summary.json's "dynamics" of one mechanism: per engine, the worst column (the largest worst/tolerance)
+    with its difference, tolerance and the engine's correction [rad, rad/s], and the verdict over every column."""
+    out = []
+    for engine in dict.fromkeys(r.engine for r in rows):
+        mine = [r for r in rows if r.engine == engine]
+        worst = max(mine, key=lambda r: r.worst / r.tolerance)
+        out.append(
+            {
+                "engine": engine,
+                "column": worst.column,
+                "worst": worst.worst if math.isfinite(worst.worst) else None,  # (no number: a failure)
+                "tolerance": worst.tolerance,
+                "correction": worst.correction,
+                "columns": len(mine),
+                "verdict": "pass" if all(r.passed for r in mine) else "fail",
+            }
+        )
+    return out
+
+
+def add_to_summary(summary: dict, entries: dict[str, list[dict]]) -> None:
+    """Each compared mechanism's entries (by its file) as its "dynamics"; a failed one fails the summary, as it
+    fails the exit code."""
+    for mech in summary.get("mechanisms", []):
+        got = entries.get(mech.get("file"))
+        if got:
+            mech["dynamics"] = got
+            if any(e["verdict"] == "fail" for e in got):
+                summary["passed"] = False

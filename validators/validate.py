@@ -37,6 +37,8 @@ def validate(args: argparse.Namespace, started: float | None = None) -> int:
     """``vloop validate``: check every input, run, write and publish one set, print the table; the exit code."""
     from vloop.files.output import OutputSet, ensure_folder
 
+    from . import dynamics_check
+
     started = time.perf_counter() if started is None else started
     engines = tuple(args.engines)
     _check_runner(args)
@@ -56,20 +58,24 @@ def validate(args: argparse.Namespace, started: float | None = None) -> int:
         items = harness.load_items(files)
         _check_something_to_compare(items, engines)
         validation = _run(items, engines, args)
+        dynamics_ok, dynamics_lines, dynamics = _dynamics(items, engines)
         ran = time.perf_counter()
         summary = _summary(validation, engines, args, corpus_info, previous, outset)
+        dynamics_check.add_to_summary(summary, {str(outset.final(p)): e for p, e in dynamics.items()})
         written = _write(validation, summary, outset, args)
     for line in _report_lines(summary, written, ran - started, time.perf_counter() - started):
         print(line)
-    dynamics_ok = _dynamics(items, engines)
+    for line in dynamics_lines:
+        print(line)
     if validation.bad_input:
         return 2
     return 0 if validation.passed and dynamics_ok and not summary.get("nightly", {}).get("flags") else 1
 
 
-def _dynamics(items: list[Any], engines: tuple[str, ...]) -> bool:
+def _dynamics(items: list[Any], engines: tuple[str, ...]) -> tuple[bool, list[str], dict[str, list[dict]]]:
     """The files with a [dynamics] section: vloop.simulate against Exudyn and Pinocchio (validators.dynamics_check),
-    those of the two the engines name; prints one line per engine, returns whether every comparison passed."""
+    those of the two the engines name: whether every comparison passed, the lines to print (one per engine) and
+    summary.json's "dynamics" entries by file."""
     from . import dynamics_check
 
     chosen = tuple(
@@ -77,22 +83,21 @@ def _dynamics(items: list[Any], engines: tuple[str, ...]) -> bool:
         for name, wanted in (("exudyn-simulate", "exudyn"), ("pinocchio-simulate", "pinocchio"))
         if any(e.startswith(wanted) for e in engines)
     )
-    if not chosen:
-        return True
-    ok = True
-    for it in items:
+    ok, lines, entries = True, [], {}
+    for it in items if chosen else []:
         mech = getattr(it, "mechanism", None)
         if mech is None or mech.dynamics is None or len(mech.drivers) != 1:
             continue
         try:
             rows = dynamics_check.compare(mech, engines=chosen)
         except VloopError as exc:
-            print(f"  {mech.name}: dynamics not compared: {exc}")
+            lines.append(f"  {mech.name}: dynamics not compared: {exc}")
+            entries[it.path] = [{"engine": e, "verdict": "not compared", "message": str(exc)} for e in chosen]
             continue
         ok &= all(r.passed for r in rows)
-        for line in dynamics_check.lines(mech.name, rows):
-            print(line)
-    return ok
+        lines += dynamics_check.lines(mech.name, rows)
+        entries[it.path] = dynamics_check.summary_entries(rows)
+    return ok, lines, entries
 
 
 def _check_runner(args: argparse.Namespace) -> None:

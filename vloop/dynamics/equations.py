@@ -22,6 +22,7 @@ import numpy as np
 
 from ..forces import load_values
 from ..model import Dynamics, Mechanism, length_factor
+from .limits import limit_tables
 from .tables import Tables, build
 
 
@@ -38,6 +39,7 @@ class Model:
     rest: np.ndarray  # s at rest [rad or m]
     load_weights: Callable[[float], list[tuple[int, float]]]  # Q_loads = Σ w·d(channel)/dq
     qscale: float  # metres per input unit (1 for a crank)
+    ends: tuple = (None, None)  # the tables on u at the lower and upper limits (vloop.dynamics.limits)
 
     def input_torque(self, t: float, qd: float) -> float:
         """The input's torque [N·m] (force [N] on a slider) at time t [s] and input rate q̇ [SI]."""
@@ -51,16 +53,26 @@ class Model:
 
     def rhs(self, t: float, y: np.ndarray) -> list[float]:
         """d/dt of (q, q̇, W_input, W_loads, W_dampers)."""
-        q, qd = float(y[0]), float(y[1])
-        v, d = self.tables.at(q)
+        return self._motion(self.tables, t, y, 1.0)
+
+    def rhs_near(self, side: int) -> Callable[[float, np.ndarray], list[float]]:
+        """d/dt of (u, u̇, W_input, W_loads, W_dampers) at the lower (``side`` 0) or upper (1) limit, on its
+        tables over u = √|q − q_lim| (vloop.dynamics.limits: q_u = −2σu)."""
+        tab, sigma = self.ends[side], (-1.0, 1.0)[side]
+        return lambda t, y: self._motion(tab, t, y, -2.0 * sigma * float(y[0]))
+
+    def _motion(self, tab: Tables, t: float, y: np.ndarray, dq: float) -> list[float]:
+        """The equation of motion on the tables' coordinate x (q, or u at a limit; dq = dq/dx)."""
+        x, xd = float(y[0]), float(y[1])
+        v, d = tab.at(x)
         q_spring = q_damp = 0.0
         for i, k, c, rest in self._springs:
             q_spring -= k * (v[i] - rest) * d[i]
-            q_damp -= c * d[i] * d[i] * qd
+            q_damp -= c * d[i] * d[i] * xd
         q_loads = sum(w * d[i] for i, w in self.load_weights(t))
-        t_in = self.input_torque(t, qd)
-        qdd = (t_in + q_loads + q_spring + q_damp - d[1] - 0.5 * d[0] * qd * qd) / v[0]
-        return [qd, qdd, t_in * qd, q_loads * qd, q_damp * qd]
+        t_in = self.input_torque(t, dq * xd) * dq
+        xdd = (t_in + q_loads + q_spring + q_damp - d[1] - 0.5 * d[0] * xd * xd) / v[0]
+        return [xd, xdd, t_in * xd, q_loads * xd, q_damp * xd]
 
     @property
     def _springs(self) -> list[tuple[int, float, float, float]]:
@@ -112,7 +124,9 @@ def compile_model(mech: Mechanism, dyn: Dynamics | None = None) -> Model:
             rest.append(0.0)
     k = np.array([s.k for s in dyn.springs], float)
     c = np.array([s.c for s in dyn.springs], float)
-    return Model(mech, dyn, tables, springs, k, c, np.array(rest, float), _load_weights(mech, names), tables.qscale)
+    ends = limit_tables(mech, channels, dyn.flywheel, tables)
+    weights = _load_weights(mech, names)
+    return Model(mech, dyn, tables, springs, k, c, np.array(rest, float), weights, tables.qscale, ends)
 
 
 def _load_weights(mech: Mechanism, names: tuple[str, ...]) -> Callable[[float], list[tuple[int, float]]]:

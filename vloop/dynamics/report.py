@@ -86,18 +86,19 @@ def energy_figure(sim: Simulation, path: Path) -> Path:
 def summary_lines(sim: Simulation) -> list[str]:
     """What the run did: rows, the input's final state, the energy balance's largest residual."""
     mech, res = sim.mechanism, sim.result
-    d = mech.drivers[0]
     e = sim.energy
     span = max(float(abs(e["kinetic"]).max(initial=0.0)), 1e-300)
+    tables = sim.model.tables.error if hasattr(sim.model, "tables") else None  # (two inputs: the solve at each call)
+    how = f"tables within {tables:.1e}" if tables is not None else "the loop solve at every step"
     lines = [
         f"{mech.name}: simulated {len(res)} rows, t = {res.t[0]:g}..{res.t[-1]:g} s ({sim.model.dynamics.method}, "
-        f"rtol {sim.model.dynamics.rtol:g}, tables within {sim.model.tables.error:.1e})" if len(res) else
-        f"{mech.name}: no row simulated",
+        f"rtol {sim.model.dynamics.rtol:g}, {how})" if len(res) else f"{mech.name}: no row simulated",
     ]  # fmt: skip
-    if len(res):
+    for d in mech.drivers if len(res) else ():
         x = res[f"{d.target}.theta"] if d.kind == "crank" else res[f"{d.target}.s"]
         v = res[f"{d.target}.omega"] if d.kind == "crank" else res[f"{d.target}.v"]
         lines.append(f"  at the end: {d.value_text(float(x[-1]), mech.units)}, rate {float(v[-1]):.10g} per s")
+    if len(res):
         lines.append(
             f"  energy balance: largest residual {abs(e['residual']).max():.3g} J (largest kinetic energy {span:.6g} J)"
         )

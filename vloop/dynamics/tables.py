@@ -155,7 +155,11 @@ def _tabulate(
     _check_inertia(mech, vals[0], nodes)
     coef = np.stack([_quintic_hermite(nodes * qscale, v, a, b) for v, a, b in zip(vals, d1, d2, strict=True)])
     coef = coef.transpose(2, 0, 1)  # (intervals, channels, 6)
-    err = _check(aug, channels, flywheel, nodes, qscale, (vals, d1, coef), full)
+
+    def sample(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _sample(aug, channels, q / qscale, qscale, flywheel, not full)[:2]
+
+    err = check(sample, nodes * qscale, (vals, d1, coef))
     lo_i, hi_i = _trusted(err, nodes, x0, full)
     return Tables(
         Channels(names), nodes[lo_i : hi_i + 1] * qscale, coef[lo_i:hi_i], _derivative(coef[lo_i:hi_i]),
@@ -165,16 +169,14 @@ def _tabulate(
     )  # fmt: skip
 
 
-def _check(
-    aug: Mechanism, channels: list[tuple[str, Any]], flywheel: float, nodes: np.ndarray, qscale: float,
-    tables: tuple[np.ndarray, np.ndarray, np.ndarray], full: bool,
-) -> np.ndarray:  # fmt: skip
-    """Per interval, the pieces' largest error at its midpoint against the loop solve there (values and slopes)."""
+def check(sample: Any, nodes: np.ndarray, tables: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """Per interval, the pieces' largest error at its midpoint against ``sample`` there (values and slopes of
+    every channel, from the loop solve) relative to each channel's range; ``nodes`` in the pieces' variable."""
     vals, d1, coef = tables
     mids = 0.5 * (nodes[1:] + nodes[:-1])
-    mvals, mslopes, _ = _sample(aug, channels, mids, qscale, flywheel, not full)
-    powers = (0.5 * np.diff(nodes * qscale))[:, None] ** np.arange(5, -1, -1)[None, :]
-    span = float(nodes[-1] - nodes[0]) * qscale
+    mvals, mslopes = sample(mids)
+    powers = (0.5 * np.diff(nodes))[:, None] ** np.arange(5, -1, -1)[None, :]
+    span = float(nodes[-1] - nodes[0])
     return np.maximum(
         _midpoint_error(np.einsum("ick,ik->ci", coef, powers), mvals, np.ptp(vals, axis=1)),
         _midpoint_error(

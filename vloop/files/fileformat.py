@@ -1051,8 +1051,8 @@ def read_simulation(raw: Any, m: Mechanism, drivers: list[Driver], ctx: _Context
         probs.add("dynamics", "must be a table [dynamics]")
         return None
     check_keys(raw, "dynamics", "dynamics", probs)
-    if len(drivers) != 1:
-        probs.add("dynamics", f"forward dynamics needs one input (this mechanism has {len(drivers)} drivers)")
+    if len(drivers) not in (1, 2):
+        probs.add("dynamics", f"forward dynamics needs one or two inputs (this mechanism has {len(drivers)} drivers)")
     if m.units.strip().lower() not in LENGTH_UNITS:
         probs.add("units", f"dynamics needs a length unit vloop knows ({', '.join(LENGTH_UNITS)}), got {show(m.units)}")
     out: dict[str, Any] = {}
