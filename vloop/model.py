@@ -232,7 +232,8 @@ class Spring:
 
 @dataclass(frozen=True)
 class Dynamics:
-    """The forward dynamics of a one-input mechanism (the file's ``[dynamics]``, docs/dynamics.md).
+    """The forward dynamics of a mechanism with one input, or two cranks under gravity (the file's ``[dynamics]``,
+    docs/dynamics.md: what two inputs accept).
 
     The input x (the driver's θ [rad] or s [length]) starts at ``position`` with rate ``rate`` at t = 0 (None:
     the driver's values at t = 0). Loads on the input: a constant ``torque`` [N·m, or N on a slider] or a
