@@ -39,13 +39,15 @@ from ..model import (
 )
 from .dimensions import (
     axes_from_angles,
+    check_extent as check_dimension_extent,
     check_lengths,
     check_ternaries,
     dimension_mode,
+    dimension_size,
     place_joints,
     points_from_local,
 )
-from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
+from .schema import FAR, TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
 
 MAX_SAMPLES = 10**12  # a ceiling for absurd counts; the limit that applies is the memory budget (_time_limit)
 TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.files.budget)
@@ -67,7 +69,6 @@ def _time_limit(n: float) -> str | None:
 MAX_FILE_BYTES = 64 * 2**20  # a mechanism file larger than this is refused before reading
 MAX_PROFILE_BYTES = 2**30  # a profile CSV larger than this is refused before reading
 MAX_PROFILE_ROWS = 10_000_000
-FAR = 1e5  # a coordinate or length this many times the joints' span from them is a typing error (see check_extent)
 MAX_ANGLE = 1e6  # rad: a larger angle's floating-point spacing (≥ 1.2e-10 rad) nears the solver's rtol
 COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
 BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
@@ -434,7 +435,12 @@ def read_points(
 
 def joint_span(m: Mechanism) -> tuple[float, tuple[float, float]]:
     """(diagonal of the joints' bounding box [file units], its centre): the linkage's own size, which tracer
-    points, centres of mass and stated lengths are measured against."""
+    points, centres of mass and stated lengths are measured against. Written from dimensions: its size by
+    :func:`~vloop.files.dimensions.dimension_size` and its ground pivots' centre (the hints may be anywhere)."""
+    if m.from_dimensions:
+        pivots = [m.joints[j] for j in m.links[m.ground].joints if j in m.joints]
+        xs, ys = [x for x, _ in pivots], [y for _, y in pivots]
+        return dimension_size(m)[0], ((max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2)
     xs, ys = [x for x, _ in m.joints.values()], [y for _, y in m.joints.values()]
     span = math.hypot(max(xs) - min(xs), max(ys) - min(ys)) if xs else 0.0
     return span, ((max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2) if xs else (0.0, 0.0)
@@ -462,20 +468,25 @@ def far_problem(m: Mechanism, what: str, value: float | tuple[float, float]) -> 
 
 
 def check_extent(m: Mechanism, probs: Problems) -> None:
-    """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`)."""
+    """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`); written from
+    dimensions, every length in proportion to the dimensions and ground pivots (:func:`check_dimension_extent`)."""
+    if m.from_dimensions:
+        check_dimension_extent(m, probs)
+        if probs.items:
+            return
     for p in m.points.values():
         problem = far_problem(m, "at", p.at)
         if problem:
             probs.add(f"points.{p.name}", problem)
     for lk in m.links.values():
-        problem = far_problem(m, "length", lk.length) if lk.length is not None else ""
+        problem = far_problem(m, "length", lk.length) if lk.length is not None and not m.from_dimensions else ""
         if problem:
             probs.add(f"links.{lk.name}", problem)
 
 
 def check_topology(m: Mechanism, probs: Problems) -> None:
     """Joints named by nobody, coincident joints on a link, single-joint moving links, disconnected parts."""
-    scale = m.scale
+    scale = dimension_size(m)[0] if m.from_dimensions else m.scale  # the hints never set a size
     named = {j for lk in m.links.values() for j in lk.joints} | {s.joint for s in m.sliders.values()}
     for j in m.joints:
         if j not in named:

@@ -18,6 +18,12 @@ from ..errors import MechanismError
 from .options import show
 
 NAME_MAX = 64
+# Every length a file, the command line or the API gives (coordinates, link lengths, offsets) lies within ±MAX_LENGTH
+# of the units: a linkage up to a few hundred times its largest length stays inside the solver's 1e60
+# (vloop.compiler.SIZES, where lengths are squared twice); MIN_LENGTH is the smallest positive one synthesis takes.
+MAX_LENGTH = 1e50
+MIN_LENGTH = 1e-50
+FAR = 1e5  # a coordinate or length this many times the mechanism's size from it is a typing error, not a design
 _NAME = re.compile(r"[^\W_][\w-]*|_[\w-]*")  # letters, digits, '_' and '-' (Unicode letters and digits too)
 
 

@@ -18,10 +18,7 @@ import numpy as np
 
 from ..errors import SynthesisError
 from ..files.options import show
-from ..files.schema import name_problem
-
-MAX_LENGTH = 1e50  # of the units: a linkage up to a few hundred times its targets stays inside the solver's 1e60
-MIN_LENGTH = 1e-50
+from ..files.schema import MAX_LENGTH, MIN_LENGTH, name_problem
 MAX_ANGLE = 1e4  # rad (≈ 1,600 turns): beyond it an angle's cosine has lost its digits
 MAX_SEED = 2**63 - 1
 
