@@ -10,7 +10,7 @@ branch nearest them. Here, before any solving, the reader
 * decides whether a file is written from dimensions (:func:`dimension_mode`), refusing the keys that only such a
   file may use (a slider's ``offset`` or ``angle``, a missing coordinate) in any other;
 * measures the mechanism by its dimensions and its ground pivots, never by its hints (:func:`dimension_size`),
-  and refuses a number far outside that size, naming its key (:func:`check_extent`);
+  and refuses a number far outside that size, naming its key (:func:`check_proportions`);
 * places joints without coordinates provisionally, link by link from the placed ones (:func:`place_joints`;
   the assembly replaces them, only the ground's coordinates are kept);
 * turns slider angles into t = 0 axes and points' ``local`` into t = 0 positions (:func:`axes_from_angles`,
@@ -23,7 +23,7 @@ import dataclasses
 import math
 
 from ..model import Link, Mechanism, Point, Slider, third_corner, to_world
-from .schema import FAR, MAX_LENGTH, Problems, show
+from .schema import FAR, SIZES, Problems, show
 
 HANDEDNESS_TOL = 1e-9  # |J0J1 × J0J2| below this fraction of |J0J1|·|J0J2|: the drawn triangle shows no side
 
@@ -99,19 +99,19 @@ def dimension_size(m: Mechanism) -> tuple[float, str]:
     return big[0], f"its largest dimension, [{big[1]}] {big[2]}"
 
 
-def check_extent(m: Mechanism, probs: Problems) -> None:
-    """In a file written from dimensions, every number that sets a length is finite-sized and in proportion:
-    coordinates and dimensions within ±MAX_LENGTH; a dimension at most FAR times the rest of the mechanism (its
-    other dimensions and its pivots' span), the pivots at most FAR times its largest dimension apart; a hint at
-    most FAR times the mechanism's size (:func:`dimension_size`) from the nearest ground pivot."""
+def check_proportions(m: Mechanism, probs: Problems) -> None:
+    """In a file written from dimensions, every number that sets a length is in proportion: coordinates and
+    dimensions within ±SIZES[1] (the largest the solver takes); a dimension at most FAR times the rest of the
+    mechanism (its other dimensions and its pivots' span), the pivots at most FAR times its largest dimension
+    apart; a hint at most FAR times the mechanism's size (:func:`dimension_size`) from the nearest ground pivot."""
     pivots = [j for j in m.links[m.ground].joints if j in m.joints]
     dims = dimension_list(m)
     for j in pivots:
-        if max(map(abs, m.joints[j])) > MAX_LENGTH:
-            probs.add(f"joints.{j}", f"({_xy(m.joints[j])}) lies beyond ±{MAX_LENGTH:g} {m.units}")
+        if max(map(abs, m.joints[j])) > SIZES[1]:
+            probs.add(f"joints.{j}", f"({_xy(m.joints[j])}) {_too_large(m)}")
     for x, entry, key in dims:
-        if x > MAX_LENGTH:
-            probs.add(entry, f"'{key}' = {x:.6g} is beyond ±{MAX_LENGTH:g} {m.units}")
+        if x > SIZES[1]:
+            probs.add(entry, f"'{key}' = {x:.6g} {_too_large(m)}")
     if probs.items:
         return
     span, pair = pivot_span(m)
@@ -119,12 +119,13 @@ def check_extent(m: Mechanism, probs: Problems) -> None:
         rest = max([span, *(d for k, (d, _, _) in enumerate(dims) if k != i)])
         if 0 < rest and x > FAR * rest:
             why = f"the rest of the mechanism's size ({rest:.6g} {m.units}: its other dimensions and its ground pivots)"
-            probs.add(entry, f"'{key}' = {x:.6g} is {x / rest:.2g} times {why}: at most {FAR:g} times (a typing error?)")
+            far = f"at most {FAR:.0e} times (a typing error?)"
+            probs.add(entry, f"'{key}' = {x:.6g} is {x / rest:.2g} times {why}: {far}")
     largest = max((d for d, _, _ in dims), default=0.0)
     if pair is not None and 0 < largest and span > FAR * largest:
         a, b = sorted(pair, key=lambda j: max(map(abs, m.joints[j])))
         what = f"ground pivots {a} and {b} are {span:.6g} {m.units} apart"
-        probs.add(f"joints.{b}", f"{what}, {span / largest:.2g} times the largest dimension: at most {FAR:g} times")
+        probs.add(f"joints.{b}", f"{what}, {span / largest:.2g} times the largest dimension: at most {FAR:.0e} times")
     if not probs.items:
         _check_hints(m, pivots, probs)
 
@@ -143,8 +144,15 @@ def _check_hints(m: Mechanism, pivots: list[str], probs: Problems) -> None:
                 f"hint ({_xy((x, y))}) is {dist / size:.2g} times the mechanism's size ({size:.6g} {m.units}, {why}) "
                 f"from the ground pivot {near}: at most {FAR:.0e} times (a typing error?)",
             )
-        elif max(abs(x), abs(y)) > MAX_LENGTH:
-            probs.add(f"joints.{j}", f"hint ({_xy((x, y))}) lies beyond ±{MAX_LENGTH:g} {m.units}")
+        elif max(abs(x), abs(y)) > SIZES[1]:
+            probs.add(f"joints.{j}", f"hint ({_xy((x, y))}) {_too_large(m)}")
+
+
+def _too_large(m: Mechanism) -> str:
+    return (
+        f"is beyond ±{SIZES[1]:g} {m.units}: only sizes from {SIZES[0]:g} to {SIZES[1]:g} of the units can be solved "
+        "in double precision (lengths are squared twice); state the coordinates in larger units"
+    )
 
 
 def _xy(xy: tuple[float, float]) -> str:
@@ -163,9 +171,7 @@ def check_lengths(m: Mechanism, tol: float, probs: Problems) -> None:
         for i, k in pairs:
             if (d := math.dist(corners[i], corners[k])) <= tol * size:
                 what = f"its dimensions put joints {lk.joints[i]} and {lk.joints[k]} {d:.3g} {m.units} apart"
-                probs.add(
-                    f"links.{n}", f"{what}, one joint at {tol:g} of the mechanism's size ({size:.6g}: {why})"
-                )
+                probs.add(f"links.{n}", f"{what}, one joint at {tol:g} of the mechanism's size ({size:.6g}: {why})")
 
 
 def check_ternaries(links: dict[str, Link], joints: dict[str, tuple[float, float]], probs: Problems) -> None:

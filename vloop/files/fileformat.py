@@ -39,8 +39,8 @@ from ..model import (
 )
 from .dimensions import (
     axes_from_angles,
-    check_extent as check_dimension_extent,
     check_lengths,
+    check_proportions,
     check_ternaries,
     dimension_mode,
     dimension_size,
@@ -469,9 +469,9 @@ def far_problem(m: Mechanism, what: str, value: float | tuple[float, float]) -> 
 
 def check_extent(m: Mechanism, probs: Problems) -> None:
     """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`); written from
-    dimensions, every length in proportion to the dimensions and ground pivots (:func:`check_dimension_extent`)."""
+    dimensions, every length in proportion to the dimensions and ground pivots (:func:`check_proportions`)."""
     if m.from_dimensions:
-        check_dimension_extent(m, probs)
+        check_proportions(m, probs)
         if probs.items:
             return
     for p in m.points.values():

@@ -18,9 +18,9 @@ from ..errors import MechanismError
 from .options import show
 
 NAME_MAX = 64
-# Every length a file, the command line or the API gives (coordinates, link lengths, offsets) lies within ±MAX_LENGTH
-# of the units: a linkage up to a few hundred times its largest length stays inside the solver's 1e60
-# (vloop.compiler.SIZES, where lengths are squared twice); MIN_LENGTH is the smallest positive one synthesis takes.
+SIZES = (1e-60, 1e60)  # mechanism sizes (in its units) whose lengths can be squared twice in double precision
+# Every length synthesis takes (targets, ground lengths, regions) lies within ±MAX_LENGTH of the units, so that a
+# linkage up to a few hundred times its targets stays inside SIZES; MIN_LENGTH is the smallest positive one.
 MAX_LENGTH = 1e50
 MIN_LENGTH = 1e-50
 FAR = 1e5  # a coordinate or length this many times the mechanism's size from it is a typing error, not a design
