@@ -171,7 +171,9 @@ def check_lengths(m: Mechanism, tol: float, probs: Problems) -> None:
         for i, k in pairs:
             if (d := math.dist(corners[i], corners[k])) <= tol * size:
                 what = f"its dimensions put joints {lk.joints[i]} and {lk.joints[k]} {d:.3g} {m.units} apart"
-                probs.add(f"links.{n}", f"{what}, one joint at {tol:g} of the mechanism's size ({size:.6g}: {why})")
+                probs.add(
+                    f"links.{n}", f"{what}, one joint at {tol:g} of the mechanism's size ({size:.6g} {m.units}: {why})"
+                )
 
 
 def check_ternaries(links: dict[str, Link], joints: dict[str, tuple[float, float]], probs: Problems) -> None:

@@ -297,10 +297,20 @@ def _read_link(ln: str, val: Any, joints: dict, probs: Problems, missing: dict[s
     elif length is not None and length <= 0:
         probs.add(entry, f"'length' must be positive, got {length:g}")
         length = None
-    sides, angle = _read_sides(val, jl, entry, probs)
+    sides, turn = _read_sides(val, jl, entry, probs)
     if ground and (length is not None or sides is not None):
         probs.add(entry, "the ground's dimensions are its joints' coordinates: it takes no length or sides")
-    return Link(ln, tuple(jl), ground, length, sides, angle)
+    return Link(ln, tuple(jl), ground, length, sides, turn)
+
+
+def angle(table: dict, key: str, entry: str, probs: Problems, default: float | None = None) -> float | None:
+    """``table[key]`` as an angle [rad] within ±MAX_ANGLE, ``default`` if absent (or after recording a problem)."""
+    x = number(table, key, entry, probs, default)
+    if x is not None and abs(x) > MAX_ANGLE:
+        probs.add(entry, f"'{key}' = {x:.6g} rad cannot be resolved: beyond ±{MAX_ANGLE:g} rad an angle's "
+                  f"floating-point spacing is {math.ulp(x):.2g} rad (give the angle modulo 2π)")  # fmt: skip
+        return default
+    return x
 
 
 def _missing_joint(j: str, entry: str, joints: dict, probs: Problems, missing: dict[str, str]) -> None:
@@ -314,9 +324,11 @@ def _missing_joint(j: str, entry: str, joints: dict, probs: Problems, missing: d
 
 def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple[float, ...] | None, float | None]:
     """A ternary link's ``sides`` (three, or two with ``angle``), checked: positive, a triangle."""
-    raw, angle = val.get("sides"), number(val, "angle", entry, probs)
+    raw, turn = val.get("sides"), angle(val, "angle", entry, probs)
+    if "angle" in val and turn is None:
+        return None, None
     if raw is None:
-        if angle is not None:
+        if turn is not None:
             probs.add(entry, "'angle' goes with two sides: sides = [|J0J1|, |J0J2|]")
         return None, None
     if len(jl) != 3 or "length" in val:
@@ -331,7 +343,7 @@ def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple
     if min(sides) <= 0:  # type: ignore[type-var]
         probs.add(entry, f"'sides' must be positive, got {show(raw)}")
         return None, None
-    if (len(sides) == 2) != (angle is not None):
+    if (len(sides) == 2) != (turn is not None):
         probs.add(entry, "two sides need the 'angle' between them; three sides take no angle")
         return None, None
     a, b, c = sides if len(sides) == 3 else (sides[0], 1.0, 1.0)  # type: ignore[misc]
@@ -339,7 +351,7 @@ def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple
         why = "each must be shorter than the other two together; a straight ternary link: two sides, angle = 0 or pi"
         probs.add(entry, f"sides {a:g}, {b:g}, {c:g} of {'-'.join(jl)} cannot form a triangle ({why})")
         return None, None
-    return tuple(sides), angle  # type: ignore[arg-type]
+    return tuple(sides), turn  # type: ignore[arg-type]
 
 
 def read_sliders(
@@ -391,11 +403,11 @@ def _read_slider(
         probs.add(entry, "give 'axis' (its direction at t = 0) or 'angle' (in the guide's frame), one of them")
         return None
     if "angle" in val:
-        angle = number(val, "angle", entry, probs)
-        if angle is not None and len(links[guide].joints) == 1 and not links[guide].ground:
+        turn = angle(val, "angle", entry, probs)
+        if turn is not None and len(links[guide].joints) == 1 and not links[guide].ground:
             probs.add(entry, f"the one-joint guide '{guide}' turns with the slider's axis: give 'axis', not 'angle'")
             return None
-        return None if angle is None else Slider(sn, j, guide, (1.0, 0.0), angle, offset)
+        return None if turn is None else Slider(sn, j, guide, (1.0, 0.0), turn, offset)
     axis = direction(val["axis"], "axis", entry, probs)
     return None if axis is None else Slider(sn, j, guide, axis, None, offset)
 
@@ -643,10 +655,9 @@ def _motion(
     probs: Problems,
 ) -> tuple[float, float, float, Profile | None]:
     """A driver's x0 (default: from the coordinates), rate and acceleration, or its profile."""
-    x0 = number(d, keys[0], entry, probs, x_coords)
-    if keys[0] == "theta0" and abs(x0) > MAX_ANGLE:
-        probs.add(entry, f"'theta0' = {x0:.6g} rad cannot be resolved: beyond ±{MAX_ANGLE:g} rad an angle's "
-                  f"floating-point spacing is {math.ulp(x0):.2g} rad (give the angle modulo 2π)")  # fmt: skip
+    x0 = (
+        angle(d, keys[0], entry, probs, x_coords) if keys[0] == "theta0" else number(d, keys[0], entry, probs, x_coords)
+    )
     v0 = number(d, keys[1], entry, probs, 0.0)
     a0 = number(d, keys[2], entry, probs, 0.0)
     prof = None
