@@ -46,6 +46,8 @@ FLAGS = ("ill_conditioned", "change_point")
 CSV_BYTES = 24  # per value, an upper estimate of a full-precision decimal and its comma
 
 
+
+
 def health_columns(res: Result) -> dict[str, np.ndarray]:
     """The compact health table of a chunk (see the module docstring)."""
     out: dict[str, np.ndarray] = {"t": res.t}
