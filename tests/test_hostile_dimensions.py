@@ -2,7 +2,8 @@
 
 The files: the Watt II of mechanisms/sixbar_watt2_dimensions.toml with hints for B and D (a ternary by two sides
 and an angle, named branches), and the offset and inverted slider-cranks rewritten from their dimensions by
-tests/test_authoring.py (slider offsets, a slider angle on a moving guide, rough hints). Each example puts one value
+tests/test_authoring.py (slider offsets, a slider angle on a moving guide, rough hints; the offset one also driven
+by its slider, s0 = 5 m). Each example puts one value
 — 0, -0, ±1e308, 5e-324, nan, ±inf, 10**400, a string, a nested array — at one key (every number and every
 coordinate pair of the file) and asserts the rule of the house: exit 0 with finite output, or exit 2 with one line
 on stderr naming the file and the key (or the joint), no traceback, nothing written. A value that is hostile
@@ -52,6 +53,8 @@ def _files() -> dict[str, dict]:
     files = {"watt": watt}
     for stem in ("slider_crank_offset", "inverted_slider_crank"):
         files[stem] = dimensions_only(MECHANISMS / f"{stem}.toml", np.random.default_rng(1))
+    files["actuated"] = copy.deepcopy(files["slider_crank_offset"])
+    files["actuated"]["drivers"] = [{"slider": "l4", "s0": 5.0, "v": 0.1, "a": 0.0}]  # the input at t = 0 a length
     for data in files.values():
         data["time"] = {"start": 0.0, "stop": 0.1, "step": 0.05}  # three samples: the rule, not the motion
     return files
@@ -142,7 +145,7 @@ def test_hostile_values_at_every_key_of_a_file_written_from_dimensions(case, val
 @pytest.mark.slow
 @pytest.mark.parametrize("command", ["assemble", "run"])
 def test_every_hostile_value_at_every_key(command):
-    """The property above over all its cases (72 keys × 11 values)."""
+    """The property above over all its cases (93 keys × 11 values)."""
     for name, path in CASES:
         for value in HOSTILE:
             _check(name, path, value, command)
@@ -155,7 +158,11 @@ def test_the_keys_cover_every_kind_of_dimension():
     hints = {p[1] for n, p in CASES if p[0] == "joints" and p[1] not in ("O2", "O4", "O6")}
     assert {"B", "D", "A"} <= hints
     assert {("links", "length"), ("links", "angle"), ("sliders", "offset"), ("sliders", "angle")} <= flat
-    assert ("drivers", "theta0") in flat and any(p[:3] == ("links", "l4", "sides") for _, p in CASES)
+    assert (
+        ("drivers", "theta0") in flat
+        and ("drivers", "s0") in flat
+        and any(p[:3] == ("links", "l4", "sides") for _, p in CASES)
+    )
 
 
 def _hint_file(tmp: Path) -> Path:

@@ -23,7 +23,7 @@ import dataclasses
 import math
 
 from ..model import Link, Mechanism, Point, Slider, third_corner, to_world
-from .schema import FAR, SIZES, Problems, show
+from .schema import FAR, SIZES, Problems, beyond_sizes, show
 
 HANDEDNESS_TOL = 1e-9  # |J0J1 × J0J2| below this fraction of |J0J1|·|J0J2|: the drawn triangle shows no side
 
@@ -108,10 +108,10 @@ def check_proportions(m: Mechanism, probs: Problems) -> None:
     dims = dimension_list(m)
     for j in pivots:
         if max(map(abs, m.joints[j])) > SIZES[1]:
-            probs.add(f"joints.{j}", f"({_xy(m.joints[j])}) {_too_large(m)}")
+            probs.add(f"joints.{j}", f"({_xy(m.joints[j])}) {beyond_sizes(m.units)}")
     for x, entry, key in dims:
         if x > SIZES[1]:
-            probs.add(entry, f"'{key}' = {x:.6g} {_too_large(m)}")
+            probs.add(entry, f"'{key}' = {x:.6g} {beyond_sizes(m.units)}")
     if probs.items:
         return
     span, pair = pivot_span(m)
@@ -145,14 +145,7 @@ def _check_hints(m: Mechanism, pivots: list[str], probs: Problems) -> None:
                 f"from the ground pivot {near}: at most {FAR:.0e} times (a typing error?)",
             )
         elif max(abs(x), abs(y)) > SIZES[1]:
-            probs.add(f"joints.{j}", f"hint ({_xy((x, y))}) {_too_large(m)}")
-
-
-def _too_large(m: Mechanism) -> str:
-    return (
-        f"is beyond ±{SIZES[1]:g} {m.units}: only sizes from {SIZES[0]:g} to {SIZES[1]:g} of the units can be solved "
-        "in double precision (lengths are squared twice); state the coordinates in larger units"
-    )
+            probs.add(f"joints.{j}", f"hint ({_xy((x, y))}) {beyond_sizes(m.units)}")
 
 
 def _xy(xy: tuple[float, float]) -> str:

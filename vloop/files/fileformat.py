@@ -47,7 +47,20 @@ from .dimensions import (
     place_joints,
     points_from_local,
 )
-from .schema import FAR, TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
+from .schema import (
+    FAR,
+    SIZES,
+    TOP_LEVEL,
+    Problems,
+    beyond_sizes,
+    check_keys,
+    direction,
+    name_problem,
+    number,
+    pair,
+    real,
+    show,
+)
 
 MAX_SAMPLES = 10**12  # a ceiling for absurd counts; the limit that applies is the memory budget (_time_limit)
 TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.files.budget)
@@ -630,6 +643,8 @@ def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, p
     p = m.joints[sl.joint]
     s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
     x0, v0, a0, prof = _motion(d, ("s0", "v", "a"), ("t", "s", "v", "a"), s_coords, entry, ctx, probs)
+    if abs(x0) > SIZES[1]:  # the slider's place at t = 0 is a length (its rates overflow on their own, as a crank's)
+        probs.add(entry, f"'s0' = {x0:.6g} {beyond_sizes(m.units)}")
     on = (sl.joint, *([] if gb.kind == "ground" else m.links[sl.guide].joints[:2]))
     return Driver("slider", sn, x0, v0, a0, None, prof, entry, _from_coordinates(d, "s0", on, m, entry, probs))
 

@@ -439,6 +439,14 @@ def direction(value: Any, what: str, entry: str, probs: Problems) -> tuple[float
     return x / n, y / n
 
 
+def beyond_sizes(units: str) -> str:
+    """Why a length beyond ±SIZES[1] is refused (follows the value in a message)."""
+    return (
+        f"is beyond ±{SIZES[1]:g} {units}: only sizes from {SIZES[0]:g} to {SIZES[1]:g} of the units can be solved "
+        "in double precision (lengths are squared twice); state the coordinates in larger units"
+    )
+
+
 def name_problem(name: Any) -> str | None:
     """Why a name is refused (None if it is fine): letters, digits, '_' and '-' only, at most 64 characters,
     so every name is safe as a CSV header, a file name, an HTML id and in a message."""
