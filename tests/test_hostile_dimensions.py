@@ -186,7 +186,7 @@ def test_a_hint_at_1e300_is_refused_as_a_hint_by_python_m_vloop_cli(tmp_path):
         assert "\n" not in line and not out.exists()
         size = math.dist((0.0, 0.0), (12.0, -4.0))  # the pivots O2 and O6 of the file: the Watt II's largest span
         assert line == (
-            f"vloop: error: {f}: [joints.B] hint (1e+300, 0) is {1e300 / size:.2g} times the mechanism's size "
+            f"vloop: error: {f}: [joints.B] hint (1e+300, 0) is {1e300 / size:.3g} times the mechanism's size "
             f"({size:.6g} m, the distance of its ground pivots O2 and O6) from the ground pivot O2: at most 1e+05 "
             "times (a typing error?)"
         )
@@ -214,3 +214,19 @@ def test_a_length_far_from_the_rest_is_named_by_its_key():
         raise AssertionError("a length 6e6 sizes long was accepted")
     assert text.startswith("long.toml: [links.l3] 'length' = 7.59e+07 is 6e+06 times the rest of the mechanism's")
     assert "zero" not in text and "[links.l2]" not in text
+
+
+def test_a_far_hint_loosens_no_tolerance_of_the_assembly():
+    """The eight-bar from its dimensions with the hint of A 1.7e4 times its size away (inside the factor): the same
+    joints as with its rough hints, to 1e-12 of the size. The assembly's tolerances are taken of a size its hints
+    cannot stretch (Mechanism.reach): with the hints' own span (1.7e4 times too large) its crank's dyad read as a
+    toggle ("condition number 5.13e+04") and the file was refused."""
+    path = MECHANISMS / "eightbar.toml"
+    data = dimensions_only(path, np.random.default_rng(3))
+    near = vloop.from_dict(data, source=str(path), base_dir=path.parent)
+    size = near.scale
+    data["joints"]["A"] = [5e4 / 3 * size, 0.0]
+    far = vloop.from_dict(data, source=str(path), base_dir=path.parent)
+    assert far.reach is None and far.scale == size  # assembled: its own joints' size again
+    for j, xy in near.joints.items():
+        assert math.dist(xy, far.joints[j]) <= 1e-12 * size, j

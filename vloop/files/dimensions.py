@@ -99,6 +99,12 @@ def dimension_size(m: Mechanism) -> tuple[float, str]:
     return big[0], f"its largest dimension, [{big[1]}] {big[2]}"
 
 
+def reach(m: Mechanism) -> float:
+    """How far apart an assembly's joints can be [file units], about: its dimensions' sum and its ground pivots'
+    span (a slider's travel aside), an upper bound of its size that its hints never set."""
+    return sum(d for d, _, _ in dimension_list(m)) + pivot_span(m)[0]
+
+
 def check_proportions(m: Mechanism, probs: Problems) -> None:
     """In a file written from dimensions, every number that sets a length is in proportion: coordinates and
     dimensions within ±SIZES[1] (the largest the solver takes); a dimension at most FAR times the rest of the
@@ -120,12 +126,12 @@ def check_proportions(m: Mechanism, probs: Problems) -> None:
         if 0 < rest and x > FAR * rest:
             why = f"the rest of the mechanism's size ({rest:.6g} {m.units}: its other dimensions and its ground pivots)"
             far = f"at most {FAR:.0e} times (a typing error?)"
-            probs.add(entry, f"'{key}' = {x:.6g} is {x / rest:.2g} times {why}: {far}")
+            probs.add(entry, f"'{key}' = {x:.6g} is {x / rest:.3g} times {why}: {far}")
     largest = max((d for d, _, _ in dims), default=0.0)
     if pair is not None and 0 < largest and span > FAR * largest:
         a, b = sorted(pair, key=lambda j: max(map(abs, m.joints[j])))
         what = f"ground pivots {a} and {b} are {span:.6g} {m.units} apart"
-        probs.add(f"joints.{b}", f"{what}, {span / largest:.2g} times the largest dimension: at most {FAR:.0e} times")
+        probs.add(f"joints.{b}", f"{what}, {span / largest:.3g} times the largest dimension: at most {FAR:.0e} times")
     if not probs.items:
         _check_hints(m, pivots, probs)
 
@@ -141,7 +147,7 @@ def _check_hints(m: Mechanism, pivots: list[str], probs: Problems) -> None:
         if dist > FAR * size:
             probs.add(
                 f"joints.{j}",
-                f"hint ({_xy((x, y))}) is {dist / size:.2g} times the mechanism's size ({size:.6g} {m.units}, {why}) "
+                f"hint ({_xy((x, y))}) is {dist / size:.3g} times the mechanism's size ({size:.6g} {m.units}, {why}) "
                 f"from the ground pivot {near}: at most {FAR:.0e} times (a typing error?)",
             )
         elif max(abs(x), abs(y)) > SIZES[1]:

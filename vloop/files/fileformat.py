@@ -46,6 +46,7 @@ from .dimensions import (
     dimension_size,
     place_joints,
     points_from_local,
+    reach,
 )
 from .schema import (
     FAR,
@@ -149,6 +150,8 @@ def from_dict(
     proto = _geometry(data, read, missing, probs)
     check_extent(proto, probs)
     probs.raise_if_any()
+    if proto.from_dimensions:
+        proto = dataclasses.replace(proto, reach=reach(proto))
     check_topology(proto, probs)
     probs.raise_if_any()
     proto = dataclasses.replace(proto, points=points_from_local(proto, proto.points))  # through its body frames
