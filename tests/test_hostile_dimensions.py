@@ -136,7 +136,7 @@ def _check(name: str, path: tuple, value, command: str) -> None:
                 finite_csv(target / "results.csv")
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
+@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
 @given(case=st.sampled_from(CASES), value=st.sampled_from(HOSTILE), command=st.sampled_from(["assemble", "run"]))
 def test_hostile_values_at_every_key_of_a_file_written_from_dimensions(case, value, command):
     _check(*case, value, command)
