@@ -371,7 +371,7 @@ def _closed_mechanism(mech: Mechanism, system: LoopSystem, q: np.ndarray, report
     sliders = {n: _axis_at(system, q, s) for n, s in mech.sliders.items()}
     options = {k: v for k, v in mech.options.items() if k != "branches"}  # the coordinates now hold them
     closed = dataclasses.replace(
-        mech, joints=joints, points=points, sliders=sliders, options=options, masses={}, unplaced=()
+        mech, joints=joints, points=points, sliders=sliders, options=options, masses={}, unplaced=(), reach=None
     )
     bodies = closed.bodies()
     masses = {}

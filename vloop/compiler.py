@@ -18,6 +18,7 @@ import numpy as np
 
 from .core.solver import assemble_blocks
 from .errors import MechanismError
+from .files.schema import SIZES
 from .method.assembly import assemble, moved
 from .method.branches import NAMES, branch_sigma
 from .method.graph import MechanismGraph, build_graph, build_loops, cycle_basis, point_paths
@@ -57,9 +58,6 @@ def loop_system(mech: Mechanism) -> tuple[LoopSystem, Structure]:
     loops, C = build_loops(mg, mech, cycle_basis(mg.adj, mg.forest))
     system = _unknowns(mech, mg, loops, C, bodies)
     return system, analyse(system)
-
-
-SIZES = (1e-60, 1e60)  # mechanism sizes (in its units) whose lengths can be squared twice in double precision
 
 
 def _check_size(mech: Mechanism) -> None:

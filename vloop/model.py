@@ -280,6 +280,9 @@ class Mechanism:
     # and ``unplaced`` joints have none (placed provisionally until vloop.authoring assembles the mechanism)
     from_dimensions: bool = False
     unplaced: tuple[str, ...] = ()
+    # until assembled, the hints may lie anywhere: ``scale`` is at most this reach (its dimensions' sum and its ground
+    # pivots' span, vloop.files.dimensions.reach), so that no far hint loosens a tolerance of the assembly
+    reach: float | None = None
     # forward dynamics (docs/dynamics.md): the [dynamics] section, None without one
     dynamics: Dynamics | None = None
 
@@ -388,12 +391,12 @@ class Mechanism:
 
     @cached_property
     def scale(self) -> float:
-        """A length scale: the diagonal of the bounding box of all joints/points at t = 0."""
+        """A length scale: the diagonal of the bounding box of all joints/points at t = 0 (at most ``reach``)."""
         pts = [*self.joints.values(), *(p.at for p in self.points.values())]
         if len(pts) < 2:
             return 1.0
         span = [_ptp([float(x) for x in axis]) for axis in zip(*pts, strict=True)]  # np.ptp's, in Python numbers
-        return float(max(math.hypot(*span), 1e-300))
+        return float(max(min(math.hypot(*span), self.reach or math.inf), 1e-300))
 
 
 def _ptp(xs: list[float]) -> float:

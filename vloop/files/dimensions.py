@@ -9,6 +9,8 @@ branch nearest them. Here, before any solving, the reader
 
 * decides whether a file is written from dimensions (:func:`dimension_mode`), refusing the keys that only such a
   file may use (a slider's ``offset`` or ``angle``, a missing coordinate) in any other;
+* measures the mechanism by its dimensions and its ground pivots, never by its hints (:func:`dimension_size`),
+  and refuses a number far outside that size, naming its key (:func:`check_proportions`);
 * places joints without coordinates provisionally, link by link from the placed ones (:func:`place_joints`;
   the assembly replaces them, only the ground's coordinates are kept);
 * turns slider angles into t = 0 axes and points' ``local`` into t = 0 positions (:func:`axes_from_angles`,
@@ -21,7 +23,7 @@ import dataclasses
 import math
 
 from ..model import Link, Mechanism, Point, Slider, third_corner, to_world
-from .schema import Problems, show
+from .schema import FAR, SIZES, Problems, beyond_sizes, show
 
 HANDEDNESS_TOL = 1e-9  # |J0J1 × J0J2| below this fraction of |J0J1|·|J0J2|: the drawn triangle shows no side
 
@@ -70,19 +72,107 @@ def dimension_mode(
     return False, lacks
 
 
+def dimension_list(m: Mechanism) -> list[tuple[float, str, str]]:
+    """Every stated dimension as (size ≥ 0 [file units], entry, key): lengths, sides, slider offsets, points' local."""
+    out = [(x, f"links.{n}", "length") for n, lk in m.links.items() if (x := lk.length) is not None]
+    out += [(x, f"links.{n}", "sides") for n, lk in m.links.items() for x in lk.sides or ()]
+    out += [(abs(sl.offset), f"sliders.{n}", "offset") for n, sl in m.sliders.items() if sl.offset is not None]
+    out += [(math.hypot(*p.local), f"points.{n}", "local") for n, p in m.points.items() if p.local is not None]
+    return out
+
+
+def pivot_span(m: Mechanism) -> tuple[float, tuple[str, str] | None]:
+    """The ground pivots' largest distance apart [file units] and the two pivots that set it (None: one pivot)."""
+    piv = [j for j in m.links[m.ground].joints if j in m.joints]
+    pairs = [(math.dist(m.joints[a], m.joints[b]), (a, b)) for i, a in enumerate(piv) for b in piv[i + 1 :]]
+    return max(pairs, default=(0.0, None))
+
+
+def dimension_size(m: Mechanism) -> tuple[float, str]:
+    """A mechanism written from dimensions: its size [file units] and what sets it (for messages) — its largest
+    dimension or its ground pivots' span, whichever is larger. Never its hints: they may be anywhere."""
+    dims = dimension_list(m)
+    big = max(dims, default=(0.0, "", ""))
+    span, pivots = pivot_span(m)
+    if pivots is not None and span >= big[0]:
+        return span, f"the distance of its ground pivots {pivots[0]} and {pivots[1]}"
+    return big[0], f"its largest dimension, [{big[1]}] {big[2]}"
+
+
+def reach(m: Mechanism) -> float:
+    """How far apart an assembly's joints can be [file units], about: its dimensions' sum and its ground pivots'
+    span (a slider's travel aside), an upper bound of its size that its hints never set."""
+    return sum(d for d, _, _ in dimension_list(m)) + pivot_span(m)[0]
+
+
+def check_proportions(m: Mechanism, probs: Problems) -> None:
+    """In a file written from dimensions, every number that sets a length is in proportion: coordinates and
+    dimensions within ±SIZES[1] (the largest the solver takes); a dimension at most FAR times the rest of the
+    mechanism (its other dimensions and its pivots' span), the pivots at most FAR times its largest dimension
+    apart; a hint at most FAR times the mechanism's size (:func:`dimension_size`) from the nearest ground pivot."""
+    pivots = [j for j in m.links[m.ground].joints if j in m.joints]
+    dims = dimension_list(m)
+    for j in pivots:
+        if max(map(abs, m.joints[j])) > SIZES[1]:
+            probs.add(f"joints.{j}", f"({_xy(m.joints[j])}) {beyond_sizes(m.units)}")
+    for x, entry, key in dims:
+        if x > SIZES[1]:
+            probs.add(entry, f"'{key}' = {x:.6g} {beyond_sizes(m.units)}")
+    if probs.items:
+        return
+    span, pair = pivot_span(m)
+    for i, (x, entry, key) in enumerate(dims):
+        rest = max([span, *(d for k, (d, _, _) in enumerate(dims) if k != i)])
+        if 0 < rest and x > FAR * rest:
+            why = f"the rest of the mechanism's size ({rest:.6g} {m.units}: its other dimensions and its ground pivots)"
+            far = f"at most {FAR:.0e} times (a typing error?)"
+            probs.add(entry, f"'{key}' = {x:.6g} is {x / rest:.3g} times {why}: {far}")
+    largest = max((d for d, _, _ in dims), default=0.0)
+    if pair is not None and 0 < largest and span > FAR * largest:
+        a, b = sorted(pair, key=lambda j: max(map(abs, m.joints[j])))
+        what = f"ground pivots {a} and {b} are {span:.6g} {m.units} apart"
+        probs.add(f"joints.{b}", f"{what}, {span / largest:.3g} times the largest dimension: at most {FAR:.0e} times")
+    if not probs.items:
+        _check_hints(m, pivots, probs)
+
+
+def _check_hints(m: Mechanism, pivots: list[str], probs: Problems) -> None:
+    """A moving joint's coordinates (a hint) within FAR times the mechanism's size of the nearest ground pivot."""
+    size, why = dimension_size(m)
+    fixed = set(m.links[m.ground].joints) | set(m.unplaced)
+    for j, (x, y) in m.joints.items():
+        if j in fixed or size <= 0:
+            continue
+        dist, near = min((max(abs(x - m.joints[p][0]), abs(y - m.joints[p][1])), p) for p in pivots)
+        if dist > FAR * size:
+            probs.add(
+                f"joints.{j}",
+                f"hint ({_xy((x, y))}) is {dist / size:.3g} times the mechanism's size ({size:.6g} {m.units}, {why}) "
+                f"from the ground pivot {near}: at most {FAR:.0e} times (a typing error?)",
+            )
+        elif max(abs(x), abs(y)) > SIZES[1]:
+            probs.add(f"joints.{j}", f"hint ({_xy((x, y))}) {beyond_sizes(m.units)}")
+
+
+def _xy(xy: tuple[float, float]) -> str:
+    return f"{xy[0]:.6g}, {xy[1]:.6g}"
+
+
 def check_lengths(m: Mechanism, tol: float, probs: Problems) -> None:
     """In a file written from dimensions, a link's joints are as far apart as its dimensions say: none may be
-    shorter than ``tol`` of the mechanism's size (coordinates and dimensions), which makes two joints one."""
-    size = max(m.scale, m.largest_dimension)
+    closer than ``tol`` of the mechanism's size (:func:`dimension_size`), which makes two joints one."""
+    size, why = dimension_size(m)
     for n, lk in m.links.items():
         if lk.ground or not lk.dimensioned:
             continue
         corners = list(_local(lk, m.joints).values())
         pairs = [(i, k) for i in range(len(corners)) for k in range(i + 1, len(corners))]
         for i, k in pairs:
-            if math.dist(corners[i], corners[k]) <= tol * size:
-                what = f"its dimensions put joints {lk.joints[i]} and {lk.joints[k]} together (zero-length link)"
-                probs.add(f"links.{n}", what)
+            if (d := math.dist(corners[i], corners[k])) <= tol * size:
+                what = f"its dimensions put joints {lk.joints[i]} and {lk.joints[k]} {d:.3g} {m.units} apart"
+                probs.add(
+                    f"links.{n}", f"{what}, one joint at {tol:g} of the mechanism's size ({size:.6g} {m.units}: {why})"
+                )
 
 
 def check_ternaries(links: dict[str, Link], joints: dict[str, tuple[float, float]], probs: Problems) -> None:

@@ -40,12 +40,28 @@ from ..model import (
 from .dimensions import (
     axes_from_angles,
     check_lengths,
+    check_proportions,
     check_ternaries,
     dimension_mode,
+    dimension_size,
     place_joints,
     points_from_local,
+    reach,
 )
-from .schema import TOP_LEVEL, Problems, check_keys, direction, name_problem, number, pair, real, show
+from .schema import (
+    FAR,
+    SIZES,
+    TOP_LEVEL,
+    Problems,
+    beyond_sizes,
+    check_keys,
+    direction,
+    name_problem,
+    number,
+    pair,
+    real,
+    show,
+)
 
 MAX_SAMPLES = 10**12  # a ceiling for absurd counts; the limit that applies is the memory budget (_time_limit)
 TIME_BYTES = 16  # per sample of a time grid: the array and the check of its steps (see vloop.files.budget)
@@ -67,7 +83,6 @@ def _time_limit(n: float) -> str | None:
 MAX_FILE_BYTES = 64 * 2**20  # a mechanism file larger than this is refused before reading
 MAX_PROFILE_BYTES = 2**30  # a profile CSV larger than this is refused before reading
 MAX_PROFILE_ROWS = 10_000_000
-FAR = 1e5  # a coordinate or length this many times the joints' span from them is a typing error (see check_extent)
 MAX_ANGLE = 1e6  # rad: a larger angle's floating-point spacing (≥ 1.2e-10 rad) nears the solver's rtol
 COINCIDENT_TOL = 1e-9  # relative to the mechanism's size: two joints on one link closer than this
 BRANCH_CHOICES = ("open", "crossed", "flip", "keep")
@@ -135,6 +150,8 @@ def from_dict(
     proto = _geometry(data, read, missing, probs)
     check_extent(proto, probs)
     probs.raise_if_any()
+    if proto.from_dimensions:
+        proto = dataclasses.replace(proto, reach=reach(proto))
     check_topology(proto, probs)
     probs.raise_if_any()
     proto = dataclasses.replace(proto, points=points_from_local(proto, proto.points))  # through its body frames
@@ -296,10 +313,20 @@ def _read_link(ln: str, val: Any, joints: dict, probs: Problems, missing: dict[s
     elif length is not None and length <= 0:
         probs.add(entry, f"'length' must be positive, got {length:g}")
         length = None
-    sides, angle = _read_sides(val, jl, entry, probs)
+    sides, turn = _read_sides(val, jl, entry, probs)
     if ground and (length is not None or sides is not None):
         probs.add(entry, "the ground's dimensions are its joints' coordinates: it takes no length or sides")
-    return Link(ln, tuple(jl), ground, length, sides, angle)
+    return Link(ln, tuple(jl), ground, length, sides, turn)
+
+
+def angle(table: dict, key: str, entry: str, probs: Problems, default: float | None = None) -> float | None:
+    """``table[key]`` as an angle [rad] within ±MAX_ANGLE, ``default`` if absent (or after recording a problem)."""
+    x = number(table, key, entry, probs, default)
+    if x is not None and abs(x) > MAX_ANGLE:
+        probs.add(entry, f"'{key}' = {x:.6g} rad cannot be resolved: beyond ±{MAX_ANGLE:g} rad an angle's "
+                  f"floating-point spacing is {math.ulp(x):.2g} rad (give the angle modulo 2π)")  # fmt: skip
+        return default
+    return x
 
 
 def _missing_joint(j: str, entry: str, joints: dict, probs: Problems, missing: dict[str, str]) -> None:
@@ -313,9 +340,11 @@ def _missing_joint(j: str, entry: str, joints: dict, probs: Problems, missing: d
 
 def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple[float, ...] | None, float | None]:
     """A ternary link's ``sides`` (three, or two with ``angle``), checked: positive, a triangle."""
-    raw, angle = val.get("sides"), number(val, "angle", entry, probs)
+    raw, turn = val.get("sides"), angle(val, "angle", entry, probs)
+    if "angle" in val and turn is None:
+        return None, None
     if raw is None:
-        if angle is not None:
+        if turn is not None:
             probs.add(entry, "'angle' goes with two sides: sides = [|J0J1|, |J0J2|]")
         return None, None
     if len(jl) != 3 or "length" in val:
@@ -330,7 +359,7 @@ def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple
     if min(sides) <= 0:  # type: ignore[type-var]
         probs.add(entry, f"'sides' must be positive, got {show(raw)}")
         return None, None
-    if (len(sides) == 2) != (angle is not None):
+    if (len(sides) == 2) != (turn is not None):
         probs.add(entry, "two sides need the 'angle' between them; three sides take no angle")
         return None, None
     a, b, c = sides if len(sides) == 3 else (sides[0], 1.0, 1.0)  # type: ignore[misc]
@@ -338,7 +367,7 @@ def _read_sides(val: dict, jl: list, entry: str, probs: Problems) -> tuple[tuple
         why = "each must be shorter than the other two together; a straight ternary link: two sides, angle = 0 or pi"
         probs.add(entry, f"sides {a:g}, {b:g}, {c:g} of {'-'.join(jl)} cannot form a triangle ({why})")
         return None, None
-    return tuple(sides), angle  # type: ignore[arg-type]
+    return tuple(sides), turn  # type: ignore[arg-type]
 
 
 def read_sliders(
@@ -390,11 +419,11 @@ def _read_slider(
         probs.add(entry, "give 'axis' (its direction at t = 0) or 'angle' (in the guide's frame), one of them")
         return None
     if "angle" in val:
-        angle = number(val, "angle", entry, probs)
-        if angle is not None and len(links[guide].joints) == 1 and not links[guide].ground:
+        turn = angle(val, "angle", entry, probs)
+        if turn is not None and len(links[guide].joints) == 1 and not links[guide].ground:
             probs.add(entry, f"the one-joint guide '{guide}' turns with the slider's axis: give 'axis', not 'angle'")
             return None
-        return None if angle is None else Slider(sn, j, guide, (1.0, 0.0), angle, offset)
+        return None if turn is None else Slider(sn, j, guide, (1.0, 0.0), turn, offset)
     axis = direction(val["axis"], "axis", entry, probs)
     return None if axis is None else Slider(sn, j, guide, axis, None, offset)
 
@@ -434,7 +463,12 @@ def read_points(
 
 def joint_span(m: Mechanism) -> tuple[float, tuple[float, float]]:
     """(diagonal of the joints' bounding box [file units], its centre): the linkage's own size, which tracer
-    points, centres of mass and stated lengths are measured against."""
+    points, centres of mass and stated lengths are measured against. Written from dimensions: its size by
+    :func:`~vloop.files.dimensions.dimension_size` and its ground pivots' centre (the hints may be anywhere)."""
+    if m.from_dimensions:
+        pivots = [m.joints[j] for j in m.links[m.ground].joints if j in m.joints]
+        xs, ys = [x for x, _ in pivots], [y for _, y in pivots]
+        return dimension_size(m)[0], ((max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2)
     xs, ys = [x for x, _ in m.joints.values()], [y for _, y in m.joints.values()]
     span = math.hypot(max(xs) - min(xs), max(ys) - min(ys)) if xs else 0.0
     return span, ((max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2) if xs else (0.0, 0.0)
@@ -462,20 +496,25 @@ def far_problem(m: Mechanism, what: str, value: float | tuple[float, float]) -> 
 
 
 def check_extent(m: Mechanism, probs: Problems) -> None:
-    """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`)."""
+    """Tracer points and stated lengths within FAR times the joints' span (:func:`far_problem`); written from
+    dimensions, every length in proportion to the dimensions and ground pivots (:func:`check_proportions`)."""
+    if m.from_dimensions:
+        check_proportions(m, probs)
+        if probs.items:
+            return
     for p in m.points.values():
         problem = far_problem(m, "at", p.at)
         if problem:
             probs.add(f"points.{p.name}", problem)
     for lk in m.links.values():
-        problem = far_problem(m, "length", lk.length) if lk.length is not None else ""
+        problem = far_problem(m, "length", lk.length) if lk.length is not None and not m.from_dimensions else ""
         if problem:
             probs.add(f"links.{lk.name}", problem)
 
 
 def check_topology(m: Mechanism, probs: Problems) -> None:
     """Joints named by nobody, coincident joints on a link, single-joint moving links, disconnected parts."""
-    scale = m.scale
+    scale = dimension_size(m)[0] if m.from_dimensions else m.scale  # the hints never set a size
     named = {j for lk in m.links.values() for j in lk.joints} | {s.joint for s in m.sliders.values()}
     for j in m.joints:
         if j not in named:
@@ -607,6 +646,8 @@ def _read_actuator(i: int, d: dict, m: Mechanism, bodies: dict, ctx: _Context, p
     p = m.joints[sl.joint]
     s_coords = (p[0] - gb.origin[0]) * sl.axis[0] + (p[1] - gb.origin[1]) * sl.axis[1]
     x0, v0, a0, prof = _motion(d, ("s0", "v", "a"), ("t", "s", "v", "a"), s_coords, entry, ctx, probs)
+    if abs(x0) > SIZES[1]:  # the slider's place at t = 0 is a length (its rates overflow on their own, as a crank's)
+        probs.add(entry, f"'s0' = {x0:.6g} {beyond_sizes(m.units)}")
     on = (sl.joint, *([] if gb.kind == "ground" else m.links[sl.guide].joints[:2]))
     return Driver("slider", sn, x0, v0, a0, None, prof, entry, _from_coordinates(d, "s0", on, m, entry, probs))
 
@@ -632,10 +673,9 @@ def _motion(
     probs: Problems,
 ) -> tuple[float, float, float, Profile | None]:
     """A driver's x0 (default: from the coordinates), rate and acceleration, or its profile."""
-    x0 = number(d, keys[0], entry, probs, x_coords)
-    if keys[0] == "theta0" and abs(x0) > MAX_ANGLE:
-        probs.add(entry, f"'theta0' = {x0:.6g} rad cannot be resolved: beyond ±{MAX_ANGLE:g} rad an angle's "
-                  f"floating-point spacing is {math.ulp(x0):.2g} rad (give the angle modulo 2π)")  # fmt: skip
+    x0 = (
+        angle(d, keys[0], entry, probs, x_coords) if keys[0] == "theta0" else number(d, keys[0], entry, probs, x_coords)
+    )
     v0 = number(d, keys[1], entry, probs, 0.0)
     a0 = number(d, keys[2], entry, probs, 0.0)
     prof = None

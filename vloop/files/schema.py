@@ -18,6 +18,12 @@ from ..errors import MechanismError
 from .options import show
 
 NAME_MAX = 64
+SIZES = (1e-60, 1e60)  # mechanism sizes (in its units) whose lengths can be squared twice in double precision
+# Every length synthesis takes (targets, ground lengths, regions) lies within ±MAX_LENGTH of the units, so that a
+# linkage up to a few hundred times its targets stays inside SIZES; MIN_LENGTH is the smallest positive one.
+MAX_LENGTH = 1e50
+MIN_LENGTH = 1e-50
+FAR = 1e5  # a coordinate or length this many times the mechanism's size from it is a typing error, not a design
 _NAME = re.compile(r"[^\W_][\w-]*|_[\w-]*")  # letters, digits, '_' and '-' (Unicode letters and digits too)
 
 
@@ -431,6 +437,14 @@ def direction(value: Any, what: str, entry: str, probs: Problems) -> tuple[float
     x, y = xy[0] / big, xy[1] / big
     n = math.hypot(x, y)
     return x / n, y / n
+
+
+def beyond_sizes(units: str) -> str:
+    """Why a length beyond ±SIZES[1] is refused (follows the value in a message)."""
+    return (
+        f"is beyond ±{SIZES[1]:g} {units}: only sizes from {SIZES[0]:g} to {SIZES[1]:g} of the units can be solved "
+        "in double precision (lengths are squared twice); state the coordinates in larger units"
+    )
 
 
 def name_problem(name: Any) -> str | None:

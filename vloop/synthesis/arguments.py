@@ -4,7 +4,7 @@ from :data:`LIMITS`, and ``vloop synth`` reads the file. A bad value is one :cla
 naming the argument (as the caller wrote it: ``samples``, ``[function] samples`` in a file) and what it accepts.
 
 Numbers are finite and bounded: lengths within ±:data:`MAX_LENGTH` (a linkage's lengths are squared twice by the
-solver, :data:`vloop.compiler.SIZES`), angles within ±:data:`MAX_ANGLE` rad (a cosine of 1e300 rad has no
+solver, :data:`vloop.files.schema.SIZES`), angles within ±:data:`MAX_ANGLE` rad (a cosine of 1e300 rad has no
 digits left); counts are integers (a bool or 2.0 is not a count).
 """
 
@@ -18,10 +18,8 @@ import numpy as np
 
 from ..errors import SynthesisError
 from ..files.options import show
-from ..files.schema import name_problem
+from ..files.schema import MAX_LENGTH, MIN_LENGTH, name_problem
 
-MAX_LENGTH = 1e50  # of the units: a linkage up to a few hundred times its targets stays inside the solver's 1e60
-MIN_LENGTH = 1e-50
 MAX_ANGLE = 1e4  # rad (≈ 1,600 turns): beyond it an angle's cosine has lost its digits
 MAX_SEED = 2**63 - 1
 
