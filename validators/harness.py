@@ -520,8 +520,11 @@ def _loaded(task: Task) -> MechanismValidation:
 
 def _lost(task: Task, error: str, seconds: float, worker: str) -> MechanismValidation:
     """A task that gave nothing back (its worker died, it timed out): every engine's error, judged as such."""
-    item = _loaded(task) if task.mechanism is None else MechanismValidation(task.path, task.mechanism.name,
-                                                                            task.mechanism, corpus=task.corpus)
+    item = (
+        _loaded(task)
+        if task.mechanism is None
+        else MechanismValidation(task.path, task.mechanism.name, task.mechanism, corpus=task.corpus)
+    )
     if item.mechanism is not None:
         for e in task.engines:
             item.runs[e] = EngineRun(e, "error", None, error, seconds, worker=worker)

@@ -429,7 +429,9 @@ def _table(summary: dict, corpus_page: bool) -> str:
     engines = [e for e in summary["engines"] if e != "vloop"]
     head = f"{'mechanism':32s} " + " ".join(f"{e[:CELL]:>{CELL}s}" for e in engines) + "  verdict"
     lines = ["worst error / allowed per engine (blamed, ? undecided, n/c inconclusive)", head, "-" * len(head)]
-    generated = (summary.get("corpus") or {}).get("mechanisms") or sum(1 for m in summary["mechanisms"] if m.get("corpus"))
+    generated = (summary.get("corpus") or {}).get("mechanisms") or sum(
+        1 for m in summary["mechanisms"] if m.get("corpus")
+    )
     for m in summary["mechanisms"]:
         if m.get("corpus") and m["passed"] and generated > 30:
             continue  # a big corpus: one line per failure here, the rest in corpus.html
