@@ -190,3 +190,22 @@ def test_exudyn_dynamic_integrates_a_change_point_window_again_before_it_is_blam
     look = engines.ENGINES["exudyn-dynamic"].second_look(mech, first, stopped=False)
     assert look.result is not None and not look.inconclusive and look.result.meta["step"] < first.meta["step"]
     assert len(look.result) == len(first) and check(look.result).passed
+
+
+def test_exudyn_dynamic_reuses_the_kinematic_pass_bit_for_bit():
+    """A task runs exudyn-kinematic then exudyn-dynamic on one mechanism: the dynamic mode's kinematic pass (its
+    step's rate and its conditioning) is the same Exudyn computation, done once; the result is identical."""
+    pytest.importorskip("exudyn")
+    import vloop
+    from validators import engines
+    from validators import exudyn as vexu
+
+    mech = vloop.loads(corpus.generate(1, 2026, start=101)[0][0].text)
+    vexu._LAST.__init__()
+    alone = engines.ENGINES["exudyn-dynamic"].run(mech)
+    engines.ENGINES["exudyn-kinematic"].run(mech)
+    assert vexu._LAST.recall(mech, mech.times) is not None
+    after = engines.ENGINES["exudyn-dynamic"].run(mech)
+    assert set(alone.columns) == set(after.columns)
+    assert all(np.array_equal(alone[c], after[c]) for c in alone.columns)
+    assert all(np.array_equal(alone.meta["allowance"][g], after.meta["allowance"][g]) for g in alone.meta["allowance"])

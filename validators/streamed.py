@@ -25,7 +25,7 @@ from typing import Any
 
 from . import harness, nightly
 
-TABLE_BLOCK = 50_000  # rows of the comparison table written at a time
+TABLE_BLOCK = 10_000  # rows of the comparison table written at a time
 SHOWN_FAILURES = 200  # generated failures kept for the printed table (all are in summary.json and corpus.html)
 SMALL_CORPUS = 30  # up to this many generated mechanisms, the printed table has a row for each
 _STAGE = re.compile(r"/\.vloop-stage-[^/]+")
