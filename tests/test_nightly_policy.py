@@ -209,3 +209,45 @@ def test_exudyn_dynamic_reuses_the_kinematic_pass_bit_for_bit():
     assert set(alone.columns) == set(after.columns)
     assert all(np.array_equal(alone[c], after[c]) for c in alone.columns)
     assert all(np.array_equal(alone.meta["allowance"][g], after.meta["allowance"][g]) for g in alone.meta["allowance"])
+
+
+# ---------------------------------------------------------------- the history across nights
+
+
+def test_history_shows_new_failures_against_the_night_before(tmp_path):
+    """Three nights: the first read from its summary.json (a night before trend.json existed), the others from
+    trend.json. Per night the page gives the counts, the red ones, per engine blamed/undecided/inconclusive, the
+    failures new since the night before and those fixed, and per family the passes."""
+    from reports.history import figures_from_summary, write_history, write_trend
+
+    def night(failing: dict[str, str], created: str) -> dict:
+        mechs = []
+        for name in ["c00001-fourbar-kite", "c00002-watt2-crank", "c00003-fourbar-kite"]:
+            blamed = failing.get(name)
+            engines = {"vloop": "pass", "exudyn-dynamic": "pass"}
+            if blamed:
+                engines[blamed] = "blamed"
+            verdict = {"status": "blamed" if blamed else "pass", "blamed": [blamed] if blamed else [],
+                       "engines": engines, "red": blamed == "vloop"}  # fmt: skip
+            fam, var = name.split("-")[1:3]
+            mechs.append({"name": name, "passed": not blamed, "red": blamed == "vloop", "verdict": verdict,
+                          "corpus": {"seed": 9, "family": fam, "variant": var}})  # fmt: skip
+        return {"created": created, "seconds": 30.0, "engines": ["vloop", "exudyn-dynamic"], "mechanisms": mechs}
+
+    first = tmp_path / "2026-11-26"
+    first.mkdir()
+    (first / "summary.json").write_text(json.dumps(night({"c00001-fourbar-kite": "exudyn-dynamic"}, "2026-11-26T02")))
+    second = tmp_path / "2026-11-27"
+    second.mkdir()
+    two = night({"c00002-watt2-crank": "vloop"}, "2026-11-27T02")
+    write_trend(figures_from_summary(two, second.name), second)
+    tonight = figures_from_summary(night({}, "2026-11-28T02"), "2026-11-28")
+    (tmp_path / "out").mkdir()
+    html = write_history(tmp_path, tmp_path / "out", tonight).read_text()
+    rows = html[html.index('id="nights-table"') :].split("<tbody>")[1].split("</tbody>")[0].split("</tr>")[:-1]
+    assert [r.split('summary.json">')[1].split("<")[0] for r in rows] == ["2026-11-28", "2026-11-27", "2026-11-26"]
+    assert "none" in rows[0] and ">1</td>" in rows[0].split("none")[1]  # tonight: nothing new, one fixed
+    assert "c00002-watt2-crank@seed9" in rows[1] and 'class="cell fail">1</td>' in rows[1]  # new, and red
+    assert "first night" in rows[2] and "1 / 0 / 0" in rows[2]  # exudyn-dynamic blamed once
+    family = html[html.index('id="family-history"') :]
+    assert ">2/2</td>" in family.split("fourbar/kite")[1].split("</tr>")[0]

@@ -51,7 +51,7 @@ class Night:
         folder: str,
         previous: dict[str, Any] | None = None,
         options: str = "",
-        corpus_page: Any = None,
+        pages: tuple[Any, ...] = (),
     ) -> None:
         self.head, self.folder, self.options = head, folder, options
         self.engines = tuple(head["engines"])
@@ -60,7 +60,7 @@ class Night:
         self.flags: list[dict[str, Any]] = []
         self.failures: list[dict[str, Any]] = []
         self.shown: list[dict[str, Any]] = []
-        self.corpus_page = corpus_page
+        self.pages = tuple(p for p in pages if p is not None)  # each gathers a page's figures: .add(entry)
         self.rows: list[dict[str, Any]] = []
         self._entries = tempfile.TemporaryFile("w+", encoding="utf-8")
         self._first = True
@@ -77,8 +77,8 @@ class Night:
         small = entry["passed"] and self.tally.generated <= SMALL_CORPUS  # a small corpus prints every row
         if not entry.get("corpus") or small or (not entry["passed"] and len(self.shown) < SHOWN_FAILURES):
             self.shown.append(kept)
-        if self.corpus_page is not None:
-            self.corpus_page.add(kept)
+        for page in self.pages:
+            page.add(kept)
         self.rows += harness.comparison_rows({"mechanisms": [entry]})
         self._entries.write(("" if self._first else ",\n") + json.dumps(kept, allow_nan=False))
         self._first = False

@@ -33,7 +33,7 @@ from . import harness, nightly
 from .tolerances import TOLERANCES
 
 OWNS = ("summary.json", "comparisons.csv", "comparisons.parquet", "comparisons", "report.html", "corpus.html", "viewer")
-OWNS += ("*-min.*",)
+OWNS += ("*-min.*", "trend.json", "history.html")
 MAX_CORPUS_SECTIONS = 20  # generated failures shown in report.html (a broken night must not make 1,000 sections)
 
 
@@ -293,13 +293,17 @@ def _summary(
     for it in validation.items:
         it.path = streamed.unstaged(str(outset.final(it.path)), str(outset.folder))
     path, before = previous
-    figures = None
+    figures = trend = None
     if args.corpus is not None and not args.no_report:
         from reports.corpus import CorpusFigures
 
         figures = CorpusFigures(list(validation.engines))
+    if args.nightly:
+        from reports.history import Accumulator
+
+        trend = Accumulator(validation.engines)
     head = harness.summary_head(validation)
-    night = streamed.Night(head, str(outset.folder), before, corpus_options(args), figures)
+    night = streamed.Night(head, str(outset.folder), before, corpus_options(args), (figures, trend))
     done = dataset.done(work / DATASET)
     table = outset.path(f"comparisons.{args.format}")
     for k in sorted(done):
@@ -313,6 +317,8 @@ def _summary(
         extra["nightly"] = {"date": dt.date.today().isoformat(), "previous": str(path) if path else None}
     summary = night.finish(outset.path("summary.json"), table, args.format, extra)
     summary["_figures"] = figures
+    if trend is not None:  # the night's figures for the history page (reports.history)
+        summary["_trend"] = trend.figures(summary, outset.folder.name)
     if summary.get("corpus", {}).get("failures") and args.minimize_tries > 0:
         summary["corpus"]["minimized"] = nightly.minimize_failures(
             validation.items, validation.engines, outset.stage, max_tries=args.minimize_tries
@@ -329,7 +335,15 @@ def _write(validation: Any, summary: dict, outset: Any, args: argparse.Namespace
         tmp.unlink()
     os.replace(work / DATASET, outset.path(DATASET))
     names = ["summary.json", f"comparisons.{args.format}", f"{DATASET}/"]
-    figures = summary.pop("_figures", None)
+    figures, trend = summary.pop("_figures", None), summary.pop("_trend", None)
+    if trend is not None:
+        from reports.history import write_history, write_trend
+
+        write_trend(trend, outset.stage)
+        names.append("trend.json")
+        if not args.no_report:
+            write_history(Path(args.out), outset.stage, trend)
+            names.append("history.html")
     if args.no_report:
         return names
     return names + _write_pages(validation, summary, outset.stage, args.animate, figures)
