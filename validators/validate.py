@@ -3,10 +3,13 @@
 Every input is checked before any engine runs: the engines (a list that can compare something), the runner (a
 scheduler that answers), the previous summary a nightly run compares with (UTF-8 JSON of the summary's shape,
 finite numbers), the corpus options and the output folder (writable). Then the corpus is generated, the files
-loaded (a bad file is reported in the summary, the others validated), the tasks run, and ``summary.json``,
-``comparisons.FMT``, ``report.html`` (with its ``viewer/`` pages), ``corpus.html`` and the minimized failures
-written and published together (:class:`vloop.files.output.OutputSet`): Ctrl-C leaves the previous set or the new
-one, and no file of the previous set stays beside the new one.
+loaded by the workers (a bad file is reported in the summary, the others validated), one task per mechanism run,
+each writing its comparisons to the dataset ``comparisons/`` (validators.dataset), and ``summary.json``,
+``comparisons.FMT`` (streamed from the dataset: validators.streamed), ``report.html`` (with its ``viewer/`` pages),
+``corpus.html``, the nightly's ``trend.json`` and ``history.html`` and the minimized failures written and published
+together (:class:`vloop.files.output.OutputSet`): Ctrl-C leaves the previous set or the new one, and no file of the
+previous set stays beside the new one. The run in progress (its identity and the dataset) is kept in
+``OUT/.vloop-run`` until it is published: ``--resume`` continues it after Ctrl-C, a SIGKILL or a restart.
 
 Exit codes (docs/validation.md, "Exit status"): 1 when vloop may be wrong — vloop blamed by the consensus, a
 mechanism undecided, or a nightly flag that may be vloop's; 0 otherwise, also when a reference engine is blamed by
