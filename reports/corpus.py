@@ -79,7 +79,7 @@ class CorpusFigures:
         self.ratios: dict[str, array] = defaultdict(lambda: array("d"))
         self.limits: list[dict[str, Any]] = []  # the limit runs that failed (the others are counted)
         self.n = self.n_passed = self.n_blamed = self.n_undecided = self.n_inconclusive = 0
-        self.n_limits = self.limits_passed = 0
+        self.n_limits = self.limits_passed = self._seq = 0
 
     def add(self, m: dict[str, Any]) -> None:
         """One mechanism of summary.json (those without a "corpus" entry are not the corpus's)."""
@@ -111,7 +111,8 @@ class CorpusFigures:
         if r is None:
             return
         self.ratios[f"{c['engine']} vs {c['reference']}"].append(r)
-        key = (r, self.n)
+        self._seq += 1
+        key = (r, self._seq)  # the order met breaks ties: rows themselves are never compared
         if len(self.worst) < WORST_SHOWN or key > self.worst[0][:2]:
             q = c["worst"]
             row = {
@@ -126,7 +127,7 @@ class CorpusFigures:
                 "t": f"{q['t_at_max']:.6g}",
                 "passed": c["passed"],
             }
-            (heapq.heappush if len(self.worst) < WORST_SHOWN else heapq.heapreplace)(self.worst, (r, self.n, row))
+            (heapq.heappush if len(self.worst) < WORST_SHOWN else heapq.heapreplace)(self.worst, (*key, row))
 
     def _limit(self, m: dict[str, Any]) -> None:
         exp = m["corpus"].get("expect") or {}

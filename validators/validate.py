@@ -318,14 +318,14 @@ def _summary(
         extra["corpus"] = corpus_info
     if args.nightly or args.previous:
         extra["nightly"] = {"date": dt.date.today().isoformat(), "previous": str(path) if path else None}
+    if night.failures and args.minimize_tries > 0 and corpus_info is not None:
+        extra["corpus"]["minimized"] = nightly.minimize_failures(
+            validation.items, validation.engines, outset.stage, max_tries=args.minimize_tries
+        )
     summary = night.finish(outset.path("summary.json"), table, args.format, extra)
     summary["_figures"] = figures
     if trend is not None:  # the night's figures for the history page (reports.history)
         summary["_trend"] = trend.figures(summary, outset.folder.name)
-    if summary.get("corpus", {}).get("failures") and args.minimize_tries > 0:
-        summary["corpus"]["minimized"] = nightly.minimize_failures(
-            validation.items, validation.engines, outset.stage, max_tries=args.minimize_tries
-        )
     return summary
 
 
