@@ -26,7 +26,7 @@ import numpy as np
 from .html import _RC, TEMPLATES, _new_figure, _picture
 
 WORST_SHOWN = 25
-LIMITS_SHOWN = 200  # failing limit runs listed (all are counted)
+LIMITS_SHOWN = 200  # limit runs listed, the failing ones first (all are counted)
 HIST_BINS = np.arange(-17.0, 4.01, 0.5)  # log10(error / allowed): round-off far left, failures right of 0
 
 
@@ -77,7 +77,8 @@ class CorpusFigures:
         self.vloop_odd: list[dict[str, Any]] = []
         self.worst: list[tuple[float, int, dict[str, Any]]] = []  # a heap of the WORST_SHOWN largest ratios
         self.ratios: dict[str, array] = defaultdict(lambda: array("d"))
-        self.limits: list[dict[str, Any]] = []  # the limit runs that failed (the others are counted)
+        self.limits: list[dict[str, Any]] = []  # the limit runs that failed, and some that passed (all are counted)
+        self.limits_ok: list[dict[str, Any]] = []
         self.n = self.n_passed = self.n_blamed = self.n_undecided = self.n_inconclusive = 0
         self.n_limits = self.limits_passed = self._seq = 0
 
@@ -135,10 +136,17 @@ class CorpusFigures:
             return
         self.n_limits += 1
         self.limits_passed += bool(exp.get("passed"))
-        if not exp.get("passed") and len(self.limits) < LIMITS_SHOWN:
+        rows = self.limits if not exp.get("passed") else self.limits_ok
+        if len(self.limits) + len(self.limits_ok) < LIMITS_SHOWN or (rows is self.limits and self.limits_ok):
+            if len(self.limits) + len(self.limits_ok) >= LIMITS_SHOWN:
+                self.limits_ok.pop()  # a failing run takes the place of a passing one
             observed = ", ".join(f"{e} {n if n is not None else '—'}" for e, n in exp.get("observed", {}).items())
-            self.limits.append({"mechanism": m["name"], "file": m["file"], "stop": exp["stop_sample"],
-                                "observed": observed, "passed": False})  # fmt: skip
+            rows.append({"mechanism": m["name"], "file": m["file"], "stop": exp["stop_sample"],
+                         "observed": observed, "passed": bool(exp.get("passed"))})  # fmt: skip
+
+    def limit_rows(self) -> list[dict[str, Any]]:
+        """The runs into a limit listed: every failing one (up to LIMITS_SHOWN), then passing ones to fill it."""
+        return self.limits + self.limits_ok
 
     def family_rows(self) -> list[dict[str, Any]]:
         """Per family/variant: mechanisms passed, and per engine passed/ran (None where the engine never ran)."""
@@ -231,7 +239,7 @@ def render_corpus(summary: dict[str, Any], figures: CorpusFigures | None = None)
         n_inconclusive=f.n_inconclusive,
         worst=f.worst_rows(),
         histogram=histogram(f.ratios),
-        limits=f.limits,
+        limits=f.limit_rows(),
         n_limits=f.n_limits,
         limits_passed=f.limits_passed,
         failures=info.get("failures", []),

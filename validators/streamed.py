@@ -28,7 +28,6 @@ from . import harness, nightly
 TABLE_BLOCK = 10_000  # rows of the comparison table written at a time
 SHOWN_FAILURES = 200  # generated failures kept for the printed table (all are in summary.json and corpus.html)
 SMALL_CORPUS = 30  # up to this many generated mechanisms, the printed table has a row for each
-_STAGE = re.compile(r"/\.vloop-stage-[^/]+")
 
 
 def light(entry: dict[str, Any]) -> dict[str, Any]:
@@ -38,8 +37,9 @@ def light(entry: dict[str, Any]) -> dict[str, Any]:
 
 
 def unstaged(text: str, folder: str) -> str:
-    """A path written inside a staging folder of ``folder`` (this run's or an interrupted one's), as published."""
-    return _STAGE.sub("", text) if text.startswith(folder) else text
+    """Every path in ``text`` written inside a staging folder of ``folder`` (this run's or an interrupted one's), as
+    it is once published."""
+    return re.sub(re.escape(folder) + r"/\.vloop-stage-[^/\"]+", lambda _: folder, text)
 
 
 class Night:
@@ -67,7 +67,8 @@ class Night:
         self._blocks: list[Path] = []
 
     def add(self, entry: dict[str, Any]) -> None:
-        entry = json.loads(unstaged(json.dumps(entry), self.folder)) if self.folder in json.dumps(entry) else entry
+        text = json.dumps(entry)
+        entry = json.loads(unstaged(text, self.folder)) if self.folder in text else entry
         self.tally.add(entry)
         if self.previous is not None:
             self.flags += self.previous.flags(entry)

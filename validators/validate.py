@@ -319,9 +319,10 @@ def _summary(
     if args.nightly or args.previous:
         extra["nightly"] = {"date": dt.date.today().isoformat(), "previous": str(path) if path else None}
     if night.failures and args.minimize_tries > 0 and corpus_info is not None:
-        extra["corpus"]["minimized"] = nightly.minimize_failures(
+        done_ = nightly.minimize_failures(
             validation.items, validation.engines, outset.stage, max_tries=args.minimize_tries
         )
+        extra["corpus"]["minimized"] = json.loads(streamed.unstaged(json.dumps(done_), str(outset.folder)))
     summary = night.finish(outset.path("summary.json"), table, args.format, extra)
     summary["_figures"] = figures
     if trend is not None:  # the night's figures for the history page (reports.history)
