@@ -735,7 +735,7 @@ def test_a_new_set_replaces_the_previous_sets_files_it_does_not_have(tmp_path):
     assert {"summary.json", "comparisons.parquet", "report.html", "viewer"} <= {p.name for p in out.iterdir()}
     args = ["validate", str(TEXTBOOK), "--engines", "vloop,analytic", "--out", str(out), "--no-report"]
     assert main([*args, "--format", "csv"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["comparisons.csv", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["comparisons", "comparisons.csv", "summary.json"]
 
 
 # ---------------------------------------------------------------- 14. the validation's printed time
