@@ -80,7 +80,9 @@ def uninterrupted(tmp_path_factory) -> dict:
     return summary
 
 
-@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "Ctrl-C"])
+@pytest.mark.parametrize(
+    "how", [signal.SIGKILL, pytest.param(signal.SIGINT, marks=pytest.mark.slow)], ids=["SIGKILL", "Ctrl-C"]
+)
 def test_an_interrupted_nightly_resumes_from_disk(how, uninterrupted, tmp_path):
     out = tmp_path / "night"
     proc = _validate(out)

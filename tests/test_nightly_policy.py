@@ -123,7 +123,7 @@ def _off(mech, res):
     return res
 
 
-@pytest.mark.parametrize("wrong, code", [("pinocchio", 0), ("vloop", 1)])
+@pytest.mark.parametrize("wrong, code", [("pinocchio", 0), pytest.param("vloop", 1, marks=pytest.mark.slow)])
 def test_validate_exits_0_on_a_reference_engine_blamed_and_1_on_vloop(wrong, code, tmp_path, monkeypatch, capsys):
     pytest.importorskip("pinocchio")
     plant(monkeypatch, wrong, _off)
