@@ -251,3 +251,37 @@ def test_history_shows_new_failures_against_the_night_before(tmp_path):
     assert "first night" in rows[2] and "1 / 0 / 0" in rows[2]  # exudyn-dynamic blamed once
     family = html[html.index('id="family-history"') :]
     assert ">2/2</td>" in family.split("fourbar/kite")[1].split("</tr>")[0]
+
+
+def test_exudyn_refine_says_inconclusive_from_its_own_estimate_or_its_own_failures():
+    """The second look decides from Exudyn's runs alone: finer runs that keep changing by more than the allowance
+    (Richardson: the finer run's error is the change over (h₁/h₂)² − 1) make it inconclusive with the estimate and
+    where; a run that fails at the same sample at every step makes it inconclusive with that failure."""
+    import vloop
+    from validators import exudyn as vexu
+    from vloop.errors import MotionError
+
+    mech = vloop.load(MECHANISMS / "fourbar_crank_rocker_open.toml")
+    first = vloop.solve(mech)
+    first.meta.update(step=1e-3, accuracy=1e-5)
+
+    def drifting(times, accuracy):  # each finer run 1 % off the one before in P's acceleration
+        res = dataclasses.replace(first, columns=dict(first.columns), meta={"step": 1e-3 * (accuracy / 1e-5) ** 0.5})
+        res.columns["B.ax"] = first["B.ax"] * (1 + 0.01 / accuracy * 1e-6)
+        return res
+
+    res, why, note = vexu.refine(mech, first, False, drifting)
+    assert res is None and why.startswith("its own error estimate (Richardson, runs at h = 0.001, 0.0005, ")
+    assert "× its allowance at t = " in why and "(B.ax)" in why and note.startswith("integrated again at h = ")
+
+    def failing(times, accuracy):
+        raise MotionError("x: exudyn-dynamic: Newton failed", time=0.5, sample=7, partial=first.head(7))
+
+    res, why, _ = vexu.refine(mech, first, True, failing)
+    assert res is None and why.startswith("its time integration fails at sample 7 at every step tried")
+
+    def converged(times, accuracy):
+        return dataclasses.replace(first, meta={"step": 1e-3 * (accuracy / 1e-5) ** 0.5})
+
+    res, why, note = vexu.refine(mech, first, False, converged)
+    assert res is not None and why == "" and "own error estimate within its allowance" in note
