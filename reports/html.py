@@ -697,7 +697,7 @@ def _cell(item: MechanismValidation, engine: str) -> dict[str, Any]:
     # where the engines disagree, only the odd one out fails (validators.consensus); the others pass
     verdict = item.verdict.engines.get(engine) if item.verdict is not None else None
     if verdict in ("pass", "blamed", "undecided", "inconclusive"):
-        failed = verdict != "pass"
+        failed = verdict != "pass" or run.status == "error"  # an engine that gave nothing is never shown passing
     css = (
         "na"
         if run.status == "skipped"
