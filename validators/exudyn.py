@@ -596,6 +596,9 @@ def refine(
         steps.append(float(res.meta.get("step", steps[-1] * math.sqrt(acc / accuracies[-1]))))
         accuracies.append(acc)
         n = min(len(prev), len(res))
+        alike = bool(failed) and stopped and len(res) == len(first)  # it stops where it stopped: a limit, not a step
+        if alike:
+            n = max(int(0.9 * (n - 1)), 0)  # next to a limit every rate grows without bound: as the harness compares
         rho2 = (steps[-2] / steps[-1]) ** 2 if steps[-1] > 0 and steps[-2] > 0 else 4.0
         k = rho2 - 1.0
         scaled = {g: k * v for g, v in stated.as_dict()["rtol"].items()}
@@ -603,14 +606,14 @@ def refine(
         est = compare(res.head(n), prev.head(n), scaled, floor=scaled, atol_t=own or None)
         worst = max(est.errors, key=lambda e: e.max_abs / max(e.tol, 1e-300), default=None)
         tried = ", ".join(f"{h:.3g}" for h in steps)
-        if failed:
+        if failed and not alike:
             why = f"its time integration fails at sample {len(res)} at every step tried (h = {tried} s): {failed}"
         elif worst is not None and not est.passed:
             why = (
                 f"its own error estimate (Richardson, runs at h = {tried} s) is {worst.max_abs / worst.tol:.3g}× its "
                 f"allowance at t = {worst.t_at_max:.6g} s ({worst.column})"
             )
-        elif not failed:
+        else:
             if first.meta.get("budget") and not res.meta.get("budget"):  # the same first samples, by design
                 res.meta["budget"] = {**first.meta["budget"], "samples": len(res)}
             return res, "", f"integrated again at h = {steps[-1]:.3g} s (own error estimate within its allowance)"
@@ -834,6 +837,7 @@ def _integration_failed(
 ) -> MotionError:
     """The MotionError of a time integration that stopped, with the samples recorded before it."""
     partial = _dynamic_result(mech, engine, model, times, records, complete=False)
+    partial.meta["step"] = float(h)  # what was tried, for a second look's account
     k_fail = len(partial)
     t_fail = float(times[min(k_fail, len(times) - 1)])
     reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -368,8 +368,9 @@ def _second_looks(item: MechanismValidation, engines: tuple[str, ...], suspects:
         if look is None:
             continue
         run.message = "; ".join(filter(None, [run.message, look.note]))
-        if look.result is not None:
-            run.result, run.status, redo = look.result, "ok", True
+        if look.result is not None:  # a run that stopped and stops again where it did keeps its status
+            same_stop = run.status == "stopped" and len(look.result) == run.samples
+            run.result, run.status, redo = look.result, "stopped" if same_stop else "ok", True
         elif look.inconclusive:
             item.inconclusive[name] = look.inconclusive
     if redo:

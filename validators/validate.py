@@ -407,8 +407,10 @@ def verdict_text(summary: dict) -> str:
         return f"RED: vloop blamed on {odd}, undecided on {counts.get('undecided', 0)} of {n} mechanisms"
     if summary["passed"]:
         return "all passed"
-    others = ", ".join(f"{k} {counts[k]}" for k in ("blamed", "inconclusive") if counts.get(k))
-    return f"vloop passed; reference engines: {others or 'flags raised'} (not red; --strict makes it red)"
+    tally = v.get("engines") or {}
+    parts = [f"{k} {sum(t.get(k, 0) for t in tally.values())}" for k in ("blamed", "inconclusive")]
+    others = ", ".join(p for p in parts if not p.endswith(" 0")) or "flags raised"
+    return f"vloop passed; reference engines: {others} (not red; --strict makes it red)"
 
 
 CELL = 16  # the engines' columns of the printed table
