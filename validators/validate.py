@@ -403,7 +403,8 @@ def verdict_text(summary: dict) -> str:
     if summary.get("red"):
         if not red:
             return "RED: a nightly flag may be vloop's"
-        odd, n = len(v.get("vloop_blamed") or []), len(summary["mechanisms"])
+        odd = len(v.get("vloop_blamed") or [])
+        n = (summary.get("counts") or {}).get("mechanisms", len(summary["mechanisms"]))
         return f"RED: vloop blamed on {odd}, undecided on {counts.get('undecided', 0)} of {n} mechanisms"
     if summary["passed"]:
         return "all passed"
