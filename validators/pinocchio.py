@@ -568,14 +568,25 @@ class _Solver:
         a = np.linalg.solve(J, rhs)
         return _State(t, q, v, a, float(np.sign(np.linalg.det(J))), float(np.max(np.abs(self.w.weights * F))), cond, it)
 
-    def step(self, prev: _State, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray, guess: np.ndarray) -> _State:
+    def step(
+        self,
+        prev: _State,
+        t: float,
+        x: np.ndarray,
+        xd: np.ndarray,
+        xdd: np.ndarray,
+        guess: np.ndarray,
+        on_path: bool = True,
+    ) -> _State:
+        """One continuation step; ``on_path``: held to the predicted path (JUMP_RATIO), which the last bisection
+        level is not (a step that short is taken as Newton lands it, as before the path was checked)."""
         q, F, J, it = self.project(guess, x)
         st = self.state(t, q, F, J, xd, xdd, it)
         sc, dt = self.pm.q_scale, t - prev.t
         move = float(np.max(np.abs(guess - prev.q) / sc))
         correction = float(np.max(np.abs(q - guess) / sc))
         turned = float(np.max(np.abs(st.v - prev.v - dt * prev.a) / sc)) * abs(dt)
-        if max(correction, turned) > JUMP_RATIO * move + JUMP_FLOOR:
+        if on_path and max(correction, turned) > JUMP_RATIO * move + JUMP_FLOOR:
             raise _NoConvergence("Newton left the predicted path (the other branch of a change point, or a toggle)")
         if st.det_sign != prev.det_sign and not self.smooth(prev, q, guess):
             # crossed det J = 0 off the predicted path: a limit/toggle or a jump to the other branch
@@ -618,7 +629,7 @@ class _Solver:
         try:
             if far and depth < self.max_bisect:
                 raise _NoConvergence("predicted move too long")
-            return self.step(prev, t, x, xd, xdd, guess)
+            return self.step(prev, t, x, xd, xdd, guess, on_path=depth < self.max_bisect)
         except _NoConvergence:
             if depth >= self.max_bisect:
                 raise
