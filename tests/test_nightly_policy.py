@@ -285,3 +285,18 @@ def test_exudyn_refine_says_inconclusive_from_its_own_estimate_or_its_own_failur
 
     res, why, note = vexu.refine(mech, first, False, converged)
     assert res is not None and why == "" and "own error estimate within its allowance" in note
+
+
+def test_pinocchio_path_check_never_refuses_a_step_it_cannot_shorten():
+    """Seed 60606, index 891 (a Stephenson III): the path check refused its first step at every bisection level;
+    the last level takes the step as Newton lands it, and the run agrees with the closed form to 1e-9 of peak."""
+    pytest.importorskip("pinocchio")
+    import vloop
+    from validators import analytic
+    from validators import pinocchio as vpin
+
+    mech = vloop.loads(corpus.generate(1, 60606, start=891)[0][0].text)
+    p, a = vpin.solve(mech), analytic.solve(mech)
+    assert len(p) == len(mech.times) == 184
+    for col in (c for c in a.columns if c in p.columns and c.endswith((".x", ".y", ".vx", ".vy"))):
+        assert float(np.max(np.abs(p[col] - a[col]))) <= 1e-9 * max(float(np.max(np.abs(a[col]))), 1e-3), col
