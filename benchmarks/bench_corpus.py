@@ -4,21 +4,22 @@
     python benchmarks/bench_corpus.py --n 200 --workers 0 2             # also in this process (same summary?)
     python benchmarks/bench_corpus.py --engines vloop,analytic,pinocchio,exudyn-kinematic
 
-Each mode runs in its own child process (so its peak memory is its own): the corpus (seed 2026) is
-generated and written once, then ``validators.harness.run`` validates every mechanism with the engines —
-one task per mechanism × engine through ``vloop.runner`` (0 workers: in this process; N: a local Dask
-cluster of N single-threaded worker processes). Printed per mode: wall time of the validation, the
-cluster's start-up (separately), mechanisms per minute in all and per worker, the CPU time of the main
-process (client, scheduler and the comparisons, which all run there), peak resident memory of the main
-process and of the largest worker, and the machine's load average while it ran.
+Each mode runs in its own child process (so its peak memory is its own): the corpus (seed 2026) is generated and
+written once, then ``validators.harness.run`` validates every mechanism with the engines — one task per mechanism
+(its engines, comparisons and verdict) through ``vloop.runner`` (0 workers: in this process; N: a local Dask
+cluster of N single-threaded worker processes). Printed per mode: wall time of the validation, the cluster's
+start-up (separately), mechanisms per minute in all and per worker, the CPU time of the main process (client and
+scheduler), peak resident memory of the main process and of the largest worker, and the machine's load average
+while it ran.
 
-Then, per engine, where the time goes: its CPU seconds summed over the tasks (``EngineRun.cpu_seconds``,
-measured in the process that ran it, so a machine shared with other work does not inflate it), its share
-and its milliseconds per mechanism; and the extrapolation to ``--target`` mechanisms (10,000): the engines'
-CPU per mechanism × target / workers, plus the main process's CPU per mechanism × target (it runs beside
-the workers but needs its own core time), which is what the run takes on a machine with a core free per
-worker; and, for comparison, the wall time measured here scaled to the target (inflated by whatever else
-the machine is doing). The runs must give the same summary (numbers, not timings): checked here.
+Then, per engine, where the time goes: its CPU seconds summed over the tasks (``EngineRun.cpu_seconds``, measured
+in the process that ran it, so a machine shared with other work does not inflate it), its share, its milliseconds
+per mechanism and the mechanisms per minute one worker gets through with that engine alone; and the extrapolation
+to ``--target`` mechanisms (10,000): the engines' CPU per mechanism × target / workers, plus the main process's CPU
+per mechanism × target (it runs beside the workers but needs its own core time), which is what the run takes on a
+machine with a core free per worker; and, for comparison, the wall time measured here scaled to the target
+(inflated by whatever else the machine is doing). The runs must give the same summary (numbers, not timings):
+checked here.
 """
 
 from __future__ import annotations
@@ -123,7 +124,11 @@ def report(results: list[dict], engines: tuple[str, ...], target: int) -> None:
         print(f"\nwhere the time goes ({'in-process' if not r['workers'] else f'{workers} workers'}), engine CPU:")
         for e in sorted(engines, key=lambda e: -r["engine_cpu"][e]):
             cpu = r["engine_cpu"][e]
-            print(f"  {e:18s} {cpu:8.1f} s  {100 * cpu / max(total, 1e-9):5.1f} %  {1000 * cpu / n:7.1f} ms/mechanism")
+            rate = 60.0 * n / cpu if cpu > 0 else float("inf")
+            print(
+                f"  {e:18s} {cpu:8.1f} s  {100 * cpu / max(total, 1e-9):5.1f} %  {1000 * cpu / n:7.1f} ms/mechanism"
+                f"  {rate:8.0f} mechanisms/minute/worker"
+            )
         per_mech = total / n
         compute = target * per_mech / workers / 60
         main = target * r["main_cpu"] / n / 60

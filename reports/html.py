@@ -30,10 +30,14 @@ from matplotlib.patches import Polygon
 from matplotlib.ticker import FuncFormatter, NullFormatter
 from matplotlib.transforms import ScaledTranslation
 
-from validators.harness import CheckedComparison, EngineRun, MechanismValidation, Validation
 from vloop.compare import QuantityError, error_series
 from vloop.mechanism import Driver, Mechanism
 from vloop.result import Result
+
+from .model import Check as CheckedComparison
+from .model import Item as MechanismValidation
+from .model import Run as EngineRun
+from .model import Validation
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 GROUPS = ("angle", "angular velocity", "angular acceleration", "position", "velocity", "acceleration")
@@ -686,23 +690,31 @@ def _worst_ratio(checks: Iterable[CheckedComparison]) -> float | None:
 def _cell(item: MechanismValidation, engine: str) -> dict[str, Any]:
     run = item.runs.get(engine)
     if run is None:
-        return {"status": "—", "css": "na", "ratio": "", "title": "not run"}
+        return {"status": "—", "badge": "—", "css": "na", "ratio": "", "title": "not run"}
     checks = _checks_of(item, engine)
     worst = _worst_ratio(checks)
     failed = run.status == "error" or any(not c.passed for c in checks)
     # where the engines disagree, only the odd one out fails (validators.consensus); the others pass
     verdict = item.verdict.engines.get(engine) if item.verdict is not None else None
-    if verdict in ("pass", "blamed", "undecided"):
-        failed = verdict != "pass"
-    css = "na" if run.status == "skipped" else ("undecided" if verdict == "undecided" else "fail" if failed else "pass")
+    if verdict in ("pass", "blamed", "undecided", "inconclusive"):
+        failed = verdict != "pass" or run.status == "error"  # an engine that gave nothing is never shown passing
+    css = (
+        "na"
+        if run.status == "skipped"
+        else (verdict if verdict in ("undecided", "inconclusive") else "fail" if failed else "pass")
+    )
+    badge = {"na": "n/a", "fail": "error" if run.status == "error" else "blamed" if verdict == "blamed" else "fail"}
     via = ", ".join(f"vs {c.reference}" if c.engine == engine else f"closed form vs {engine}" for c in checks)
     why = item.verdict.reasons.get(engine, "") if item.verdict is not None else ""
+    why = why or item.inconclusive.get(engine, "")
     return {
         "status": run.status,
+        "badge": badge.get(css, css),
         "css": css,
         "ratio": "" if worst is None else _fmt(worst),
         "verdict": verdict or "",
-        "title": (why or (run.message.splitlines()[0][:200] if run.message else run.status))
+        "title": f"run {run.status}: "
+        + (why or (run.message.splitlines()[0][:200] if run.message else run.status))
         + (f" ({via})" if via else ""),
     }
 
@@ -883,6 +895,8 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
     return env.get_template("report.html.j2").render(
         created=created_text,
         passed=bool(summary.get("passed", validation.passed)),
+        counts=_counts(summary, sections),
+        overall=overall(summary),
         engines=engines,
         versions=summary.get("versions") or validation.versions,
         seconds=f"{summary.get('seconds', validation.seconds):.1f}",
@@ -894,6 +908,39 @@ def render(validation: Validation, summary: dict[str, Any], *, animate: bool = F
         engine_rows=_engine_rows(summary, engines),
         vloop_odd=[s for s in sections if s["verdict"] and "vloop" in s["verdict"]["blamed"]],
     )
+
+
+def _counts(summary: dict[str, Any], sections: list[dict[str, Any]]) -> dict[str, int]:
+    """Mechanisms in the whole run and how many pass every comparison (a big corpus shows only its failures)."""
+    counts = summary.get("counts")
+    if counts:
+        return {"total": counts["mechanisms"], "passed": counts["passed"]}
+    mechs = summary.get("mechanisms")
+    if mechs:
+        return {"total": len(mechs), "passed": sum(1 for m in mechs if m.get("passed"))}
+    return {"total": len(sections), "passed": sum(1 for s in sections if s["passed"])}
+
+
+def overall(summary: dict[str, Any]) -> dict[str, str]:
+    """The front verdict: FAILED when vloop may be wrong (red), PASSED FOR VLOOP when only reference engines failed
+    or were inconclusive (amber, docs/validation.md's exit policy), ALL PASSED."""
+    v = summary.get("verdicts") or {}
+    counts = v.get("mechanisms") or {}
+    bad = sum(1 for m in summary.get("mechanisms") or () if m.get("error"))
+    if bad:
+        return {"css": "fail", "text": "FAILED", "note": f"{bad} file{'s' if bad > 1 else ''} could not be read"}
+    if summary.get("red") or (summary.get("red") is None and not summary.get("passed", True)):
+        odd, undecided = len(v.get("vloop_blamed") or []), counts.get("undecided", 0)
+        return {"css": "fail", "text": "FAILED", "note": f"vloop blamed on {odd}, undecided on {undecided}"}
+    if not summary.get("passed", True):
+        tally = v.get("engines") or {}
+        parts = [
+            f"{e}: {t.get('blamed', 0)} blamed, {t.get('inconclusive', 0)} inconclusive"
+            for e, t in tally.items()
+            if t.get("blamed") or t.get("inconclusive")
+        ]
+        return {"css": "warn", "text": "PASSED FOR VLOOP", "note": "reference engines failed — " + "; ".join(parts)}
+    return {"css": "pass", "text": "ALL PASSED", "note": ""}
 
 
 def _engine_rows(summary: dict[str, Any], engines: Sequence[str]) -> list[dict[str, Any]]:

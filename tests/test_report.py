@@ -110,6 +110,35 @@ def test_front_page(built: Built) -> None:
     assert [r.split("-", 1)[1] for r in rows] == [*NAMES, BAD_FILE]
 
 
+def test_cells_say_the_engines_verdict_in_their_own_colour(built: Built) -> None:
+    """A cell's badge is the engine's verdict on the mechanism (pass, blamed, error, ...), in the cell's colour: never
+    a green "ok" over a red count."""
+    front = built.text[: built.text.index('<section class="mech"')]
+    cells = re.findall(r'<td class="cell (\w+)"[^>]*><span class="badge (\w+)">([^<]*)</span>', front)
+    assert cells and not any(text == "ok" for _, _, text in cells)
+    assert all(css == badge for css, badge, _ in cells)
+    assert ("fail", "fail", "error") in cells  # whitworth's Pinocchio, which failed outright
+
+
+def test_the_front_counts_the_whole_run_and_names_the_verdict():
+    """A 30-mechanism corpus with one failure shows that failure only: the front still counts 29 of 30, and says
+    whether the night is red (vloop may be wrong) or only a reference engine failed."""
+    from reports.html import _counts, overall
+
+    tally = {"exudyn-dynamic": {"pass": 29, "blamed": 1, "undecided": 0, "inconclusive": 0}}
+    summary = {"passed": False, "red": False, "counts": {"mechanisms": 30, "passed": 29, "red": 0},
+               "verdicts": {"engines": tally, "mechanisms": {"pass": 29, "blamed": 1}, "vloop_blamed": []},
+               "mechanisms": [{"name": "c00022", "passed": False}]}  # fmt: skip
+    assert _counts(summary, [{"passed": False}]) == {"total": 30, "passed": 29}
+    front = overall(summary)
+    assert (
+        front["css"] == "warn" and front["text"] == "PASSED FOR VLOOP" and "exudyn-dynamic: 1 blamed" in front["note"]
+    )
+    red = overall(summary | {"red": True, "verdicts": {**summary["verdicts"], "vloop_blamed": ["c00022"]}})
+    assert red == {"css": "fail", "text": "FAILED", "note": "vloop blamed on 1, undecided on 0"}
+    assert overall({"passed": True, "red": False})["text"] == "ALL PASSED"
+
+
 def test_each_section_has_its_loops_and_equations(built: Built) -> None:
     for item in built.validation.items:
         if item.error:

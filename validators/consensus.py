@@ -16,6 +16,15 @@ blamed engines failed on this mechanism, each with its reason. Otherwise the mec
 and every engine in a disagreement is undecided on it (two engines that disagree, or three that all
 disagree with each other, cannot say who is right). An engine whose tolerance is too loose to tell
 (Exudyn's time integration next to a wrong vloop) neither accuses nor excuses: only disagreements count.
+
+An engine that found by its own means (its own error estimate, step rejections, conditioning — never
+another engine's answer) that it cannot resolve the mechanism is *inconclusive* on it: it is not a voter,
+its disagreements do not count, and the reason is kept. A mechanism whose voters are then fewer than two
+is inconclusive as a whole (nothing is left to compare).
+
+Red (:attr:`Verdict.red`) means vloop may be wrong: vloop blamed, or no majority (undecided). A reference
+engine blamed by engines that agree with vloop, or inconclusive, is reported but is not red
+(docs/validation.md: the exit policy).
 """
 
 from __future__ import annotations
@@ -25,18 +34,26 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-PASS, BLAMED, UNDECIDED = "pass", "blamed", "undecided"
+PASS, BLAMED, UNDECIDED, INCONCLUSIVE = "pass", "blamed", "undecided", "inconclusive"
+STATUSES = (PASS, BLAMED, UNDECIDED, INCONCLUSIVE, "skipped")
 
 
 @dataclass
 class Verdict:
-    """A mechanism's verdict: "pass", "blamed" (only ``blamed`` failed) or "undecided"; per engine its own."""
+    """A mechanism's verdict: "pass", "blamed" (only ``blamed`` failed), "undecided" or "inconclusive" (fewer than
+    two engines could resolve it); per engine its own, and why each inconclusive engine could not resolve it."""
 
     status: str
     blamed: tuple[str, ...] = ()
     reason: str = ""
     engines: dict[str, str] = field(default_factory=dict)  # engine -> "pass" | "blamed" | "undecided" | "skipped"
     reasons: dict[str, str] = field(default_factory=dict)  # blamed engine -> why
+    inconclusive: dict[str, str] = field(default_factory=dict)  # inconclusive engine -> its own reason
+
+    @property
+    def red(self) -> bool:
+        """Whether vloop may be wrong here: vloop blamed, or no majority to tell."""
+        return self.status == UNDECIDED or "vloop" in self.blamed
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -45,6 +62,8 @@ class Verdict:
             "reason": self.reason,
             "engines": dict(self.engines),
             "reasons": dict(self.reasons),
+            "inconclusive": dict(self.inconclusive),
+            "red": self.red,
         }
 
 
@@ -61,9 +80,26 @@ def _covers(voters: list[str], edges: set[tuple[str, str]]) -> list[tuple[str, .
     return []
 
 
-def decide(voters: Iterable[str], disagreements: Mapping[tuple[str, str], str], skipped: Iterable[str] = ()) -> Verdict:
-    """The verdict from the voters and their disagreements ((engine, engine) -> what differs)."""
-    voters = list(voters)
+def decide(
+    voters: Iterable[str],
+    disagreements: Mapping[tuple[str, str], str],
+    skipped: Iterable[str] = (),
+    inconclusive: Mapping[str, str] | None = None,
+) -> Verdict:
+    """The verdict from the voters and their disagreements ((engine, engine) -> what differs); ``inconclusive``:
+    the engines that said they cannot resolve the mechanism (engine -> their reason), which do not vote."""
+    unsure = {e: why for e, why in (inconclusive or {}).items() if e in voters}
+    verdict = _decide([v for v in voters if v not in unsure], disagreements, skipped)
+    verdict.engines.update(dict.fromkeys(unsure, INCONCLUSIVE))
+    verdict.inconclusive = dict(unsure)
+    if unsure and len(voters) - len(unsure) < 2:
+        verdict.status, verdict.blamed, verdict.reasons = INCONCLUSIVE, (), {}
+        verdict.reason = "fewer than two engines could resolve it: " + "; ".join(f"{e}: {w}" for e, w in unsure.items())
+        verdict.engines.update({e: PASS for e in voters if e not in unsure})
+    return verdict
+
+
+def _decide(voters: list[str], disagreements: Mapping[tuple[str, str], str], skipped: Iterable[str]) -> Verdict:
     engines = dict.fromkeys(skipped, "skipped")
     reasons_by_pair: dict[tuple[str, str], str] = {}
     for (a, b), why in disagreements.items():
@@ -100,9 +136,9 @@ def _accusation(engine: str, voters: list[str], blamed: tuple[str, ...], reasons
 
 
 def tally(verdicts: Iterable[Verdict], engines: Iterable[str]) -> dict[str, dict[str, int]]:
-    """Per engine: how many mechanisms it passed, was blamed on, was undecided on, was skipped on."""
-    out = {e: {PASS: 0, BLAMED: 0, UNDECIDED: 0, "skipped": 0} for e in engines}
+    """Per engine: how many mechanisms it passed, was blamed on, was undecided or inconclusive on, was skipped on."""
+    out = {e: dict.fromkeys(STATUSES, 0) for e in engines}
     for v in verdicts:
         for e, s in v.engines.items():
-            out.setdefault(e, {PASS: 0, BLAMED: 0, UNDECIDED: 0, "skipped": 0})[s] += 1
+            out.setdefault(e, dict.fromkeys(STATUSES, 0))[s] += 1
     return out

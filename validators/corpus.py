@@ -1396,25 +1396,74 @@ def write(
     items: Sequence[Item], out: str | Path, *, seed: int, refused: Sequence[dict[str, Any]] = (), **settings: Any
 ) -> list[Path]:
     """NAME.toml and NAME.json for every item and a corpus.json manifest, atomically, inside ``out``."""
-    from vloop.files.output import ensure_folder, write_text
+    from vloop.files.output import ensure_folder
 
     out = ensure_folder(out)
-    written = []
-    for it in items:
-        written.append(write_text(out / f"{it.name}.toml", it.text))
-        write_text(out / f"{it.name}.json", json.dumps(it.sidecar, indent=1, allow_nan=False))
+    written = [_write_item(out, it) for it in items]
+    _write_manifest(out, seed, settings, [f"{it.name}.toml" for it in items], _family_counts(items), refused,
+                    sum(1 for it in items if it.sidecar["expect"]["stop_sample"] is not None))  # fmt: skip
+    return written
+
+
+def generate_into(
+    out: str | Path,
+    n: int,
+    seed: int,
+    *,
+    start: int = 0,
+    families: Sequence[str] | None = None,
+    limit_fraction: float = 0.1,
+) -> list[Path]:
+    """:func:`generate` and :func:`write` one mechanism at a time (memory: the file names and the counts, not the
+    mechanisms: a 10,000-mechanism corpus costs what a 1,000 one does); the files written, in index order."""
+    from vloop.files.output import ensure_folder
+
+    _catalogue(families)
+    out = ensure_folder(out)
+    written, refused, counts, limits = [], [], {}, 0
+    for i in range(start, start + n):
+        d = draw_item(seed, i, families, limit_fraction)
+        written.append(_write_item(out, d.item))
+        refused += d.refused
+        key = f"{d.item.spec.family}/{d.item.spec.variant}"
+        counts[key] = counts.get(key, 0) + 1
+        limits += d.item.sidecar["expect"]["stop_sample"] is not None
+    settings = {"start": start, "families": families, "limit_fraction": limit_fraction}
+    _write_manifest(out, seed, settings, [p.name for p in written], dict(sorted(counts.items())), refused, limits)
+    return written
+
+
+def _write_item(out: Path, it: Item) -> Path:
+    from vloop.files.output import write_text
+
+    path = write_text(out / f"{it.name}.toml", it.text)
+    write_text(out / f"{it.name}.json", json.dumps(it.sidecar, indent=1, allow_nan=False))
+    return path
+
+
+def _write_manifest(
+    out: Path,
+    seed: int,
+    settings: dict,
+    files: list[str],
+    families: dict[str, int],
+    refused: Sequence[dict],
+    limits: int,
+) -> None:
+    """corpus.json: the generator, seed and settings, the families' counts, what vloop refused, the files."""
+    from vloop.files.output import write_text
+
     manifest = {
         "generator": GENERATOR,
         "seed": seed,
-        "n": len(items),
+        "n": len(files),
         "settings": settings,
-        "families": _family_counts(items),
-        "limit_runs": sum(1 for it in items if it.sidecar["expect"]["stop_sample"] is not None),
+        "families": families,
+        "limit_runs": limits,
         "refused": list(refused),
-        "files": [f"{it.name}.toml" for it in items],
+        "files": files,
     }
     write_text(out / "corpus.json", json.dumps(manifest, indent=1, allow_nan=False))
-    return written
 
 
 def _family_counts(items: Iterable[Item]) -> dict[str, int]:

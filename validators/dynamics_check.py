@@ -139,12 +139,19 @@ def summary_entries(rows: list[Row]) -> list[dict]:
     return out
 
 
+def attach(entry: dict, got: list[dict] | None) -> dict:
+    """A mechanism's summary entry with its forward-dynamics comparisons ("dynamics"); a failed one fails the
+    mechanism, as it fails the exit code."""
+    if got:
+        entry["dynamics"] = got
+        entry["passed"] = entry.get("passed", True) and not any(e["verdict"] == "fail" for e in got)
+    return entry
+
+
 def add_to_summary(summary: dict, entries: dict[str, list[dict]]) -> None:
-    """Each compared mechanism's entries (by its file) as its "dynamics"; a failed one fails the summary, as it
-    fails the exit code."""
+    """Each compared mechanism's entries (by its file) as its "dynamics" (:func:`attach`); a failed one fails the
+    summary too."""
     for mech in summary.get("mechanisms", []):
-        got = entries.get(mech.get("file"))
-        if got:
-            mech["dynamics"] = got
-            if any(e["verdict"] == "fail" for e in got):
-                summary["passed"] = False
+        attach(mech, entries.get(mech.get("file")))
+        if not mech.get("passed", True):
+            summary["passed"] = False

@@ -20,6 +20,7 @@ that stops part-way keeps its forces on the samples it solved (``exc.partial``).
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -30,6 +31,21 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from .tolerances import DYNAMIC_STEPS
+
+
+@dataclass
+class SecondLook:
+    """An engine's second look at its own run, asked for when another engine disagrees with it.
+
+    ``result``: the run again, better by the engine's own measure (a finer step), on the same samples; it replaces
+    the first. ``inconclusive``: why the engine cannot resolve the mechanism, from its own evidence only (its error
+    estimate, step rejections, conditioning — never another engine's answer); the comparison is then inconclusive
+    for this engine. ``note``: what was done, for the run's message.
+    """
+
+    result: Result | None = None
+    inconclusive: str = ""
+    note: str = ""
 
 
 class Engine:
@@ -52,6 +68,11 @@ class Engine:
     def run(self, mech: Mechanism) -> Result:
         """What the harness compares: the kinematics, with the forces when the mechanism has masses or loads."""
         return self.with_forces(mech) if has_forces(mech) else self.solve(mech)
+
+    def second_look(self, mech: Mechanism, result: Result, stopped: bool) -> SecondLook | None:
+        """Look again at ``result`` (this engine's run of ``mech``; ``stopped``: it ended early). None: nothing to add
+        (an engine exact to round-off, or vloop itself, whose answer is what is being checked)."""
+        return None
 
     def __repr__(self) -> str:
         return f"<engine {self.name}>"
@@ -141,6 +162,17 @@ class ExudynDynamic(_Exudyn):
     name = "exudyn-dynamic"
     mode = "dynamic"
     options: ClassVar[dict[str, Any]] = {"max_steps": DYNAMIC_STEPS}
+
+    def second_look(self, mech: Mechanism, result: Result, stopped: bool) -> SecondLook | None:
+        """The window compared integrated again at finer steps, each run's error estimated from the one before
+        (:func:`validators.exudyn.refine`); forces, if any, from the run kept."""
+        from . import exudyn, exudyn_forces
+
+        def with_forces(t: np.ndarray, accuracy: float) -> Result:
+            return unpack(lambda m: exudyn_forces.solve_with_forces(m, t, mode=self.mode, accuracy=accuracy), mech)
+
+        res, why, note = exudyn.refine(mech, result, stopped, with_forces if has_forces(mech) else None)
+        return SecondLook(res, why, note)
 
 
 class MuJoCo(Engine):

@@ -412,7 +412,39 @@ def _solve_kinematic(
     for inp in model.driver_inputs:
         inp.prefetch(times)
     state = _assemble(kin, mech, _assembly_time(mech), engine, times)
-    return _track(kin, mech, times, state, engine, max_halvings)
+    if (tol, max_iter, max_halvings) != (1e-12, 25, 14):
+        return _track(kin, mech, times, state, engine, max_halvings)
+    try:
+        res = _track(kin, mech, times, state, engine, max_halvings)
+    except MotionError as exc:
+        _LAST.keep(mech, times, exc.partial)
+        raise
+    _LAST.keep(mech, times, res)
+    return res
+
+
+class _LastPass:
+    """Exudyn's last kinematic solution in this process (default options), up to a limit if the motion stops.
+
+    The dynamic mode's kinematic pass (its step's rate Ω and its conditioning κ) over the same mechanism and times
+    is the same computation — the same model, assembly and continuation, Exudyn's own numbers — so a validation task
+    that runs exudyn-kinematic then exudyn-dynamic on one mechanism does it once (bit for bit the same Result).
+    Holding the Mechanism itself keeps the identity test sound (its id cannot be reused while it is held)."""
+
+    def __init__(self) -> None:
+        self.mech: Mechanism | None = None
+        self.times = np.zeros(0)
+        self.result: Result | None = None
+
+    def keep(self, mech: Mechanism, times: np.ndarray, result: Result) -> None:
+        self.mech, self.times, self.result = mech, np.array(times, float), result
+
+    def recall(self, mech: Mechanism, times: np.ndarray) -> Result | None:
+        same = self.mech is mech and self.times.shape == np.shape(times) and np.array_equal(self.times, times)
+        return self.result if same else None
+
+
+_LAST = _LastPass()
 
 
 def _track(
@@ -463,7 +495,11 @@ def _commensurate(times: np.ndarray, t_start: float) -> float | None:
 def _kinematic_pass(
     mech: Mechanism, times: np.ndarray, kin: _Kinematics | None = None, start: _State | None = None
 ) -> Result:
-    """Exudyn's kinematic solution over ``times`` (up to a limit, if the motion stops), on ``kin``'s model if given."""
+    """Exudyn's kinematic solution over ``times`` (up to a limit, if the motion stops), on ``kin``'s model if given
+    (the one this process computed last for the same mechanism and times, if any: :class:`_LastPass`)."""
+    known = _LAST.recall(mech, times)
+    if known is not None:
+        return known
     try:
         if kin is None or start is None:
             return _solve_kinematic(mech, times)
@@ -524,6 +560,65 @@ def dynamic_step(
         h = min(h, float(np.min(np.diff(t))))
     span = float(t[-1] - min(t[0], _assembly_time(mechanism)))
     return max(h, span / MAX_STEPS)
+
+
+# A run another engine disagrees with is integrated again at these targets (steps ≈ h/2, then ≈ h/3.2: the
+# finest the round-off floor allows, MIN_ACCURACY) before anything is blamed on it (refine).
+REFINE_ACCURACIES = (DEFAULT_ACCURACY / 4, MIN_ACCURACY)
+
+
+def refine(
+    mech: Mechanism, first: Result, stopped: bool, solve_at: Callable[[np.ndarray, float], Result] | None = None
+) -> tuple[Result | None, str, str]:
+    """Integrate the samples of ``first`` (all the file's if the run ``stopped``) again at finer steps, and estimate
+    each run's error from the run before it: generalized-α is second order, so for steps h₁ > h₂ (ρ = h₁/h₂) the
+    finer run's error is |r₁ − r₂|/(ρ² − 1) (Richardson). Exudyn's evidence only, never another engine's answer.
+
+    Returns (run, "", note) for the first finer run that is complete and whose estimate is within its allowance
+    (the stated tolerance of validators/tolerances.py plus its own round-off bound); (None, why, note) when none is:
+    the estimate stays above the allowance, or every step tried fails at the same sample (Newton rejects it).
+    ``solve_at(times, accuracy)``: the run at an accuracy target (default: :func:`solve` in dynamic mode)."""
+    from vloop.compare import compare
+
+    from .tolerances import DYNAMIC_STEPS, tolerance
+
+    times = np.asarray(mech.times if stopped else first.t, float)
+    budget = 4 * DYNAMIC_STEPS if stopped else None  # a stopped run: the same stretch of time, at most, at h/2
+    run = solve_at or (lambda t, acc: solve(mech, t, mode="dynamic", accuracy=acc, max_steps=budget))
+    stated = tolerance(ENGINES["dynamic"], "vloop")
+    prev, why = first, ""
+    steps, accuracies = [float(first.meta.get("step", 0.0))], [float(first.meta.get("accuracy", DEFAULT_ACCURACY))]
+    for acc in REFINE_ACCURACIES:
+        try:
+            res, failed = run(times, acc), ""
+        except MotionError as exc:
+            res, failed = exc.partial, str(exc).split(": ", 2)[-1]
+        steps.append(float(res.meta.get("step", steps[-1] * math.sqrt(acc / accuracies[-1]))))
+        accuracies.append(acc)
+        n = min(len(prev), len(res))
+        alike = bool(failed) and stopped and len(res) == len(first)  # it stops where it stopped: a limit, not a step
+        if alike:
+            n = max(int(0.9 * (n - 1)), 0)  # next to a limit every rate grows without bound: as the harness compares
+        rho2 = (steps[-2] / steps[-1]) ** 2 if steps[-1] > 0 and steps[-2] > 0 else 4.0
+        k = rho2 - 1.0
+        scaled = {g: k * v for g, v in stated.as_dict()["rtol"].items()}
+        own = {g: k * np.asarray(a, float)[:n] for g, a in (res.meta.get("allowance") or {}).items()}
+        est = compare(res.head(n), prev.head(n), scaled, floor=scaled, atol_t=own or None)
+        worst = max(est.errors, key=lambda e: e.max_abs / max(e.tol, 1e-300), default=None)
+        tried = ", ".join(f"{h:.3g}" for h in steps)
+        if failed and not alike:
+            why = f"its time integration fails at sample {len(res)} at every step tried (h = {tried} s): {failed}"
+        elif worst is not None and not est.passed:
+            why = (
+                f"its own error estimate (Richardson, runs at h = {tried} s) is {worst.max_abs / worst.tol:.3g}× its "
+                f"allowance at t = {worst.t_at_max:.6g} s ({worst.column})"
+            )
+        else:
+            if first.meta.get("budget") and not res.meta.get("budget"):  # the same first samples, by design
+                res.meta["budget"] = {**first.meta["budget"], "samples": len(res)}
+            return res, "", f"integrated again at h = {steps[-1]:.3g} s (own error estimate within its allowance)"
+        prev = res
+    return None, why, f"integrated again at h = {', '.join(f'{h:.3g}' for h in steps[1:])} s"
 
 
 class _Quiet:
@@ -742,6 +837,7 @@ def _integration_failed(
 ) -> MotionError:
     """The MotionError of a time integration that stopped, with the samples recorded before it."""
     partial = _dynamic_result(mech, engine, model, times, records, complete=False)
+    partial.meta["step"] = float(h)  # what was tried, for a second look's account
     k_fail = len(partial)
     t_fail = float(times[min(k_fail, len(times) - 1)])
     reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -12,6 +12,7 @@ the engines stop within one sample of each other and agree before that.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import importlib.metadata
 import itertools
@@ -30,7 +31,7 @@ from vloop.errors import MechanismError, MotionError, VloopError
 from vloop.mechanism import Mechanism
 from vloop.result import Result
 
-from .consensus import Verdict, decide, tally
+from .consensus import STATUSES, Verdict, decide, tally
 from .engines import ENGINES as REGISTRY
 from .engines import engine
 from .tolerances import TOLERANCES, Tolerance, conditioning_floor, pair_tolerance, tolerance
@@ -94,15 +95,24 @@ class MechanismValidation:
     corpus: dict[str, Any] | None = None  # the generated file's sidecar (validators.corpus): family, seed, expectations
     expectation: dict[str, Any] | None = None  # what the sidecar expected of every engine, and what happened
     verdict: Verdict | None = None  # who is the odd one out when the engines disagree (validators.consensus)
+    inconclusive: dict[str, str] = field(default_factory=dict)  # engine -> why it cannot resolve this mechanism
 
     @property
     def passed(self) -> bool:
+        """Every comparison within its tolerance, every engine ran, the generator's expectations met (strict)."""
         return (
             not self.error
             and all(c.passed for c in self.checks)
             and all(r.status in ("ok", "stopped", "skipped") for r in self.runs.values())
             and (self.expectation is None or self.expectation["passed"])
         )
+
+    @property
+    def red(self) -> bool:
+        """Whether vloop may be wrong here (consensus.Verdict.red): vloop blamed, or undecided."""
+        if self.passed:
+            return False
+        return self.verdict is None or self.verdict.red
 
 
 @dataclass
@@ -113,13 +123,24 @@ class Validation:
     seconds: float
     versions: dict[str, str]
     runner: dict[str, Any] = field(default_factory=dict)  # how the tasks ran (vloop.runner settings)
+    outcomes: list[Outcome] | None = None  # with a dataset: every mechanism's few numbers (items: those shown)
 
     @property
     def passed(self) -> bool:
+        if self.outcomes is not None:
+            return all(o.passed for o in self.outcomes)
         return all(it.passed for it in self.items)
 
     @property
+    def red(self) -> bool:
+        if self.outcomes is not None:
+            return any(o.red for o in self.outcomes if not o.error)
+        return any(it.red for it in self.items if not it.error)
+
+    @property
     def bad_input(self) -> bool:
+        if self.outcomes is not None:
+            return any(o.error for o in self.outcomes)
         return any(it.error for it in self.items)
 
 
@@ -310,7 +331,7 @@ def verdict(item: MechanismValidation) -> Verdict:
     voters = [e for e, r in item.runs.items() if r.status != "skipped"]
     skipped = [e for e, r in item.runs.items() if r.status == "skipped"]
     if item.passed:
-        return decide(voters, {}, skipped)
+        return decide(voters, {}, skipped, item.inconclusive)
     _cross_checks(item)
     against = {(c.engine, c.reference): c.message for c in item.checks if not c.passed}
     exp = item.expectation
@@ -326,7 +347,37 @@ def verdict(item: MechanismValidation) -> Verdict:
             v = decide(voters, {}, skipped)
             v.status, v.reason = "undecided", f"every engine agrees, but not with the generator: {exp['message']}"
             return v
-    return decide(voters, against, skipped)
+    return decide(voters, against, skipped, item.inconclusive)
+
+
+def _second_looks(item: MechanismValidation, engines: tuple[str, ...], suspects: set[str]) -> None:
+    """Each suspect reference engine (blamed or undecided by a first verdict) looks again at its own run
+    (engines.Engine.second_look): a better run replaces its first and the comparisons are made again; an engine
+    that finds by its own evidence that it cannot resolve the mechanism is inconclusive on it. vloop, the engine
+    under test, gets no second look. Then the verdict again."""
+    redo = False
+    for name in sorted(suspects - {"vloop"}):
+        run = item.runs.get(name)
+        if run is None or run.result is None or item.mechanism is None or run.status not in ("ok", "stopped"):
+            continue
+        try:
+            look = engine(name).second_look(item.mechanism, run.result, run.status == "stopped")
+        except Exception as exc:  # a second look that fails leaves the first run as it was, and says so
+            run.message = "; ".join(filter(None, [run.message, f"second look failed: {type(exc).__name__}: {exc}"]))
+            continue
+        if look is None:
+            continue
+        run.message = "; ".join(filter(None, [run.message, look.note]))
+        if look.result is not None:  # a run that stopped and stops again where it did keeps its status
+            same_stop = run.status == "stopped" and len(look.result) == run.samples
+            run.result, run.status, redo = look.result, "stopped" if same_stop else "ok", True
+        elif look.inconclusive:
+            item.inconclusive[name] = look.inconclusive
+    if redo:
+        item.checks = []
+        _checks(item, engines)
+        item.expectation = expectation(item)
+    item.verdict = verdict(item)
 
 
 def _finalize(item: MechanismValidation, engines: tuple[str, ...], keep_results: bool) -> None:
@@ -334,6 +385,9 @@ def _finalize(item: MechanismValidation, engines: tuple[str, ...], keep_results:
     _checks(item, engines)
     item.expectation = expectation(item)
     item.verdict = verdict(item)
+    suspects = {e for e, s in item.verdict.engines.items() if s in ("blamed", "undecided")} - {"vloop"}
+    if suspects and not item.passed:
+        _second_looks(item, engines, suspects)
     if not keep_results and item.corpus is not None and item.passed:
         for r in item.runs.values():
             r.drop_result()
@@ -369,12 +423,6 @@ def _run_line(name: str, run: EngineRun) -> str:
     return f"{name}: {run.engine} {run.status} in {run.seconds:.2f} s{extra}"
 
 
-def engine_task(task: tuple[str, Mechanism]) -> EngineRun:
-    """One task of a validation run (what a Dask worker executes): one engine on one mechanism."""
-    name, mech = task
-    return run_engine(name, mech)
-
-
 def load_items(paths: Iterable[str | Path]) -> list[MechanismValidation]:
     """Load every file (a bad one becomes an item with its error) and its corpus sidecar, if any."""
     from validators.corpus import read_sidecar
@@ -392,6 +440,99 @@ def load_items(paths: Iterable[str | Path]) -> list[MechanismValidation]:
     return items
 
 
+@dataclass
+class Task:
+    """One mechanism to validate, where a worker runs it: the file (loaded there unless ``mechanism`` is given),
+    the engines, the dataset folder its comparisons go to (None: the whole validation comes back), and whether a
+    failure comes back whole for the report (its Results) or as a few numbers."""
+
+    index: int
+    path: str
+    engines: tuple[str, ...]
+    dataset: str | None = None
+    keep: bool = True
+    mechanism: Mechanism | None = None
+    corpus: dict[str, Any] | None = None
+    keep_results: bool = False
+
+
+@dataclass
+class Outcome:
+    """What the main process keeps of a mechanism whose comparisons are in the dataset: a few numbers, and the whole
+    validation when the report shows it (a file of the catalog, a failure)."""
+
+    index: int
+    name: str
+    passed: bool
+    red: bool
+    error: str
+    seconds: float
+    item: MechanismValidation | None = None
+
+
+def mechanism_task(task: Task) -> MechanismValidation | Outcome:
+    """One task of a validation run (what a Dask worker executes): every engine on one mechanism, the comparisons,
+    the verdict (with the reference engines' second looks); with a dataset, its file written and an Outcome back."""
+    t0 = time.perf_counter()
+    item = _loaded(task)
+    if item.mechanism is not None:
+        for name in task.engines:
+            item.runs[name] = run_engine(name, item.mechanism)
+        _finalize(item, task.engines, keep_results=task.keep_results or task.dataset is not None)
+    if task.dataset is None:
+        return item
+    write_item(Path(task.dataset), task.index, item)
+    shown = task.keep and (item.corpus is None or not item.passed)
+    if not shown:
+        for r in item.runs.values():
+            r.drop_result()
+    keep = item if shown else None
+    return Outcome(task.index, item.name, item.passed, item.red, item.error, time.perf_counter() - t0, keep)
+
+
+def write_item(root: Path, index: int, item: MechanismValidation) -> Path:
+    """A validated mechanism's file of the dataset: its comparisons sample by sample, its summary entry."""
+    from . import dataset
+
+    pairs = []
+    for c in item.checks:
+        a, b = item.runs[c.engine].result, item.runs[c.reference].result
+        if c.comparison is not None and a is not None and b is not None:
+            pairs.append((c.engine, c.reference, a, b, c.samples))
+    family = (item.corpus or {}).get("family", "catalog")
+    rows = dataset.sample_columns(index, item.name, pairs)
+    return dataset.write_task(root, index, family, rows, mechanism_entry(item))
+
+
+def _loaded(task: Task) -> MechanismValidation:
+    """The task's mechanism (read from its file unless given) and its corpus sidecar; a bad file: its error."""
+    from validators.corpus import read_sidecar
+
+    path = Path(task.path)
+    if task.mechanism is not None:
+        return MechanismValidation(str(path), task.mechanism.name, task.mechanism, corpus=task.corpus)
+    try:
+        mech = vloop.load(path)
+        side = read_sidecar(path)
+    except VloopError as exc:
+        return MechanismValidation(str(path), path.stem, None, error=str(exc))
+    return MechanismValidation(str(path), mech.name, mech, corpus=side)
+
+
+def _lost(task: Task, error: str, seconds: float, worker: str) -> MechanismValidation:
+    """A task that gave nothing back (its worker died, it timed out): every engine's error, judged as such."""
+    item = (
+        _loaded(task)
+        if task.mechanism is None
+        else MechanismValidation(task.path, task.mechanism.name, task.mechanism, corpus=task.corpus)
+    )
+    if item.mechanism is not None:
+        for e in task.engines:
+            item.runs[e] = EngineRun(e, "error", None, error, seconds, worker=worker)
+        _finalize(item, task.engines, keep_results=False)
+    return item
+
+
 def run(
     paths: Iterable[str | Path],
     engines: Iterable[str] = ENGINES,
@@ -403,15 +544,24 @@ def run(
     bar: bool | None = None,
     keep_results: bool = False,
     items: list[MechanismValidation] | None = None,
+    dataset: str | Path | None = None,
+    skip: Iterable[int] = (),
+    shown: int | None = None,
 ) -> Validation:
-    """Validate every mechanism file with every engine, each (mechanism, engine) one task of vloop.runner.
+    """Validate every mechanism file with every engine, each mechanism one task of vloop.runner (its engines, its
+    comparisons and its verdict where it runs).
 
-    In this process by default; ``workers=N`` on a local Dask cluster of N processes, ``scheduler=ADDRESS``
-    on a running one. A task that fails, crashes its worker or passes ``timeout`` [s] is that engine's
-    error. ``progress`` gets one line per finished task; ``bar`` as :func:`vloop.runner.run_tasks`'s
-    ``progress``. Results of generated files that pass are dropped once compared (``keep_results=False``)
-    so that a corpus of thousands fits in memory; the summary keeps their numbers. ``items``: the files already
-    loaded by :func:`load_items` (``paths`` is then not read again).
+    In this process by default; ``workers=N`` on a local Dask cluster of N processes, ``scheduler=ADDRESS`` on a
+    running one. A task that fails, crashes its worker or passes ``timeout`` [s] gives every engine of its mechanism
+    that error. ``progress`` gets one line per finished mechanism; ``bar`` as :func:`vloop.runner.run_tasks`'s
+    ``progress``.
+
+    Without ``dataset`` every validation comes back whole (Results of generated files that pass are dropped once
+    compared, ``keep_results=False``). With ``dataset`` (a folder) each worker writes its mechanism's file there
+    (:mod:`validators.dataset`) and sends back an :class:`Outcome`; ``Validation.items`` then holds only what a
+    report shows — the files that are not generated, and the first ``shown`` generated failures — and
+    ``Validation.outcomes`` one Outcome per mechanism: memory does not grow with the corpus. ``skip``: task
+    numbers already in the dataset (a resumed run). ``items``: the files already loaded by :func:`load_items`.
     """
     from vloop.runner import run_tasks
 
@@ -421,36 +571,99 @@ def run(
             raise MechanismError(f"unknown engine '{e}' (known: {', '.join(ENGINES)})", entry="engines")
     started = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     t0 = time.perf_counter()
-    items = load_items(paths) if items is None else items
-    tasks = [(k, e) for k, it in enumerate(items) if it.mechanism is not None for e in engines]
-    waiting = {k: len(engines) for k, _ in tasks}
-
-    def on_done(out: Any) -> None:
-        k, name = tasks[out.index]
-        item = items[k]
-        run_ = out.value if out.ok else EngineRun(name, "error", None, out.error, out.seconds)
-        run_.worker, run_.task_seconds = out.worker, out.seconds
-        item.runs[name] = run_
-        out.value = None
-        if progress:
-            progress(_run_line(item.name, run_))
-        waiting[k] -= 1
-        if waiting[k] == 0:
-            _finalize(item, engines, keep_results)
-
+    tasks = _tasks(paths, engines, items, dataset, keep_results)
+    skipped = set(skip)
+    todo = [t for t in tasks if t.index not in skipped]
+    state = _Gather(tasks, engines, progress, shown, dataset is not None)
     run_tasks(
-        engine_task,
-        [(e, items[k].mechanism) for k, e in tasks],
+        mechanism_task,
+        todo,
         scheduler=scheduler,
         workers=workers,
         timeout=timeout,
         progress=bar,
-        on_done=on_done,
+        on_done=lambda out: state.done(todo[out.index], out),
         label="validate",
     )
     mode = "scheduler" if scheduler else "local-cluster" if workers else "in-process"
-    runner = {"mode": mode, "workers": workers, "scheduler": scheduler, "timeout": timeout, "tasks": len(tasks)}
-    return Validation(items, engines, started, time.perf_counter() - t0, versions(), runner)
+    runner = {"mode": mode, "workers": workers, "scheduler": scheduler, "timeout": timeout, "tasks": len(todo)}
+    runner["resumed"] = len(tasks) - len(todo)
+    v = Validation(state.items(), engines, started, time.perf_counter() - t0, versions(), runner)
+    if dataset is not None:
+        v.outcomes = state.outcomes
+    return v
+
+
+def _tasks(
+    paths: Iterable[str | Path],
+    engines: tuple[str, ...],
+    items: list[MechanismValidation] | None,
+    dataset: str | Path | None,
+    keep_results: bool,
+) -> list[Task]:
+    """One task per file: in memory, the files loaded here (as before); with a dataset, paths only (the worker loads
+    its file: nothing per mechanism is held here)."""
+    root = None if dataset is None else str(dataset)
+    if items is None and root is not None:
+        return [Task(k, str(p), engines, root) for k, p in enumerate(paths)]
+    items = load_items(paths) if items is None else items
+    return [
+        Task(k, it.path, engines, root, mechanism=it.mechanism, corpus=it.corpus, keep_results=keep_results)
+        if it.mechanism is not None
+        else Task(k, it.path, engines, root)
+        for k, it in enumerate(items)
+    ]
+
+
+class _Gather:
+    """The main process's side of a run: each finished task's validation (in memory) or Outcome (with a dataset)."""
+
+    def __init__(self, tasks: list[Task], engines: tuple[str, ...], progress: Any, shown: int | None, streamed: bool):
+        self.tasks, self.engines, self.progress, self.streamed = tasks, engines, progress, streamed
+        self.shown = shown
+        self.whole: dict[int, MechanismValidation] = {}
+        self.outcomes: list[Outcome] = []
+        self.generated_shown = 0
+
+    def done(self, task: Task, out: Any) -> None:
+        value = out.value if out.ok else None
+        out.value = None  # the runner keeps its outcomes: nothing heavy in them
+        if value is None:
+            value = _lost(task, out.error or "no result", out.seconds, out.worker)
+            if self.streamed:
+                write_item(Path(task.dataset), task.index, value)  # type: ignore[arg-type]
+                value = Outcome(task.index, value.name, value.passed, value.red, value.error, out.seconds, value)
+        item = value.item if isinstance(value, Outcome) else value
+        if isinstance(value, Outcome):
+            self.outcomes.append(dataclasses.replace(value, item=None))
+        if item is not None:
+            for r in item.runs.values():
+                r.worker, r.task_seconds = r.worker or out.worker, r.task_seconds or out.seconds
+            if self._keep(item):
+                self.whole[task.index] = item
+        if self.progress:
+            self.progress(_done_line(value if item is None else item, out.seconds))
+
+    def _keep(self, item: MechanismValidation) -> bool:
+        if not self.streamed or item.corpus is None:
+            return True
+        if self.shown is not None and self.generated_shown >= self.shown:
+            return False
+        self.generated_shown += 1
+        return True
+
+    def items(self) -> list[MechanismValidation]:
+        return [self.whole[k] for k in sorted(self.whole)]
+
+
+def _done_line(x: Any, seconds: float) -> str:
+    """One progress line per mechanism: its name, pass / red / which engines failed, the task's time."""
+    what = "pass" if x.passed else "RED" if x.red else "failed (not red)"
+    what = "error: " + x.error[:120] if x.error else what
+    if isinstance(x, Outcome):
+        return f"{x.name}: {what} in {seconds:.2f} s"
+    bad = [f"{e} {r.status}" for e, r in x.runs.items() if r.status in ("error", "stopped")]
+    return f"{x.name}: {what} in {seconds:.2f} s" + (f" ({', '.join(bad)})" if bad else "")
 
 
 # ------------------------------------------------------------------ summary.json
@@ -495,76 +708,117 @@ def _comparison_entry(c: CheckedComparison) -> dict[str, Any]:
     }
 
 
-def to_summary(v: Validation) -> dict[str, Any]:
-    """The machine-readable summary (documented by validators/summary.schema.json)."""
-    mechs = []
-    for it in v.items:
-        entry: dict[str, Any] = {"name": it.name, "file": it.path, "passed": it.passed}
-        if it.error:
-            entry["error"] = it.error
-            entry.update(samples=None, loops=None, mobility=None, runs={}, comparisons=[])
-            mechs.append(entry)
-            continue
-        m = it.mechanism
-        L, J, M = m.gruebler()
-        entry.update(samples=len(m.times), loops=J - L + 1, mobility=M)
-        entry["runs"] = {
-            name: {
-                "status": r.status,
-                "samples": r.samples,
-                "seconds": r.seconds,
-                "message": r.message,
-                "worker": r.worker,
-                "task_seconds": r.task_seconds,
-                "cpu_seconds": r.cpu_seconds,
-            }
-            for name, r in it.runs.items()
+def mechanism_entry(it: MechanismValidation) -> dict[str, Any]:
+    """One mechanism's entry of summary.json: its runs, every comparison with every quantity's errors, the verdict."""
+    entry: dict[str, Any] = {"name": it.name, "file": it.path, "passed": it.passed}
+    if it.error:
+        entry["error"] = it.error
+        entry.update(samples=None, loops=None, mobility=None, runs={}, comparisons=[])
+        return entry
+    m = it.mechanism
+    L, J, M = m.gruebler()
+    entry.update(samples=len(m.times), loops=J - L + 1, mobility=M, red=it.red)
+    entry["runs"] = {
+        name: {
+            "status": r.status,
+            "samples": r.samples,
+            "seconds": r.seconds,
+            "message": r.message,
+            "worker": r.worker,
+            "task_seconds": r.task_seconds,
+            "cpu_seconds": r.cpu_seconds,
         }
-        if it.corpus is not None:
-            entry["corpus"] = _corpus_entry(it)
-        entry["comparisons"] = [_comparison_entry(c) for c in it.checks]
-        if it.verdict is not None:
-            entry["verdict"] = it.verdict.as_dict()
-        mechs.append(entry)
-    out = {
+        for name, r in it.runs.items()
+    }
+    if it.corpus is not None:
+        entry["corpus"] = _corpus_entry(it)
+    entry["comparisons"] = [_comparison_entry(c) for c in it.checks]
+    if it.verdict is not None:
+        entry["verdict"] = it.verdict.as_dict()
+    return entry
+
+
+def summary_head(v: Validation) -> dict[str, Any]:
+    """summary.json's fields before the mechanisms."""
+    return {
         "schema": SCHEMA,
         "created": v.started,
         "seconds": v.seconds,
         "passed": v.passed,
+        "red": v.red,
         "engines": list(v.engines),
         "versions": v.versions,
         "tolerances": {f"{a} vs {b}": t.as_dict() for (a, b), t in TOLERANCES.items()},
-        "mechanisms": mechs,
     }
-    out["verdicts"] = verdicts(v)
+
+
+def to_summary(v: Validation) -> dict[str, Any]:
+    """The machine-readable summary (documented by validators/summary.schema.json)."""
+    tally = Tally(v.engines)
+    mechs = []
+    for it in v.items:
+        mechs.append(mechanism_entry(it))
+        tally.add(mechs[-1])
+    out = summary_head(v) | {"mechanisms": mechs} | tally.fields()
     if v.runner:
         out["runner"] = v.runner
-    corpus = [it.corpus for it in v.items if it.corpus is not None]
-    if corpus:
-        out["corpus"] = {
-            "seeds": sorted({int(c["seed"]) for c in corpus}),
-            "mechanisms": len(corpus),
-            "families": _count(f"{c['family']}/{c['variant']}" for c in corpus),
-            "limit_runs": sum(1 for c in corpus if c["expect"].get("stop_sample") is not None),
-        }
     return out
 
 
-def verdicts(v: Validation) -> dict[str, Any]:
-    """Per engine: mechanisms passed, blamed on it, undecided, skipped; the verdicts' counts; where vloop is blamed."""
-    decided = [it for it in v.items if it.verdict is not None]
-    return {
-        "engines": tally((it.verdict for it in decided), v.engines),  # type: ignore[misc]
-        "mechanisms": _count(it.verdict.status for it in decided),  # type: ignore[union-attr]
-        "vloop_blamed": [it.name for it in decided if "vloop" in it.verdict.blamed],  # type: ignore[union-attr]
-    }
+class Tally:
+    """The summary's counts, gathered one mechanism entry at a time (memory: the counts and the names of the red
+    and the blamed ones), so that a summary can be written while its entries stream past."""
 
+    def __init__(self, engines: Iterable[str]) -> None:
+        self.engines = tuple(engines)
+        self.per_engine = tally((), self.engines)
+        self.status: dict[str, int] = {}
+        self.vloop_blamed: list[str] = []
+        self.red: list[str] = []
+        self.n = self.passed = 0
+        self.seeds: set[int] = set()
+        self.families: dict[str, int] = {}
+        self.generated = self.limit_runs = 0
 
-def _count(keys: Iterable[str]) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for k in keys:
-        out[k] = out.get(k, 0) + 1
-    return dict(sorted(out.items()))
+    def add(self, entry: dict[str, Any]) -> None:
+        self.n += 1
+        self.passed += bool(entry["passed"])
+        v = entry.get("verdict")
+        if v is not None:
+            for e, st in v["engines"].items():
+                self.per_engine.setdefault(e, dict.fromkeys(STATUSES, 0))[st] += 1
+            self.status[v["status"]] = self.status.get(v["status"], 0) + 1
+            if "vloop" in v["blamed"]:
+                self.vloop_blamed.append(entry["name"])
+        if entry.get("red"):
+            self.red.append(entry["name"])
+        c = entry.get("corpus")
+        if c is not None:
+            self.generated += 1
+            self.seeds.add(int(c["seed"]))
+            key = f"{c['family']}/{c.get('variant', '')}"
+            self.families[key] = self.families.get(key, 0) + 1
+            self.limit_runs += (c.get("expect") or {}).get("stop_sample") is not None
+
+    def fields(self) -> dict[str, Any]:
+        """The summary's fields after the mechanisms: verdicts, counts, and the corpus's when there is one."""
+        out: dict[str, Any] = {
+            "verdicts": {
+                "engines": self.per_engine,
+                "mechanisms": dict(sorted(self.status.items())),
+                "vloop_blamed": self.vloop_blamed,
+                "red": self.red,
+            },
+            "counts": {"mechanisms": self.n, "passed": self.passed, "red": len(self.red)},
+        }
+        if self.generated:
+            out["corpus"] = {
+                "seeds": sorted(self.seeds),
+                "mechanisms": self.generated,
+                "families": dict(sorted(self.families.items())),
+                "limit_runs": self.limit_runs,
+            }
+        return out
 
 
 def _corpus_entry(it: MechanismValidation) -> dict[str, Any]:
@@ -642,11 +896,12 @@ def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
-def comparison_table(summary: dict[str, Any]) -> Any:
-    """The rows of :func:`comparison_rows` as a pandas DataFrame with fixed columns and dtypes."""
+def comparison_table(summary: dict[str, Any], rows: list[dict[str, Any]] | None = None) -> Any:
+    """The rows of :func:`comparison_rows` (or ``rows``, made by it) as a pandas DataFrame with fixed columns and
+    dtypes."""
     import pandas as pd
 
-    df = pd.DataFrame(comparison_rows(summary), columns=list(TABLE_COLUMNS))
+    df = pd.DataFrame(comparison_rows(summary) if rows is None else rows, columns=list(TABLE_COLUMNS))
     for col in ("corpus_seed", "corpus_index", "samples"):
         df[col] = df[col].astype("Int64")
     for col in ("engine_seconds", "max_abs", "max_rel", "rms", "t_at_max", "peak", "allowed", "ratio"):
@@ -656,14 +911,16 @@ def comparison_table(summary: dict[str, Any]) -> Any:
     return df
 
 
-def write_table(summary: dict[str, Any], path: str | Path, fmt: str = "parquet") -> Path:
+def write_table(
+    summary: dict[str, Any], path: str | Path, fmt: str = "parquet", rows: list[dict[str, Any]] | None = None
+) -> Path:
     """Write the comparison table as ``fmt`` ("parquet" or "csv", vloop.files.writers.write_table): errors in the
     quantity's unit (see summary.json), times in s, ratios unitless; a non-finite error is a null."""
     from vloop.files.writers import write_table as write
 
     units = {"engine_seconds": "s", "t_at_max": "s", "max_rel": "1", "ratio": "1"}
     units.update(dict.fromkeys(("max_abs", "rms", "peak", "allowed"), "the quantity's"))
-    return write(comparison_table(summary), path, fmt, units, {"schema": SCHEMA})
+    return write(comparison_table(summary, rows), path, fmt, units, {"schema": SCHEMA})
 
 
 def write_parquet(summary: dict[str, Any], path: str | Path) -> Path:

@@ -5,6 +5,10 @@ by more than ``GROWTH`` times. Errors far below their tolerance are round-off an
 between library versions, so growth is measured on max(error, NOISE × allowed): a quantity at
 1e-16 that moves to 1e-15 is not news; one that moves from 1e-12 to 1e-10 of a 1e-9 tolerance is.
 An engine that ran before and fails now, and a comparison that disappeared, are flagged too.
+
+A flag is red (it makes the night red) when it may be vloop's: the mechanism's verdict is red now, or the flagged
+comparison is between vloop and an engine that passes on the mechanism (not blamed, not inconclusive). A flag
+between reference engines, or on an engine blamed or inconclusive now, is reported and is red only with --strict.
 """
 
 from __future__ import annotations
@@ -48,13 +52,18 @@ def _key(m: dict[str, Any]) -> str:
     return f"{m['name']}@seed{c['seed']}" if c else m["name"]
 
 
-def _index(summary: dict[str, Any]) -> dict[tuple[str, str, str, str], dict[str, Any]]:
-    out = {}
+def _index(summary: dict[str, Any]) -> tuple[dict[tuple[str, str, str, str], dict], dict[tuple[str, str, str], dict]]:
+    """The previous night by quantity (where its comparisons list every quantity) and by comparison (where they
+    keep only their worst: a summary written from the dataset)."""
+    by_q, by_c = {}, {}
     for m in summary.get("mechanisms", []):
         for c in m.get("comparisons", []):
-            for q in c.get("quantities", []):
-                out[(_key(m), c["engine"], c["reference"], q["quantity"])] = q
-    return out
+            if c.get("quantities"):
+                for q in c["quantities"]:
+                    by_q[(_key(m), c["engine"], c["reference"], q["quantity"])] = q
+            elif c.get("worst"):
+                by_c[(_key(m), c["engine"], c["reference"])] = {**c["worst"], "passed": bool(c.get("passed", True))}
+    return by_q, by_c
 
 
 def _err(q: dict[str, Any]) -> float:
@@ -62,58 +71,105 @@ def _err(q: dict[str, Any]) -> float:
     return float("inf") if isinstance(v, str) else float(v)
 
 
+def _ratio(q: dict[str, Any]) -> float:
+    return _err(q) / max(float(q["allowed"]), 1e-300)
+
+
+def _flag(
+    m: dict[str, Any], c: dict[str, Any], q: dict[str, Any], p: dict[str, Any], by_ratio: bool
+) -> dict[str, Any] | None:
+    """A flag when ``q`` (now) crossed its tolerance or grew more than GROWTH times against ``p`` (before): errors
+    measured above NOISE of the allowance; ``by_ratio``: the comparison's worst, as error over allowance."""
+    before, after = (_ratio(p), _ratio(q)) if by_ratio else (_err(p), _err(q))
+    floor = NOISE if by_ratio else NOISE * float(q["allowed"])
+    passed_now = q.get("passed", _err(q) <= float(q["allowed"])) if not by_ratio else c.get("passed", after <= 1)
+    if p["passed"] and not passed_now:
+        kind = "crossed tolerance"
+    elif max(after, floor) > GROWTH * max(before, floor):
+        kind = f"grew more than {GROWTH:g}x"
+    else:
+        return None
+    engine, ref, quantity, mech = c["engine"], c["reference"], q["quantity"], _key(m)
+    what = " (of its allowance)" if by_ratio else ""
+    return {
+        "mechanism": mech,
+        "engine": engine,
+        "reference": ref,
+        "quantity": quantity,
+        "kind": kind,
+        "before": before,
+        "after": after,
+        "allowed": 1.0 if by_ratio else q["allowed"],
+        "red": _red(m, engine, ref),
+        "message": (
+            f"{mech}: {engine} vs {ref}: {quantity} {kind} ({before:.3g} -> {after:.3g}{what}, "
+            f"allowed {1.0 if by_ratio else q['allowed']:.3g})"
+        ),
+    }
+
+
+def _red(m: dict[str, Any] | None, engine: str, reference: str) -> bool:
+    """Whether a flag on ``engine`` vs ``reference`` of mechanism ``m`` (its current entry) may be vloop's."""
+    verdict = (m or {}).get("verdict") or {}
+    if verdict.get("red"):
+        return True
+    if "vloop" not in (engine, reference):
+        return False
+    other = reference if engine == "vloop" else engine
+    return not other or verdict.get("engines", {}).get(other, "pass") == "pass"
+
+
+class Previous:
+    """The previous night, indexed once (by quantity, by comparison, by run), to flag tonight's entries one by one."""
+
+    def __init__(self, previous: dict[str, Any]) -> None:
+        self.by_q, self.by_c = _index(previous)
+        self.runs = {(_key(m), e): r for m in previous.get("mechanisms", []) for e, r in m.get("runs", {}).items()}
+
+    def flags(self, m: dict[str, Any]) -> list[dict[str, Any]]:
+        """Tonight's entry ``m`` against the previous night: its flags."""
+        flags: list[dict[str, Any] | None] = []
+        for c in m.get("comparisons", []):
+            pc = self.by_c.get((_key(m), c["engine"], c["reference"]))
+            if pc is not None and c.get("worst"):
+                flags.append(_flag(m, c, c["worst"], pc, by_ratio=True))
+                continue
+            for q in c.get("quantities") or ():
+                p = self.by_q.get((_key(m), c["engine"], c["reference"], q["quantity"]))
+                if p is not None:
+                    flags.append(_flag(m, c, q, p, by_ratio=False))
+        flags += _engine_flags(m, self.runs)
+        return [f for f in flags if f is not None]
+
+
 def compare_summaries(current: dict[str, Any], previous: dict[str, Any]) -> list[dict[str, Any]]:
-    """Flags (one dict each: mechanism, engine, reference, quantity, kind, before, after, message)."""
-    flags: list[dict[str, Any]] = []
-    cur, prev = _index(current), _index(previous)
-    for key, q in cur.items():
-        p = prev.get(key)
-        if p is None:
-            continue
-        mech, engine, ref, quantity = key
-        before, after = _err(p), _err(q)
-        floor = NOISE * float(q["allowed"])
-        if p["passed"] and not q["passed"]:
-            kind = "crossed tolerance"
-        elif max(after, floor) > GROWTH * max(before, floor):
-            kind = f"grew more than {GROWTH:g}x"
-        else:
-            continue
-        flags.append(
-            {
-                "mechanism": mech,
-                "engine": engine,
-                "reference": ref,
-                "quantity": quantity,
-                "kind": kind,
-                "before": before,
-                "after": after,
-                "allowed": q["allowed"],
-                "message": (
-                    f"{mech}: {engine} vs {ref}: {quantity} {kind} "
-                    f"({before:.3g} -> {after:.3g}, allowed {q['allowed']:.3g})"
-                ),
-            }
-        )
-    prev_runs = {(_key(m), e): r for m in previous.get("mechanisms", []) for e, r in m.get("runs", {}).items()}
-    for m in current.get("mechanisms", []):
-        for e, r in m.get("runs", {}).items():
-            before = prev_runs.get((_key(m), e))
-            if before is not None and before["status"] in ("ok", "stopped") and r["status"] == "error":
-                flags.append(
-                    {
-                        "mechanism": m["name"],
-                        "engine": e,
-                        "reference": "",
-                        "quantity": "",
-                        "kind": "engine failed",
-                        "before": before["status"],
-                        "after": r["status"],
-                        "allowed": 0.0,
-                        "message": f"{m['name']}: {e} ran before and fails now: {r['message'][:200]}",
-                    }
-                )
-    return flags
+    """Flags (one dict each: mechanism, engine, reference, quantity, kind, before, after, red, message), in one pass
+    over ``current["mechanisms"]`` (any iterable of entries)."""
+    prev = Previous(previous)
+    return [f for m in current.get("mechanisms", []) for f in prev.flags(m)]
+
+
+def _engine_flags(m: dict[str, Any], prev_runs: dict[tuple[str, str], dict]) -> list[dict[str, Any]]:
+    """An engine that ran before (ok or stopped) and fails now."""
+    out = []
+    for e, r in m.get("runs", {}).items():
+        before = prev_runs.get((_key(m), e))
+        if before is not None and before["status"] in ("ok", "stopped") and r["status"] == "error":
+            out.append(
+                {
+                    "mechanism": m["name"],
+                    "engine": e,
+                    "reference": "",
+                    "quantity": "",
+                    "kind": "engine failed",
+                    "before": before["status"],
+                    "after": r["status"],
+                    "allowed": 0.0,
+                    "red": e == "vloop" or bool((m.get("verdict") or {}).get("red")),
+                    "message": f"{m['name']}: {e} ran before and fails now: {r['message'][:200]}",
+                }
+            )
+    return out
 
 
 MAX_SUMMARY_BYTES = 1 << 30

@@ -472,6 +472,13 @@ MAX_SLIDER_STEP = 0.05
 # Taylor prediction by less than this fraction of the predicted move: on the smooth branch the predictor
 # errs by O(h³) against a move of O(h); a jump to the other branch needs a correction of O(move).
 CROSS_JUMP = 0.01
+# Every step, not only one across det J = 0: Newton's correction of the prediction, and the velocities' departure
+# from the predicted ones (v + h·a) times h, must stay below JUMP_RATIO of the predicted move (+ JUMP_FLOOR for a
+# mechanism at rest). On the branch followed both are O(h³) against a move of O(h); a landing on the other branch
+# that meets this one at a change point keeps det J's sign (the branches cross) and differs by about the move, in
+# the velocities even where the two branches' positions are close. The step is then bisected.
+JUMP_RATIO = 0.1
+JUMP_FLOOR = 1e-9
 
 
 class _NoConvergence(Exception):
@@ -561,9 +568,26 @@ class _Solver:
         a = np.linalg.solve(J, rhs)
         return _State(t, q, v, a, float(np.sign(np.linalg.det(J))), float(np.max(np.abs(self.w.weights * F))), cond, it)
 
-    def step(self, prev: _State, t: float, x: np.ndarray, xd: np.ndarray, xdd: np.ndarray, guess: np.ndarray) -> _State:
+    def step(
+        self,
+        prev: _State,
+        t: float,
+        x: np.ndarray,
+        xd: np.ndarray,
+        xdd: np.ndarray,
+        guess: np.ndarray,
+        on_path: bool = True,
+    ) -> _State:
+        """One continuation step; ``on_path``: held to the predicted path (JUMP_RATIO), which the last bisection
+        level is not (a step that short is taken as Newton lands it, as before the path was checked)."""
         q, F, J, it = self.project(guess, x)
         st = self.state(t, q, F, J, xd, xdd, it)
+        sc, dt = self.pm.q_scale, t - prev.t
+        move = float(np.max(np.abs(guess - prev.q) / sc))
+        correction = float(np.max(np.abs(q - guess) / sc))
+        turned = float(np.max(np.abs(st.v - prev.v - dt * prev.a) / sc)) * abs(dt)
+        if on_path and max(correction, turned) > JUMP_RATIO * move + JUMP_FLOOR:
+            raise _NoConvergence("Newton left the predicted path (the other branch of a change point, or a toggle)")
         if st.det_sign != prev.det_sign and not self.smooth(prev, q, guess):
             # crossed det J = 0 off the predicted path: a limit/toggle or a jump to the other branch
             raise _NoConvergence("assembly branch changed (the constraint Jacobian's determinant changed sign)")
@@ -605,7 +629,7 @@ class _Solver:
         try:
             if far and depth < self.max_bisect:
                 raise _NoConvergence("predicted move too long")
-            return self.step(prev, t, x, xd, xdd, guess)
+            return self.step(prev, t, x, xd, xdd, guess, on_path=depth < self.max_bisect)
         except _NoConvergence:
             if depth >= self.max_bisect:
                 raise

@@ -3,13 +3,19 @@
 Every input is checked before any engine runs: the engines (a list that can compare something), the runner (a
 scheduler that answers), the previous summary a nightly run compares with (UTF-8 JSON of the summary's shape,
 finite numbers), the corpus options and the output folder (writable). Then the corpus is generated, the files
-loaded (a bad file is reported in the summary, the others validated), the tasks run, and ``summary.json``,
-``comparisons.FMT``, ``report.html`` (with its ``viewer/`` pages), ``corpus.html`` and the minimized failures
-written and published together (:class:`vloop.files.output.OutputSet`): Ctrl-C leaves the previous set or the new
-one, and no file of the previous set stays beside the new one.
+loaded by the workers (a bad file is reported in the summary, the others validated), one task per mechanism run,
+each writing its comparisons to the dataset ``comparisons/`` (validators.dataset), and ``summary.json``,
+``comparisons.FMT`` (streamed from the dataset: validators.streamed), ``report.html`` (with its ``viewer/`` pages),
+``corpus.html``, the nightly's ``trend.json`` and ``history.html`` and the minimized failures written and published
+together (:class:`vloop.files.output.OutputSet`): Ctrl-C leaves the previous set or the new one, and no file of the
+previous set stays beside the new one. The run in progress (its identity and the dataset) is kept in
+``OUT/.vloop-run`` until it is published: ``--resume`` continues it after Ctrl-C, a SIGKILL or a restart.
 
-Exit codes: 0 every comparison passed; 1 a comparison failed its tolerance (or a nightly flag was raised);
-2 bad input (a file, an option, the previous summary) or nothing to compare.
+Exit codes (docs/validation.md, "Exit status"): 1 when vloop may be wrong — vloop blamed by the consensus, a
+mechanism undecided, or a nightly flag that may be vloop's; 0 otherwise, also when a reference engine is blamed by
+engines that agree with vloop or is inconclusive (reported in the table, the summary and the pages), unless
+``--strict`` (then any failed comparison or flag is 1); 2 bad input (a file, an option, the previous summary) or
+nothing to compare.
 """
 
 from __future__ import annotations
@@ -29,53 +35,64 @@ from vloop.errors import VloopError
 from . import harness, nightly
 from .tolerances import TOLERANCES
 
-OWNS = ("summary.json", "comparisons.csv", "comparisons.parquet", "report.html", "corpus.html", "viewer", "*-min.*")
+OWNS = ("summary.json", "comparisons.csv", "comparisons.parquet", "comparisons", "report.html", "corpus.html", "viewer")
+OWNS += ("*-min.*", "trend.json", "history.html")
 MAX_CORPUS_SECTIONS = 20  # generated failures shown in report.html (a broken night must not make 1,000 sections)
 
 
 def validate(args: argparse.Namespace, started: float | None = None) -> int:
     """``vloop validate``: check every input, run, write and publish one set, print the table; the exit code."""
-    from vloop.files.output import OutputSet, ensure_folder
+    import shutil
 
-    from . import dynamics_check
+    from vloop.files.output import OutputSet, ensure_folder
 
     started = time.perf_counter() if started is None else started
     engines = tuple(args.engines)
     _check_runner(args)
     root = Path(args.out)
-    out = nightly.dated_folder(root) if args.nightly else root
+    out = _out_folder(args, root)
     previous = _previous(args, root, out)
     families = parse_families(args.families)
     files = _validate_files(args)
     if not files and args.corpus is None:
         raise VloopError("validate: name mechanism files or folders, use --all, or --corpus N", entry="files")
-    ensure_folder(root)
+    ensure_folder(out)
+    work = _work(out, args, engines, files)
     with OutputSet(out, owns=OWNS) as outset:
         corpus_info = None
         if args.corpus is not None:
             generated, corpus_info = _generate(args, families, outset)
             files += generated
-        items = harness.load_items(files)
-        _check_something_to_compare(items, engines)
-        validation = _run(items, engines, args)
-        dynamics_ok, dynamics_lines, dynamics = _dynamics(items, engines)
+        _check_something_to_compare(files, engines)
+        validation = _run(files, engines, args, work)
+        dynamics_ok, dynamics_lines, dynamics = _dynamics(files, engines)
         ran = time.perf_counter()
-        summary = _summary(validation, engines, args, corpus_info, previous, outset)
-        dynamics_check.add_to_summary(summary, {str(outset.final(p)): e for p, e in dynamics.items()})
-        written = _write(validation, summary, outset, args)
+        summary = _summary(validation, args, corpus_info, previous, outset, work, dynamics)
+        written = _write(validation, summary, outset, args, work)
+    shutil.rmtree(work, ignore_errors=True)
     for line in _report_lines(summary, written, ran - started, time.perf_counter() - started):
         print(line)
     for line in dynamics_lines:
         print(line)
-    if validation.bad_input:
+    if validation.bad_input or any(m.get("error") for m in summary["mechanisms"]):
         return 2
-    return 0 if validation.passed and dynamics_ok and not summary.get("nightly", {}).get("flags") else 1
+    return max(exit_status(summary, getattr(args, "strict", False)), 0 if dynamics_ok else 1)
 
 
-def _dynamics(items: list[Any], engines: tuple[str, ...]) -> tuple[bool, list[str], dict[str, list[dict]]]:
+def exit_status(summary: dict, strict: bool = False) -> int:
+    """1 when vloop may be wrong (a red mechanism, a red nightly flag); with ``strict`` also any failed comparison
+    or flag; else 0."""
+    flags = summary.get("nightly", {}).get("flags") or []
+    if summary.get("red") or any(f.get("red", True) for f in flags):
+        return 1
+    return 1 if strict and (not summary["passed"] or flags) else 0
+
+
+def _dynamics(files: list[Path], engines: tuple[str, ...]) -> tuple[bool, list[str], dict[str, list[dict]]]:
     """The files with a [dynamics] section: vloop.simulate against Exudyn and Pinocchio (validators.dynamics_check),
     those of the two the engines name: whether every comparison passed, the lines to print (one per engine) and
-    summary.json's "dynamics" entries by file."""
+    summary.json's "dynamics" entries by file (as given). Each such file is read here on its own, so the run's
+    memory stays that of one mechanism."""
     from . import dynamics_check
 
     chosen = tuple(
@@ -84,20 +101,33 @@ def _dynamics(items: list[Any], engines: tuple[str, ...]) -> tuple[bool, list[st
         if any(e.startswith(wanted) for e in engines)
     )
     ok, lines, entries = True, [], {}
-    for it in items if chosen else []:
-        mech = getattr(it, "mechanism", None)
-        if mech is None or mech.dynamics is None or len(mech.drivers) != 1:
+    for path in files if chosen else []:
+        mech = _with_dynamics(path)
+        if mech is None:
             continue
         try:
             rows = dynamics_check.compare(mech, engines=chosen)
         except VloopError as exc:
             lines.append(f"  {mech.name}: dynamics not compared: {exc}")
-            entries[it.path] = [{"engine": e, "verdict": "not compared", "message": str(exc)} for e in chosen]
+            entries[str(path)] = [{"engine": e, "verdict": "not compared", "message": str(exc)} for e in chosen]
             continue
         ok &= all(r.passed for r in rows)
         lines += dynamics_check.lines(mech.name, rows)
-        entries[it.path] = dynamics_check.summary_entries(rows)
+        entries[str(path)] = dynamics_check.summary_entries(rows)
     return ok, lines, entries
+
+
+def _with_dynamics(path: Path) -> Any:
+    """The file's Mechanism where it has a one-input [dynamics] section (a cheap look at its text first), else None."""
+    import vloop
+
+    try:
+        if "dynamics" not in Path(path).read_text(encoding="utf-8"):
+            return None
+        mech = vloop.load(path)
+    except (OSError, UnicodeDecodeError, VloopError):
+        return None  # the kinematic comparison reports an unreadable file
+    return mech if mech.dynamics is not None and len(mech.drivers) == 1 else None
 
 
 def _check_runner(args: argparse.Namespace) -> None:
@@ -159,31 +189,30 @@ def corpus_options(args: argparse.Namespace) -> str:
 
 
 def _generate(args: argparse.Namespace, families: list[str] | None, outset: Any) -> tuple[list[Path], dict]:
-    """--corpus N: a fresh corpus inside the output set; its seed (drawn if not given) goes to the summary."""
-    import secrets
-
+    """--corpus N: a fresh corpus inside the output set, written as it is drawn; its seed goes to the summary."""
     from . import corpus
 
-    seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
+    seed = args.seed
     folder = outset.path(f"corpus-{seed}")
-    items, refused = corpus.generate(
-        args.corpus, seed, start=args.start, families=families, limit_fraction=args.limit_fraction
+    files = corpus.generate_into(
+        folder, args.corpus, seed, start=args.start, families=families, limit_fraction=args.limit_fraction
     )
-    corpus.write(items, folder, seed=seed, refused=refused, start=args.start, limit_fraction=args.limit_fraction)
     info = {
         "seed": seed,
-        "n": len(items),
+        "n": len(files),
         "start": args.start,
         "folder": str(outset.final(folder)),
-        "command": nightly.corpus_command(seed, len(items), args.start, corpus_options(args)),
+        "command": nightly.corpus_command(seed, len(files), args.start, corpus_options(args)),
     }
-    return [folder / f"{it.name}.toml" for it in items], info
+    return files, info
 
 
-def _check_something_to_compare(items: list[Any], engines: tuple[str, ...]) -> None:
+def _check_something_to_compare(files: list[Path], engines: tuple[str, ...]) -> None:
     """Refuse a validation that would validate nothing: no pair of the engines has a tolerance on any file (and no
-    file is a generated one, whose sidecar's expectations every engine is checked against)."""
-    for it in items:
+    file is a generated one, whose sidecar's expectations every engine is checked against). Files are read one at a
+    time until one answers."""
+    for path in files:
+        (it,) = harness.load_items([path])
         if it.error or (it.corpus and "expect" in it.corpus):
             return
         applies = [e for e in engines if harness.engine_applies(e, it.mechanism)]
@@ -191,99 +220,188 @@ def _check_something_to_compare(items: list[Any], engines: tuple[str, ...]) -> N
             return
     raise VloopError(
         f"validate: nothing to compare: --engines {','.join(engines)} makes no comparison on "
-        f"{'this file' if len(items) == 1 else f'these {len(items)} files'} (every comparison is of an engine against "
+        f"{'this file' if len(files) == 1 else f'these {len(files)} files'} (every comparison is of an engine against "
         "vloop or analytic, and analytic needs a closed form: e.g. --engines vloop,pinocchio)",
         entry="engines",
     )
 
 
-def _run(items: list[Any], engines: tuple[str, ...], args: argparse.Namespace) -> Any:
+# ---------------------------------------------------------------- the run in progress: resumable from disk
+
+WORK = ".vloop-run"  # in the output folder while a run is in progress; kept when it is interrupted
+DATASET = "comparisons"  # the comparison dataset's folder (validators.dataset), published with the set
+
+
+def _out_folder(args: argparse.Namespace, root: Path) -> Path:
+    """--out, or with --nightly a new dated folder under it — with --resume the newest one an interrupted run left."""
+    if not args.nightly:
+        return root
+    if getattr(args, "resume", False) and root.is_dir():
+        left = sorted((p for p in root.iterdir() if (p / WORK / "run.json").is_file()), key=lambda p: p.name)
+        if left:
+            return left[-1]
+    return nightly.dated_folder(root)
+
+
+def _identity(args: argparse.Namespace, engines: tuple[str, ...], files: list[Path]) -> dict[str, Any]:
+    """What makes two runs the same run (a resumed one must be): engines, files, the corpus's parameters."""
+    corpus = None
+    if args.corpus is not None:
+        corpus = {
+            "n": args.corpus,
+            "seed": args.seed,
+            "start": args.start,
+            "families": args.families,
+            "limit_fraction": args.limit_fraction,
+        }
+    return {"engines": list(engines), "files": [str(Path(f).resolve()) for f in files], "corpus": corpus}
+
+
+def _work(out: Path, args: argparse.Namespace, engines: tuple[str, ...], files: list[Path]) -> Path:
+    """The run's work folder, out/.vloop-run: its identity (run.json) and the comparisons done so far. --resume
+    continues the one there (refused if it is another run: other engines, files or corpus); otherwise a run left
+    there is discarded and a fresh one started. A corpus without --seed draws one here (a resumed run reuses it)."""
+    import secrets
+    import shutil
+
+    work = out / WORK
+    stored = _stored(work)
+    resume = getattr(args, "resume", False)
+    if args.corpus is not None and args.seed is None:
+        have = (stored or {}).get("corpus") or {}
+        args.seed = have.get("seed") if resume and have.get("seed") is not None else secrets.randbelow(2**31)
+    ident = _identity(args, engines, files)
+    if stored is not None and resume:
+        if stored != ident:
+            diff = ", ".join(k for k in ident if ident[k] != stored.get(k))
+            raise VloopError(
+                f"--resume: the interrupted run in {out} is another run (its {diff} differ); "
+                "repeat its options, or leave out --resume to start again",
+                entry="resume",
+            )
+        return work
+    if stored is not None or work.exists():
+        print(f"vloop: discarding the interrupted run in {work} (--resume continues it)", file=sys.stderr)
+        shutil.rmtree(work, ignore_errors=True)
+    elif resume:
+        print(f"vloop: --resume: no interrupted run in {out}; starting one", file=sys.stderr)
+    (work / DATASET).mkdir(parents=True, exist_ok=True)
+    from vloop.files.output import write_text
+
+    write_text(work / "run.json", json.dumps(ident, indent=1))
+    return work
+
+
+def _stored(work: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads((work / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def _run(files: list[Path], engines: tuple[str, ...], args: argparse.Namespace, work: Path) -> Any:
+    """Every file one task; the comparisons to work/comparisons; the tasks already there skipped."""
+    from . import dataset
+
     bar = sys.stderr.isatty()
 
     def progress(msg: str) -> None:
         if not bar:
             print(msg, file=sys.stderr, flush=True)
 
+    done = dataset.done(work / DATASET)
+    if done:
+        print(f"vloop: resuming: {len(done)} of {len(files)} mechanisms already validated", file=sys.stderr)
     return harness.run(
-        [it.path for it in items],
+        files,
         engines,
         progress=progress,
         scheduler=args.scheduler,
         workers=args.workers,
         timeout=args.timeout,
         bar=bar,
-        items=items,
+        dataset=work / DATASET,
+        skip=done,
+        shown=MAX_CORPUS_SECTIONS,
     )
 
 
 def _summary(
     validation: Any,
-    engines: tuple[str, ...],
     args: argparse.Namespace,
     corpus_info: dict | None,
     previous: tuple[Path | None, dict | None],
     outset: Any,
+    work: Path,
+    dynamics: dict[str, list[dict]] | None = None,
 ) -> dict:
-    """summary.json's structure, with every path as it will be once published (not the staging folder's)."""
+    """summary.json and the comparison table, streamed from the dataset in task order (validators.streamed), with
+    every path as it will be once published; the summary as the table and pages read it (the mechanisms shown)."""
+    from . import dataset, dynamics_check, streamed
+
     for it in validation.items:
-        it.path = str(outset.final(it.path))
-    summary = harness.to_summary(validation)
-    if "corpus" in summary:
-        _corpus_failures(summary, validation, engines, args, corpus_info, outset)
+        it.path = streamed.unstaged(str(outset.final(it.path)), str(outset.folder))
     path, before = previous
+    figures = trend = None
+    if args.corpus is not None and not args.no_report:
+        from reports.corpus import CorpusFigures
+
+        figures = CorpusFigures(list(validation.engines))
+    if args.nightly:
+        from reports.history import Accumulator
+
+        trend = Accumulator(validation.engines)
+    head = harness.summary_head(validation)
+    night = streamed.Night(head, str(outset.folder), before, corpus_options(args), (figures, trend))
+    done = dataset.done(work / DATASET)
+    table = outset.path(f"comparisons.{args.format}")
+    for k in sorted(done):
+        entry = dataset.read_entry(done[k])
+        night.add(dynamics_check.attach(entry, (dynamics or {}).get(entry.get("file"))))
+        if len(night.rows) >= streamed.TABLE_BLOCK:
+            night.block(outset.stage, args.format)
+    extra: dict[str, Any] = {"runner": validation.runner}
+    if corpus_info is not None:
+        extra["corpus"] = corpus_info
     if args.nightly or args.previous:
-        flags = nightly.compare_summaries(summary, before) if before is not None else []
-        summary["nightly"] = {
-            "date": dt.date.today().isoformat(),
-            "previous": str(path) if path else None,
-            "flags": flags,
-        }
-    return _published(summary, str(outset.stage), str(outset.folder))
-
-
-def _published(obj: Any, stage: str, folder: str) -> Any:
-    """``obj`` with the staging folder's path replaced by the output folder's in every string."""
-    if isinstance(obj, str):
-        return obj.replace(stage, folder)
-    if isinstance(obj, dict):
-        return {k: _published(v, stage, folder) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_published(v, stage, folder) for v in obj]
-    return obj
-
-
-def _corpus_failures(
-    summary: dict, validation: Any, engines: tuple[str, ...], args: argparse.Namespace, info: dict | None, outset: Any
-) -> None:
-    """summary["corpus"]: how to regenerate it, each failure's reproduce command, the minimized failures."""
-    failures = nightly.corpus_failures(summary, engines, corpus_options(args))
-    summary["corpus"].update(info or {}, failures=failures)
-    if failures and args.minimize_tries > 0:
-        summary["corpus"]["minimized"] = nightly.minimize_failures(
-            validation.items, engines, outset.stage, max_tries=args.minimize_tries
+        extra["nightly"] = {"date": dt.date.today().isoformat(), "previous": str(path) if path else None}
+    if night.failures and args.minimize_tries > 0 and corpus_info is not None:
+        done_ = nightly.minimize_failures(
+            validation.items, validation.engines, outset.stage, max_tries=args.minimize_tries
         )
+        extra["corpus"]["minimized"] = json.loads(streamed.unstaged(json.dumps(done_), str(outset.folder)))
+    summary = night.finish(outset.path("summary.json"), table, args.format, extra)
+    summary["_figures"] = figures
+    if trend is not None:  # the night's figures for the history page (reports.history)
+        summary["_trend"] = trend.figures(summary, outset.folder.name)
+    return summary
 
 
-def _write(validation: Any, summary: dict, outset: Any, args: argparse.Namespace) -> list[str]:
-    """summary.json, comparisons.FMT, report.html and corpus.html into the output set; the names written."""
-    from vloop.files.output import write_text
+def _write(validation: Any, summary: dict, outset: Any, args: argparse.Namespace, work: Path) -> list[str]:
+    """The dataset moved into the set; report.html and corpus.html; the names written (summary.json and the table
+    are written already)."""
+    import os
 
-    write_text(outset.path("summary.json"), json.dumps(summary, indent=1, allow_nan=False))
-    names = ["summary.json"]
-    try:
-        harness.write_table(summary, outset.path(f"comparisons.{args.format}"), args.format)
-        names.append(f"comparisons.{args.format}")
-    except VloopError as exc:
-        if "pyarrow" not in str(exc):
-            raise
-        print(f"vloop: no comparisons.parquet ({exc})", file=sys.stderr)
+    for tmp in (work / DATASET).glob("family=*/.*.tmp"):  # a worker killed while it wrote: its file never appeared
+        tmp.unlink()
+    os.replace(work / DATASET, outset.path(DATASET))
+    names = ["summary.json", f"comparisons.{args.format}", f"{DATASET}/"]
+    figures, trend = summary.pop("_figures", None), summary.pop("_trend", None)
+    if trend is not None:
+        from reports.history import write_history, write_trend
+
+        write_trend(trend, outset.stage)
+        names.append("trend.json")
+        if not args.no_report:
+            write_history(Path(args.out), outset.stage, trend)
+            names.append("history.html")
     if args.no_report:
         return names
-    return names + _write_pages(validation, summary, outset.stage, args.animate)
+    return names + _write_pages(validation, summary, outset.stage, args.animate, figures)
 
 
-def _write_pages(validation: Any, summary: dict, stage: Path, animate: bool) -> list[str]:
-    """report.html (the catalog and the generated files that fail) and corpus.html."""
+def _write_pages(validation: Any, summary: dict, stage: Path, animate: bool, figures: Any) -> list[str]:
+    """report.html (the files that are not generated, and the generated ones that fail) and corpus.html."""
     try:
         from reports.html import write_report
     except ImportError as exc:  # the report needs Jinja2; the summary does not
@@ -291,17 +409,13 @@ def _write_pages(validation: Any, summary: dict, stage: Path, animate: bool) -> 
         return []
     names = []
     shown = [it for it in validation.items if it.corpus is None or not it.passed]
-    generated_failures = [it for it in shown if it.corpus is not None]
-    if len(generated_failures) > MAX_CORPUS_SECTIONS:
-        drop = {id(it) for it in generated_failures[MAX_CORPUS_SECTIONS:]}
-        shown = [it for it in shown if id(it) not in drop]
     if shown:
         write_report(dataclasses.replace(validation, items=shown), summary, stage, animate=animate)
         names.append("report.html")
     if "corpus" in summary:
         from reports.corpus import write_corpus_page
 
-        write_corpus_page(summary, stage)
+        write_corpus_page(summary, stage, figures)
         names.append("corpus.html")
     return names
 
@@ -309,7 +423,10 @@ def _write_pages(validation: Any, summary: dict, stage: Path, animate: bool) -> 
 def _report_lines(summary: dict, written: list[str], engines_seconds: float, seconds: float) -> list[str]:
     """The table, the flags and failures, what was written, and the verdict with the whole command's time."""
     lines = [_table(summary, "corpus.html" in written)]
-    lines += [f"FLAG {f['message']}" for f in summary.get("nightly", {}).get("flags", [])]
+    lines += [
+        f"FLAG {f['message']}" + ("" if f.get("red", True) else " (not vloop's)")
+        for f in summary.get("nightly", {}).get("flags", [])
+    ]
     for f in summary.get("corpus", {}).get("failures", []):
         lines.append(f"FAIL {f['mechanism']}: reproduce with: {f['reproduce']}")
     for m in summary.get("corpus", {}).get("minimized", []):
@@ -318,26 +435,49 @@ def _report_lines(summary: dict, written: list[str], engines_seconds: float, sec
                 f"minimized {m['mechanism']} in {m['tries']} tries: {m['file']} (still fails: {m['still_failing']})"
             )
     lines.append("wrote " + ", ".join(written))
-    verdict = "all passed" if summary["passed"] else "FAILED"
     lines.append(
-        f"{verdict} in {seconds:.1f} s (engines {summary['seconds']:.1f} s; summary, tables and pages "
-        f"{max(seconds - engines_seconds, 0.0):.1f} s)"
+        f"{verdict_text(summary)} in {seconds:.1f} s (engines {summary['seconds']:.1f} s; summary, tables "
+        f"and pages {max(seconds - engines_seconds, 0.0):.1f} s)"
     )
     return lines
 
 
+def verdict_text(summary: dict) -> str:
+    """The night in one phrase: RED (vloop may be wrong), passed with reference engines' failures, or all passed."""
+    v = summary.get("verdicts") or {}
+    red = v.get("red") or []
+    counts = v.get("mechanisms") or {}
+    if summary.get("red"):
+        if not red:
+            return "RED: a nightly flag may be vloop's"
+        odd = len(v.get("vloop_blamed") or [])
+        n = (summary.get("counts") or {}).get("mechanisms", len(summary["mechanisms"]))
+        return f"RED: vloop blamed on {odd}, undecided on {counts.get('undecided', 0)} of {n} mechanisms"
+    if summary["passed"]:
+        return "all passed"
+    tally = v.get("engines") or {}
+    parts = [f"{k} {sum(t.get(k, 0) for t in tally.values())}" for k in ("blamed", "inconclusive")]
+    others = ", ".join(p for p in parts if not p.endswith(" 0")) or "flags raised"
+    return f"vloop passed; reference engines: {others} (not red; --strict makes it red)"
+
+
+CELL = 16  # the engines' columns of the printed table
+
+
 def _worst_text(m: dict, engine: str) -> str:
-    """An engine's cell of the table: its worst error as a fraction of what is allowed, or what happened. An engine
-    not blamed is shown against the engines not blamed (its disagreement with a blamed one is that one's)."""
+    """An engine's cell of the table: its worst error as a fraction of what is allowed, then its verdict when that
+    is not a pass (blamed, ? undecided, n/c inconclusive); an engine not blamed is shown against the engines not
+    blamed (its disagreement with a blamed one is that one's)."""
     run = m.get("runs", {}).get(engine)
     verdict = m.get("verdict") or {}
     own = verdict.get("engines", {}).get(engine)
     blamed = set() if own == "blamed" else set(verdict.get("blamed") or ())
+    blamed |= set(verdict.get("inconclusive") or ()) - {engine}
     comps = [c for c in m.get("comparisons", []) if c["engine"] == engine and c.get("reference") not in blamed]
     if run is None or run["status"] == "skipped":
         return "-"
     if run["status"] == "error":
-        return "ERROR"
+        return "error"
     ratios = [
         (c["worst"]["max_abs"] if isinstance(c["worst"]["max_abs"], int | float) else float("inf"))
         / max(c["worst"]["allowed"], 1e-300)
@@ -345,40 +485,62 @@ def _worst_text(m: dict, engine: str) -> str:
         if c["worst"]
     ]
     worst = max(ratios, default=0.0)
-    mark = {"blamed": " FAIL", "undecided": " ?"}.get(own or "", "")
+    mark = {"blamed": " blamed", "undecided": " ?", "inconclusive": " n/c"}.get(own or "", "")
     if own is None and not all(c["passed"] for c in comps):
-        mark = " FAIL"
-    return (f"{worst:.1e} of tol" if worst < float("inf") else "not finite") + mark
+        mark = " fail"
+    return (f"{worst:.1e}" if worst < float("inf") else "not finite") + mark
 
 
 def _table(summary: dict, corpus_page: bool) -> str:
-    """One line per mechanism: each engine's worst error as a fraction of what is allowed."""
+    """One line per mechanism (a big corpus: its failures only): each engine's worst error over its allowance, then
+    the mechanism's verdict once; under it the counts over every mechanism and per engine."""
     engines = [e for e in summary["engines"] if e != "vloop"]
-    head = f"{'mechanism':32s} " + " ".join(f"{e:>17s}" for e in engines) + "  result"
-    lines = [head, "-" * len(head)]
-    generated = [m for m in summary["mechanisms"] if m.get("corpus")]
+    head = f"{'mechanism':32s} " + " ".join(f"{e[:CELL]:>{CELL}s}" for e in engines) + "  verdict"
+    lines = ["worst error / allowed per engine (blamed, ? undecided, n/c inconclusive)", head, "-" * len(head)]
+    generated = (summary.get("corpus") or {}).get("mechanisms") or sum(
+        1 for m in summary["mechanisms"] if m.get("corpus")
+    )
     for m in summary["mechanisms"]:
-        if m.get("corpus") and m["passed"] and len(generated) > 30:
+        if m.get("corpus") and m["passed"] and generated > 30:
             continue  # a big corpus: one line per failure here, the rest in corpus.html
         cells = [_worst_text(m, e) for e in engines]
-        verdict = "error: " + m["error"][:60] if m.get("error") else ("pass" if m["passed"] else _blame(m))
-        lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>17s}" for c in cells) + f"  {verdict}")
-    if generated:
-        ok = sum(1 for m in generated if m["passed"])
-        where = " (per family: corpus.html)" if corpus_page else ""
-        lines.append(f"generated corpus: {ok} of {len(generated)} mechanisms pass{where}")
+        verdict = "error: " + m["error"][:60] if m.get("error") else _outcome(m)
+        lines.append(f"{m['name'][:32]:32s} " + " ".join(f"{c:>{CELL}s}" for c in cells) + f"  {verdict}")
+    mechs = summary["mechanisms"]
+    counts = summary.get("counts") or {"mechanisms": len(mechs), "passed": sum(1 for m in mechs if m["passed"])}
+    where = " (per family: corpus.html)" if corpus_page else ""
+    lines.append(f"{counts['passed']} of {counts['mechanisms']} mechanisms pass every comparison{where}")
+    tally = (summary.get("verdicts") or {}).get("engines") or {}
+    for e in summary["engines"]:
+        t = tally.get(e)
+        if t and (t.get("blamed") or t.get("undecided") or t.get("inconclusive")):
+            lines.append(
+                f"  {e}: blamed on {t.get('blamed', 0)}, undecided on {t.get('undecided', 0)}, "
+                f"inconclusive on {t.get('inconclusive', 0)}"
+            )
     odd = (summary.get("verdicts") or {}).get("vloop_blamed") or []
     if odd:
         lines.append(f"VLOOP IS THE ODD ONE OUT on {len(odd)} mechanisms: {', '.join(odd[:10])}")
     return "\n".join(lines)
 
 
-def _blame(m: dict) -> str:
-    """FAIL, with the engine the consensus blames (or "undecided")."""
+def _outcome(m: dict) -> str:
+    """The mechanism's verdict, said once: pass, VLOOP BLAMED, blamed on a reference engine, undecided, inconclusive
+    (each with the engines that could not resolve it)."""
     v = m.get("verdict") or {}
-    if v.get("status") == "blamed":
-        return f"FAIL: blamed on {', '.join(v['blamed'])}"
-    return "FAIL: undecided" if v.get("status") == "undecided" else "FAIL"
+    unsure = ", ".join(v.get("inconclusive") or ())
+    tail = f"; inconclusive: {unsure}" if unsure else ""
+    status = v.get("status")
+    if m["passed"] or status == "pass":
+        return "pass" + tail
+    if status == "blamed":
+        who = ", ".join(v["blamed"])
+        return ("VLOOP BLAMED" if "vloop" in v["blamed"] else f"blamed on {who}") + tail
+    if status == "undecided":
+        return "UNDECIDED" + tail
+    if status == "inconclusive":
+        return f"inconclusive ({unsure})"
+    return "FAIL" + tail
 
 
 # ---------------------------------------------------------------- vloop corpus

@@ -915,7 +915,21 @@ def _parser_validate(sub: Any) -> None:
         metavar="T",
         help="shrink each failing generated mechanism with up to T rebuilt files (0: off; default 40)",
     )
+    _add_validate_policy(v)
     v.set_defaults(func=cmd_validate)
+
+
+def _add_validate_policy(v: argparse.ArgumentParser) -> None:
+    """validate's exit policy and its resumption (validators/validate.py)."""
+    v.add_argument(
+        "--strict", action="store_true",
+        help="exit 1 on any failed comparison, also one blamed on a reference engine or inconclusive "
+        "(default: only when vloop is blamed or a mechanism is undecided)",
+    )  # fmt: skip
+    v.add_argument(
+        "--resume", action="store_true",
+        help="continue an interrupted run into the same --out from the comparisons already on disk",
+    )  # fmt: skip
 
 
 def _parser_corpus(sub: Any) -> None:

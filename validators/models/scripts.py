@@ -291,6 +291,8 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
         "MAX_CRANK_STEP",
         "MAX_SLIDER_STEP",
         "CROSS_JUMP",
+        "JUMP_RATIO",
+        "JUMP_FLOOR",
         "_NoConvergence",
         "_State",
         "_Solver",
