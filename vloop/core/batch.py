@@ -302,7 +302,7 @@ def _change_points_possible(batch: _Batch, d: Designs, grid: Grid, i: int, h: np
     """The variants where block ``i``'s discriminants h (variants, samples) dip to a change point (located as the
     single run locates it, every dip of every variant at once), or where a block cannot close in a dip (a limit
     between samples), or where blocks before it are solved by Newton (probing through them is the single run's)."""
-    found = candidate_minima(h, tail=True)
+    found = candidate_minima(h, tail=True, t=grid.t)
     found = found[flags.regular[found[:, 0]]]
     out = np.zeros(len(d), bool)
     if not len(found):

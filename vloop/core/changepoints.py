@@ -42,15 +42,17 @@ ETA_INPUT = 1e-5  # the rates across a change point are compared this far from i
 DIP = 0.9  # a sampled minimum of h below this fraction of its larger neighbour is zoomed on
 
 
-def candidate_minima(h: np.ndarray, tail: bool = True) -> np.ndarray:
+def candidate_minima(h: np.ndarray, tail: bool = True, t: np.ndarray | None = None) -> np.ndarray:
     """(brackets, 3) ints (variant, row lo, row hi) around sampled minima of h (variants × samples) that dip:
     where a zero could hide between samples; per variant in the order of their rows.
 
     Near a double zero √h is V-shaped, so a sample next to it is well below its larger neighbour
     (h below 1/4 of it for an even V) whatever the sampling's phase; a broad, shallow minimum keeps
     the three samples alike and is left alone. A dip is only a candidate: the zoom decides.
-    ``tail``: also look between the last two samples (the end of the run, not of a chunk: the next
-    chunk sees that minimum with both its neighbours).
+    At an end of the run a zero between the two outer samples has only one neighbour to dip below: near the
+    middle of that interval the two samples are alike (:func:`_edge_dips`). ``tail``: also look between the
+    last two samples (the end of the run, not of a chunk: the next chunk sees that minimum with both its
+    neighbours). ``t``: the sample times (s; uniform steps if not given).
     """
     n = h.shape[1]
     found = []
@@ -62,17 +64,36 @@ def candidate_minima(h: np.ndarray, tail: bool = True) -> np.ndarray:
         m = m[flat[m] < DIP * np.maximum(flat[m - 1], flat[m + 1])]  # those that dip are candidates
         if len(m):
             found.append(np.column_stack([m // n, m % n - 1, m % n + 1]))
-        v = np.nonzero((h[:, 0] < DIP * h[:, 1]) & (h[:, 1] <= h[:, 2]))[0]  # rising from the first sample
+        steps = np.diff(t[:3]) if t is not None else np.ones(2)
+        start = (h[:, 0] < DIP * h[:, 1]) | _edge_dips(h[:, :3], steps[0] / steps[1])
+        v = np.nonzero(start & (h[:, 1] <= h[:, 2]))[0]  # rising from the first sample
         if len(v):
             found.append(np.column_stack([v, np.zeros_like(v), np.ones_like(v)]))
     if tail and n > 1:  # still falling at the end: a zero may lie before the last sample
-        v = np.nonzero(h[:, -1] < DIP * h[:, -2])[0]
+        end = h[:, -1] < DIP * h[:, -2]
+        if n > 2:
+            steps = np.diff(t[-3:]) if t is not None else np.ones(2)
+            end |= _edge_dips(h[:, :-4:-1], steps[1] / steps[0])
+        v = np.nonzero(end)[0]
         if len(v):
             found.append(np.column_stack([v, np.full_like(v, n - 2), np.full_like(v, n - 1)]))
     if len(found) < 2:  # (each part is in order already)
         return found[0] if found else np.zeros((0, 3), int)
     out = np.concatenate(found)
     return out[np.lexsort((out[:, 2], out[:, 1], out[:, 0]))]
+
+
+def _edge_dips(h: np.ndarray, ratio: float) -> np.ndarray:
+    """Whether √h may reach zero between the outer samples of h (…, 3: the outer sample, its neighbour, the
+    next), h rising inwards; ``ratio``: the outer interval over the next one.
+
+    Near a change point √h is V-shaped, as steep either side of its vertex: a zero between the outer two
+    samples makes √h0 + √h1 the slope times the outer interval, where a plain rise makes it √h1 − √h0. The
+    slope is taken twice the one between the inner samples, as in :func:`first_look` (√h bends: steepest at
+    its vertex)."""
+    with np.errstate(invalid="ignore"):
+        r = np.sqrt(h)
+        return (h[..., 0] <= h[..., 1]) & (r[..., 0] + r[..., 1] <= 2.0 * ratio * (r[..., 2] - r[..., 1]))
 
 
 LIMIT, CLEAR, ZOOM = 0, 1, 2  # what a first look at a bracket finds (:func:`first_look`)
@@ -139,7 +160,7 @@ def find_change_points(
     """
     loop = run.system.loops[block_plans(run.system)[i].block.loops[0]]
     choices = change_point_choices(run.system, loop.index + 1)
-    found_minima = candidate_minima(h[None, :], run.tail)
+    found_minima = candidate_minima(h[None, :], run.tail, t_grid[: len(h)])
     if not len(found_minima):
         return [], None
     lo, hi = found_minima[:, 1:].T
