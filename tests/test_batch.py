@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -126,14 +127,20 @@ def test_the_state_is_one_structure_over_variants_and_samples():
 
 def _dips_of_one(h: np.ndarray, tail: bool) -> list[tuple[int, int]]:
     """The single run's brackets, written out for one variant: sampled minima below 0.9 of their larger
-    neighbour, a rise from the first sample, a fall into the last."""
+    neighbour, a rise from the first sample, a fall into the last (below 0.9 of the next sample, or a V of √h
+    with its vertex between the outer two samples possible at twice the slope beyond them)."""
     n, out = len(h), []
+
+    def v_at_edge(h0: float, h1: float, h2: float) -> bool:
+        r0, r1, r2 = (math.sqrt(x) if x >= 0 else math.nan for x in (h0, h1, h2))
+        return h0 <= h1 and r0 + r1 <= 2 * (r2 - r1)
+
     for c in range(1, n - 1):
         if h[c] <= h[c - 1] and h[c] <= h[c + 1] and h[c] < 0.9 * max(h[c - 1], h[c + 1]):
             out.append((c - 1, c + 1))
-    if n > 2 and h[0] < 0.9 * h[1] and h[1] <= h[2]:
+    if n > 2 and (h[0] < 0.9 * h[1] or v_at_edge(*h[:3])) and h[1] <= h[2]:
         out.insert(0, (0, 1))
-    if tail and n > 1 and h[-1] < 0.9 * h[-2]:
+    if tail and n > 1 and (h[-1] < 0.9 * h[-2] or (n > 2 and v_at_edge(h[-1], h[-2], h[-3]))):
         out.append((n - 2, n - 1))
     return out
 

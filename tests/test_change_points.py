@@ -455,3 +455,108 @@ def test_rates_beside_a_change_point_every_generated_family(family):
                         )
                     checked += 1
     assert checked == CP_DRAWS * 2 * 2 * 2 * len(CP_DISTANCES)
+
+
+# ---------------------------------------------------------------- a change point in the first or last sample interval
+#
+# Seed 4711's mechanism 943 (vloop corpus): an antiparallelogram-family four-bar (crank = rocker, coupler = ground),
+# change points at the crank angles π/2 and 3π/2, started 0.054 rad before 3π/2 with samples 0.109 rad apart: the
+# change point lay at 0.495 of the first interval, where the discriminant's two samples are alike (its √h is a V
+# with the vertex near the middle), and vloop went on along the parallelogram branch (the coupler's ω from 30.3 to 0).
+
+
+def _antiparallelogram_at(theta0: float, omega: float, step: float, n: int) -> vloop.Mechanism:
+    """Seed 4711's mechanism 943 with its crank at θ0 (rad), on the antiparallelogram branch (the coupler not parallel
+    to the ground), driven at ω (rad/s), n samples ``step`` (s) apart from t = 0. B is the circles' intersection
+    (law of cosines along A→O4), from the file's lengths and pivots."""
+    from validators import corpus
+
+    base = corpus.draw_item(4711, 943).item.mechanism
+    a, b, c = (base.links[k].length for k in ("crank", "coupler", "rocker"))
+    O2, O4 = (complex(*base.joints[k]) for k in ("O2", "O4"))
+    A = O2 + a * complex(math.cos(theta0), math.sin(theta0))
+    f = abs(O4 - A)
+    u = (O4 - A) / f
+    p = (b * b - c * c + f * f) / (2 * f)
+    q = math.sqrt(max(b * b - p * p, 0.0))
+    B = max((A + (p + 1j * s * q) * u for s in (1, -1)), key=lambda z: abs(((z - A) * (O4 - O2).conjugate()).imag))
+    text = f"""
+name = "antiparallelogram-edge"
+drivers = [{{ link = "crank", pivot = "O2", omega = {omega!r}, alpha = 0.0 }}]
+[joints]
+O2 = [{O2.real!r}, {O2.imag!r}]
+O4 = [{O4.real!r}, {O4.imag!r}]
+A = [{A.real!r}, {A.imag!r}]
+B = [{B.real!r}, {B.imag!r}]
+[links]
+ground = {{ joints = ["O2", "O4"], ground = true }}
+crank = {{ joints = ["O2", "A"], length = {a!r} }}
+coupler = {{ joints = ["A", "B"], length = {b!r} }}
+rocker = {{ joints = ["O4", "B"], length = {c!r} }}
+[time]
+start = 0.0
+stop = {step * (n - 1)!r}
+step = {step!r}
+"""
+    return vloop.loads(text)
+
+
+def _edge_cases() -> list:
+    cases = []
+    for sense in (1, -1):
+        for where in ("first", "last"):
+            for frac in (0.02, 0.3, 0.48, 0.49, 0.495, 0.5, 0.505, 0.51, 0.52, 0.7, 0.98):  # (near ½: the two alike)
+                cases.append(pytest.param(sense, where, frac, id=f"{where}-{frac}-{'up' if sense > 0 else 'down'}"))
+    return cases
+
+
+@pytest.mark.parametrize(("sense", "where", "frac"), _edge_cases())
+def test_change_point_inside_the_first_or_last_interval(sense, where, frac):
+    """The change point 3π/2 inside the first (or the last) sample interval, at ``frac`` of it from the interval's
+    start, the crank turning either way: vloop continues on the velocity-continuous branch, and health flags the
+    first sample past the crossing (and at most the one before it, where that sample's rates were taken across the
+    change point). Against the closed form continued through change points (validators/analytic/changepoint.py,
+    the nightly validation's reference) to its tolerance, 1e-9 of each column's peak, for positions, angles and
+    rates; accelerations against the 60-digit closed form of the stated linkage (above) to 1e-9 of the group's
+    scale, since the float closed form is off by 1.5e-8 of its peak α at 0.002 rad from the change point (vloop:
+    7e-12 there)."""
+    from validators import analytic
+    from validators.analytic import changepoint as analytic_changepoint
+    from validators.analytic.common import cross
+
+    omega, cp, n, step = sense * 7.424019735557147, 1.5 * math.pi, 12, 0.0147  # (the nightly's: 0.109 rad a step)
+    back = (frac if where == "first" else n - 2 + frac) * abs(omega) * step  # rad from θ0 to the change point
+    mech = _antiparallelogram_at(cp - sense * back, omega, step, n)
+    res = vloop.solve(mech)
+    assert len(res.t) == n
+    motion = [c for c in res.columns if c != "t" and not c.endswith((".alpha", ".ax", ".ay"))]
+    assert_histories_close(res, analytic.solve(mech), rtol=1e-9, floor=1e-9, columns=motion, min_columns=15)
+    assert [c["inputs"]["θ_crank"] for c in res.meta["change_points"]] == pytest.approx([cp], abs=1e-9)
+    row = int(np.searchsorted(res.t, back / abs(omega)))  # the first sample past the crossing, flagged; so may be
+    flagged = np.flatnonzero(res.health["change_point"]).tolist()  # the one before, if its rates came across it
+    assert row in flagged and set(flagged) <= {row - 1, row}, flagged
+
+    geo = _stated_geometry(mech)
+    zO4, zA, zB = (complex(*mech.joints[j]) for j in (geo["roles"].O4, geo["roles"].A, geo["roles"].B))
+    sigma0, angles = float(np.sign(cross(zO4 - zA, zB - zA))), analytic_changepoint.change_angles(mech)
+    sigma = analytic_changepoint.branch_signs(res["crank.theta"], 0, sigma0, angles)
+    ref = [_fourbar_hp(geo, int(sigma[k]), res["crank.theta"][k], omega, 0.0) for k in range(n)]
+    acc = max(abs(r[f"{k}.alpha"]) for r in ref for k in ("coupler", "rocker")) + omega**2
+    for q in ("coupler.alpha", "rocker.alpha", "B.ax", "B.ay"):
+        scale = acc * (mech.scale if q.startswith("B.") else 1.0)
+        err = np.max(np.abs(res[q] - [r[q] for r in ref])) / scale
+        assert err <= 1e-9, f"{q}: {err:.2e} of (ω² + α)max"
+
+
+def test_the_nightly_antiparallelogram_through_its_first_interval():
+    """Seed 4711's mechanism 943 itself (the change point at 0.495 of its first interval, and again at 5π/2 inside
+    the run): on the closed form to the validation's 1e-9, both change points flagged in health."""
+    from validators import analytic, corpus
+
+    mech = corpus.draw_item(4711, 943).item.mechanism
+    res = vloop.solve(mech)
+    assert_histories_close(res, analytic.solve(mech), rtol=1e-9, floor=1e-9, min_columns=15)
+    assert np.ptp(res["coupler.theta"][:3]) > 0.5  # (not the parallelogram branch, where it stays at 3π/2)
+    d = mech.drivers[0]
+    crossings = [(x - d.x0) / d.v0 for x in (1.5 * math.pi, 2.5 * math.pi)]
+    assert set(np.searchsorted(res.t, crossings).tolist()) <= set(np.flatnonzero(res.health["change_point"]).tolist())
