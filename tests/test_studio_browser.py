@@ -246,3 +246,34 @@ def test_a_function_generator_designed_in_the_page_is_taken_into_the_editor(stud
     act(page, lambda: page.click('[data-take="0"]'))
     assert page.locator("circle[data-handle]").count() == 4 and page.locator("g[data-body]").count() == 3
     assert "M = 3(4−1) − 2·4 = 1" in page.locator("#s-info").inner_text()
+
+
+def test_plots_and_numbers_catch_up_after_a_stream_of_drags(studio) -> None:
+    """Drags sent as fast as the pointer moves (plots redrawn a slice per frame, a pass at most every 100 ms): once
+    the pointer rests, the coupler's θ plot has been redrawn, and the numbers (once scrolled into view) show the last
+    reply: at t = 0, B's x and y are where the session put joint B."""
+    page, _ = studio
+    page.select_option("#f-catalog [name=catalog]", "fourbar_textbook_example")
+    before = page.evaluate("document.body.dataset.studioReady")
+    page.click("#f-catalog button:not([name])")
+    settle(page, before)
+    plot = page.locator('[data-plot="Links:theta"] path[data-series="l3"]')
+    d0 = plot.get_attribute("d")
+    tool(page, "drag")
+    page.mouse.move(*screen(page, 143.19, 67.34))
+    page.mouse.down()
+    for k in range(1, 16):
+        page.mouse.move(*screen(page, 143.19 + 0.3 * k, 67.34 - 0.2 * k))
+    page.mouse.up()
+    page.wait_for_timeout(300)  # the last reply drawn, then its plots' passes (a slice per frame)
+    page.locator("#numbers").scroll_into_view_if_needed()  # numbers out of view are brought up to date in view
+    page.wait_for_function(
+        "() => { const b = vloopStudio.state.doc.joints.B, c = (q) => document.querySelector(`td[data-col='B.${q}']`);"
+        " return vloopViewer.index === 0 && Number(c('x').dataset.value) === vloopViewer.column('B.x')[0]"
+        " && Math.abs(vloopViewer.column('B.x')[0] - b[0]) <= 1e-9 * Math.abs(b[0])"
+        " && Math.abs(Number(c('y').dataset.value) - b[1]) <= 1e-9 * Math.abs(b[1]); }",
+        timeout=10_000,
+    )
+    bx = page.evaluate("vloopStudio.state.doc.joints.B[0]")
+    assert abs(bx - 143.19) > 0.1  # the drags moved B
+    assert plot.get_attribute("d") != d0

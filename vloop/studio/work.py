@@ -21,6 +21,9 @@ from .session import MessageError, Session
 CHILD = "import os, sys; hasattr(os, 'nice') and os.nice(19); from vloop.cli import main; sys.exit(main(sys.argv[1:]))"
 VALIDATE_TIMEOUT = 600.0  # s: the engines' budgets end well before (a four-bar takes ~5 s)
 MAX_TARGETS = 8
+# the engines' numerical libraries on one thread each: on a small machine a validation leaves the other cores to the
+# page and the server (its solves are small; threads would only contend)
+ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")}
 
 
 def job(s: Session, msg: dict) -> Callable[[], Any]:
@@ -149,7 +152,7 @@ def validate(text: str, name: str) -> dict[str, Any]:
         path = Path(tmp) / "studio.toml"
         path.write_text(text, encoding="utf-8")
         out = Path(tmp) / "validation"
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), **ONE_THREAD}
         args = ["validate", str(path), "--out", str(out), "--no-report"]
         proc = subprocess.run(
             [sys.executable, "-c", CHILD, *args], capture_output=True, text=True, timeout=VALIDATE_TIMEOUT, env=env,

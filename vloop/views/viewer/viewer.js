@@ -1098,26 +1098,46 @@
   }
 
   // While new data streams in (a drag), the drawing is redrawn at once and the plots and numbers just after the
-  // frame is shown, at most once per frame: the mechanism under the pointer never waits for the plots.
+  // frame is shown, a slice of them per frame (LATER_MS of script, at least one plot), a new pass at most every
+  // LATER_GAP ms: the mechanism under the pointer never waits for the plots, no frame waits for all of them (each
+  // plot redrawn is laid out and painted again), and a stream of drags leaves the processor to the drawing.
   // What is scrolled out of view is brought up to date when it comes back into view.
-  let pendingPlots = false;
+  const LATER_MS = 4, LATER_GAP = 100;
+  let pendingPlots = false, laterMs = 0, lastPass = -Infinity;
   const onScreen = (el) => { const r = el.getBoundingClientRect(); return r.bottom > 0 && r.top < innerHeight && r.height > 0; };
   function later() {
+    for (const p of plots) p.stale = true;
+    S.numbersStale = true;
     if (pendingPlots) return;
     pendingPlots = true;
-    requestAnimationFrame(() => setTimeout(() => {
-      pendingPlots = false;
-      const t0 = performance.now();
-      for (const p of plots) p.stale = true;
-      S.numbersStale = true;
-      catchUp();
-      S.stats.later = performance.now() - t0;
-    }, 0));
+    laterMs = 0;
+    const slice = () => requestAnimationFrame(() => setTimeout(laterSlice, 0));
+    const wait = lastPass + LATER_GAP - performance.now();
+    if (wait > 0) setTimeout(slice, wait); else slice();
   }
-  function catchUp() {
+  function laterSlice() {
+    const t0 = performance.now();
+    const more = catchUp(t0 + LATER_MS);
+    laterMs += performance.now() - t0;
+    if (more) { requestAnimationFrame(() => setTimeout(laterSlice, 0)); return; }
+    pendingPlots = false;
+    lastPass = performance.now();
+    S.stats.later = laterMs; // the plots' and numbers' script time after the drawing's frame, over its slices [ms]
+  }
+  // the stale plots and numbers in view redrawn (until ``until``, performance.now()'s clock, if given): whether some
+  // in view are left for later
+  function catchUp(until = Infinity) {
     const width = $("plots").clientWidth;
-    for (const p of plots) if (p.stale && onScreen(p.host)) { p.stale = false; p.render(width); p.setCursor(S.i); }
-    if (S.numbersStale && onScreen($("numbers"))) { S.numbersStale = false; updateNumbers(S.i); }
+    for (const p of plots) {
+      if (!p.stale || !onScreen(p.host)) continue;
+      if (performance.now() > until) return true;
+      p.stale = false; p.render(width); p.setCursor(S.i);
+    }
+    if (S.numbersStale && onScreen($("numbers"))) {
+      if (performance.now() > until) return true;
+      S.numbersStale = false; updateNumbers(S.i);
+    }
+    return false;
   }
 
   // Draw ``data`` (the page's payload). ``opts.keepView``: keep the zoom and pan (a drag redraws under the pointer);
