@@ -162,6 +162,8 @@ def test_the_population_screen_is_the_same_rule(lengths, thetas, sides):
     four-bars placed at random reachable crank angles and sides: a row passes the screen exactly when classify
     names no defect, with the same direction and instants."""
     a, b, c, d = lengths
+    gaps = np.abs(np.angle(np.exp(1j * (np.array(thetas)[:, None] - np.array(thetas)[None, :]))))
+    assume(np.all(gaps[np.triu_indices(len(thetas), 1)] > 1e-9))  # two positions at one input angle have no order
     configs = []
     for th, s in zip(thetas, sides, strict=False):
         A = a * np.exp(1j * th)
