@@ -195,7 +195,7 @@ def test_synth_file_keys(tmp_path, capfd, where, data, value):
 
 
 @pytest.mark.parametrize("out", ["FILE", "FILE/sub", "\x07bell", "a\x00b", "", " ", "x" * 5000])
-@pytest.mark.parametrize("command", ["synth", "export", "assemble", "study", "run", "view"])
+@pytest.mark.parametrize("command", ["synth", "export", "assemble", "study", "run", "view", "simulate"])
 def test_every_commands_out_is_checked_before_the_work(tmp_path, capfd, command, out):
     """--out naming an existing file, a path through a file, control characters, NUL, empty or a name too long:
     exit 2 and one line, or (control characters are a legal name) the outputs inside that folder."""
@@ -213,6 +213,7 @@ def test_every_commands_out_is_checked_before_the_work(tmp_path, capfd, command,
         "study": ["study", str(tmp_path / "missing.toml")],
         "run": ["run", str(plain)],
         "view": ["view", str(plain)],
+        "simulate": ["simulate", str(MECHANISMS / "fourbar_textbook_dynamics.toml")],
     }[command]
     code = main([*args, "--out", out])
     _, err = capfd.readouterr()

@@ -239,6 +239,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     mech = _load(args)
     if mech.dynamics is None:
         return _fail(f"{mech.source}: [dynamics] missing: vloop simulate needs the input's loads (docs/dynamics.md)")
+    out = _out_folder(args, mech)  # before the integration: a bad --out is one line, no work lost
     error = None
     try:
         sim = simulate(mech)
@@ -246,7 +247,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if exc.partial is None:
             raise
         sim, error = exc.partial, exc
-    with OutputSet(_out_folder(args, mech)) as files:
+    with OutputSet(out) as files:
         report.write(sim, files.stage, args.format, plot=args.plot, html=args.html, error=str(error) if error else None)
     for line in report.summary_lines(sim):
         print(line)
