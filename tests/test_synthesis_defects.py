@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import vloop.synthesis as syn
@@ -151,7 +151,7 @@ def test_function_generation_runs_into_its_cranks_limit():
     assert FOURBAR.name == far[0].topology
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(
     lengths=st.tuples(*[st.floats(0.2, 2.0)] * 4),
     thetas=st.lists(st.floats(-math.pi, math.pi), min_size=3, max_size=5),

@@ -402,8 +402,11 @@ def _write(validation: Any, summary: dict, outset: Any, args: argparse.Namespace
 
 def _write_pages(validation: Any, summary: dict, stage: Path, animate: bool, figures: Any) -> list[str]:
     """report.html (the files that are not generated, and the generated ones that fail) and corpus.html."""
+    from vloop.files.output import interrupts_held
+
     try:
-        from reports.html import write_report
+        with interrupts_held():  # a Ctrl-C inside a compiled module's import (matplotlib's) leaves it half made
+            from reports.html import write_report
     except ImportError as exc:  # the report needs Jinja2; the summary does not
         print(f"vloop: no report ({exc})", file=sys.stderr)
         return []

@@ -203,7 +203,7 @@ class OutputSet:
             fd = os.open(self.folder, os.O_RDONLY)  # the folder itself is the lock: no lock file left behind
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX)
-                with _interrupts_held():
+                with interrupts_held():
                     self._rename(names)
             finally:
                 os.close(fd)  # closing releases the lock
@@ -264,7 +264,7 @@ def _remove(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def _interrupts_held() -> Iterator[None]:
+def interrupts_held() -> Iterator[None]:
     """Hold SIGINT (Ctrl-C) until the block is done, then raise KeyboardInterrupt if one came (main thread only)."""
     import signal
     import threading
