@@ -45,6 +45,7 @@ from vloop.result import Result
 pytest.importorskip("exudyn")
 
 from validators import exudyn as vexu  # after the importorskip on purpose
+from validators import exudyn_model as em
 
 ROOT = Path(__file__).resolve().parents[1]
 MECH_FILES = sorted((ROOT / "mechanisms").glob("*.toml"))
@@ -442,6 +443,28 @@ def test_kinematic_rates_are_derivatives(key: str) -> None:
     assert_histories_close(mid, fd, FD_RTOL, floor=FD_FLOOR, min_columns=len(fd_cols))
 
 
+@pytest.mark.parametrize("key", [*[str(p) for p in MECH_FILES], *EXTRA_IDS], ids=[*MECH_IDS, *EXTRA_IDS])
+def test_velocity_jacobian_is_the_velocity_residuals_own(key: str) -> None:
+    """C_q from Exudyn's position Jacobian equals the velocity-level residual's own ∂ċ/∂q̇ (its columns
+    ċ(q, e_i, t) − ċ(q, 0, t), exact for an affine map) at arbitrary states, to round-off, on every model but
+    those with a driven slider on a moving guide, whose marker Exudyn linearises without the guide's turn:
+    there the engine takes the columns, and the two do differ (the actuator: by its rotating cylinder)."""
+    model = em.build(_mech(key))
+    eq = vexu.ConstraintEquations(model)
+    rng = np.random.default_rng(7)
+    worst = 0.0
+    for t in (0.0, 0.3, 0.7):
+        q = rng.normal(scale=0.05, size=eq.n)
+        c0 = eq.velocity_residual(q, np.zeros(eq.n), t)
+        cols = np.column_stack([eq.velocity_residual(q, e, t) - c0 for e in np.eye(eq.n)])
+        jac, c0_used = eq.velocity_jacobian(q, t)
+        np.testing.assert_array_equal(c0_used, c0)
+        assert np.max(np.abs(jac - cols)) <= 1e-13 * np.max(np.abs(cols))
+        worst = max(worst, float(np.max(np.abs(eq.jacobian(q, t) - cols)) / np.max(np.abs(cols))))
+    assert model.simplified_jacobian == (key == "actuator")
+    assert (worst > 1e-3) if model.simplified_jacobian else (worst <= 1e-13)
+
+
 # ---------------------------------------------------------------- dynamic mode
 
 
@@ -505,6 +528,37 @@ def test_dynamic_error_is_second_order_in_the_step() -> None:
     for g in ("velocity", "acceleration", "angular velocity", "angular acceleration"):
         ratio = errors[0][g] / errors[1][g]
         assert 3.0 < ratio < 5.0, f"{g}: error ratio {ratio:.2f} for h = {steps[0]:.3g} → {steps[1]:.3g} (expected ≈ 4)"
+
+
+@pytest.mark.parametrize("name", ["fourbar_textbook_example", "eightbar"])
+def test_the_fast_integration_equals_callbacks_and_the_default_solver(name: str, monkeypatch) -> None:
+    """A formula's input is handed to Exudyn as its own (symbolic) offset function and the Newton systems go
+    to Eigen's dense LU; the run equals the one with Python callbacks and Exudyn's default dense solver sample
+    for sample, within the run's own round-off bound on the rates (``meta["allowance"]``: the driver values
+    and the solves differ in their last bits) and to 1e-12 in positions."""
+    import exudyn as exu
+
+    mech = vloop.load(ROOT / "mechanisms" / f"{name}.toml")
+    times = mech.times[:40]
+    fast = vexu.solve(mech, times, mode="dynamic")
+    settings = vexu._dynamic_settings
+
+    def default_solver(*args: float) -> object:
+        ss = settings(*args)
+        ss.linearSolver.solverType = exu.LinearSolverType.EXUdense
+        return ss
+
+    monkeypatch.setattr(em, "formula_offsets", lambda model: [])
+    monkeypatch.setattr(vexu, "_dynamic_settings", default_solver)
+    slow = vexu.solve(mech, times, mode="dynamic")
+    assert fast.meta["step"] == slow.meta["step"] and len(fast) == len(slow) == len(times)
+    bound = fast.meta["allowance"]
+    for c in fast.columns:
+        group = _group(c)
+        diff = np.abs(fast[c] - slow[c])
+        peak = max(float(np.max(np.abs(slow[c]))), 1.0)
+        allowed = 1e-12 * peak + (np.asarray(bound[group]) if group in bound else 0.0)
+        assert np.all(diff <= allowed), (c, float(np.max(diff - allowed)))
 
 
 def test_dynamic_step_follows_the_accuracy_target() -> None:
