@@ -89,8 +89,11 @@ def test_an_interrupted_nightly_resumes_from_disk(how, uninterrupted, tmp_path):
     work = out / ".vloop-run" / "comparisons"
     _wait_for(work, 2, proc)
     os.killpg(proc.pid, how)  # the main process (and, in-process, its tasks): as a terminal's Ctrl-C or a kill -9
-    proc.wait(timeout=60)
-    assert proc.returncode != 0
+    code, _, err = _finish(proc, timeout=60)
+    assert code != 0
+    if how == signal.SIGINT:  # the user is told what is kept and how to go on
+        assert code == 130 and "the same command with --resume continues from them" in err, err
+        assert "Traceback" not in err
     kept = {p.name: p.stat().st_mtime_ns for p in _files(work)}
     assert len(kept) >= 2 and not (out / "summary.json").exists()  # nothing published, the work kept
     code, _, err = _finish(_validate(out, "--resume"))

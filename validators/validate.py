@@ -312,18 +312,27 @@ def _run(files: list[Path], engines: tuple[str, ...], args: argparse.Namespace, 
     done = dataset.done(work / DATASET)
     if done:
         print(f"vloop: resuming: {len(done)} of {len(files)} mechanisms already validated", file=sys.stderr)
-    return harness.run(
-        files,
-        engines,
-        progress=progress,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        timeout=args.timeout,
-        bar=bar,
-        dataset=work / DATASET,
-        skip=done,
-        shown=MAX_CORPUS_SECTIONS,
-    )
+    try:
+        return harness.run(
+            files,
+            engines,
+            progress=progress,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            timeout=args.timeout,
+            bar=bar,
+            dataset=work / DATASET,
+            skip=done,
+            shown=MAX_CORPUS_SECTIONS,
+        )
+    except KeyboardInterrupt:  # what is on disk stays there: say how to go on from it
+        kept = len(dataset.done(work / DATASET))
+        print(
+            f"vloop: {kept} of {len(files)} mechanisms validated are kept in {work}; the same command with "
+            "--resume continues from them",
+            file=sys.stderr,
+        )
+        raise
 
 
 def _summary(
