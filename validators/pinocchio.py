@@ -336,10 +336,10 @@ class _Work:
     def __init__(self, pm: PinocchioModel) -> None:
         import pinocchio as pin
 
-        self.pm = pm
+        self.pm, self.model, self.nv, self.n_rows = pm, pm.model, pm.nv, pm.n_rows
         self.data = pm.model.createData()
         self.cdata = [c.createData() for c in pm.cuts]
-        self.n_rows = pm.n_rows
+        self.cut_pairs = list(zip(pm.cuts, self.cdata, strict=True))
         self.lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         # residual weights make the merit dimensionless: lengths / mechanism size, angles as they are
         self.weights = np.full(pm.n_rows, 1.0 / pm.mech.scale)
@@ -382,22 +382,22 @@ class _Work:
         """
         import pinocchio as pin
 
-        pm, m, d, lwa = self.pm, self.pm.model, self.data, self.lwa
+        m, d, lwa = self.model, self.data, self.lwa
         if jac:
             pin.computeJointJacobians(m, d, q)  # also places the joints
         else:
             pin.forwardKinematics(m, d, q)
         pin.updateFramePlacements(m, d)
         F = np.empty(self.n_rows)
-        J = np.empty((self.n_rows, pm.nv)) if jac else None
+        J = np.empty((self.n_rows, self.nv)) if jac else None
         r = 0
-        for cm, cd in zip(pm.cuts, self.cdata, strict=True):
+        for cm, cd in self.cut_pairs:
             cm.calc(m, d, cd)
             F[r : r + 2] = cd.constraint_position_error[:2]  # z row is identically zero in the plane
             if J is not None:
                 J[r : r + 2] = cm.jacobian(m, d, cd)[:2]
             r += 2
-        for r, row in zip(self.starts, pm.rows, strict=True):
+        for r, row in zip(self.starts, self.pm.rows, strict=True):
             target = 0.0 if row.driver is None else x[row.driver]
             if row.kind == "slider":
                 s, Js = self.slider_s(row, jac)
@@ -418,16 +418,16 @@ class _Work:
         """J̇·v: every row's second time derivative at zero joint acceleration (Pinocchio)."""
         import pinocchio as pin
 
-        pm, m, d, lwa = self.pm, self.pm.model, self.data, self.lwa
-        pin.forwardKinematics(m, d, q, v, np.zeros(pm.nv))
+        m, d, lwa = self.model, self.data, self.lwa
+        pin.forwardKinematics(m, d, q, v, np.zeros(self.nv))
         pin.updateFramePlacements(m, d)
         out = np.empty(self.n_rows)
         r = 0
-        for cm, cd in zip(pm.cuts, self.cdata, strict=True):
+        for cm, cd in self.cut_pairs:
             cm.calc(m, d, cd)
             out[r : r + 2] = cd.constraint_acceleration_error[:2]
             r += 2
-        for r, row in zip(self.starts, pm.rows, strict=True):
+        for r, row in zip(self.starts, self.pm.rows, strict=True):
             if row.kind == "slider":
                 out[r] = self.slider_sva(row)[2]
             elif row.kind == "angle":
@@ -504,6 +504,28 @@ def _cond2(J: np.ndarray) -> float:
     return c if math.isfinite(c) else float(np.linalg.cond(J))
 
 
+CERTAIN_COND = 1e-3  # of max_cond: below it the bound ‖J‖_F^n/|det J| certifies a position regular without an SVD
+
+
+def _well_conditioned(J: np.ndarray, det: float, max_cond: float) -> bool:
+    """Whether cond₂(J) ≤ max_cond for certain, from J's Frobenius norm and its determinant ``det`` (LU) alone.
+
+    Π σ_i = |det| gives σ_min ≥ |det| / σ_max^(n−1), so cond₂ = σ_max/σ_min ≤ ‖J‖_F^n / |det|; this bound at most
+    CERTAIN_COND·max_cond certifies the position (False: undecided, the SVD decides). LU's det is det(J + E) with
+    ‖E‖ ≲ n·ρ·ε·‖J‖ (ρ: its growth factor); for a J with cond₂ > max_cond to pass, E must move σ_min by
+    σ_max/(CERTAIN_COND·max_cond) = 1e-9·σ_max at the default 1e12, which needs n·ρ ≳ 4e6: beyond partial
+    pivoting's worst-case growth 2^(n−1) up to n = 18 (the corpus's systems have n ≤ 7), and its growth is near 1
+    in practice. Where it passes, numpy.linalg.cond passes too (tests/test_pinocchio.py checks both).
+    """
+    fro = math.sqrt(float((J * J).sum()))
+    if not (math.isfinite(fro) and math.isfinite(det) and math.isfinite(max_cond)) or det == 0:
+        return False
+    try:
+        return fro ** len(J) <= CERTAIN_COND * max_cond * abs(det)
+    except OverflowError:
+        return False
+
+
 class _Solver:
     """Newton projection, velocity/acceleration solves and continuation for one model."""
 
@@ -530,9 +552,9 @@ class _Solver:
         ½|W·F|² guards against overshoot. Raises _NoConvergence otherwise. The line
         search evaluates J with F, so an accepted point's F and J start the next iteration.
         """
-        w, sc = self.w.weights, self.pm.q_scale
+        w, sc, residual = self.w.weights, self.pm.q_scale, self.w.residual
         q = q.copy()
-        F, J = self.w.residual(q, x, True)
+        F, J = residual(q, x, True)
         for it in range(1, self.max_iter + 1):
             try:
                 dq = np.linalg.solve(J, -F)
@@ -543,16 +565,16 @@ class _Solver:
                 raise _NoConvergence("singular constraint Jacobian")
             if step <= self.tol:
                 q += dq
-                F, J = self.w.residual(q, x, True)
+                F, J = residual(q, x, True)
                 res = float(np.abs(w * F).max())
                 if res > RESIDUAL_TOL:  # a small step is not enough: the equations must hold
                     raise _NoConvergence(f"Newton stalled at scaled residual {res:.3g}")
                 return q, F, J, it
-            phi0 = 0.5 * float(np.sum((w * F) ** 2))
+            phi0 = 0.5 * float(((w * F) ** 2).sum())
             lam = 1.0
             while True:
-                F, J = self.w.residual(q + lam * dq, x, True)
-                if 0.5 * float(np.sum((w * F) ** 2)) <= (1.0 - 1e-4 * lam) * phi0:
+                F, J = residual(q + lam * dq, x, True)
+                if 0.5 * float(((w * F) ** 2).sum()) <= (1.0 - 1e-4 * lam) * phi0:
                     break
                 lam *= 0.5
                 if lam < 1e-3:
@@ -564,16 +586,18 @@ class _Solver:
         self, t: float, q: np.ndarray, F: np.ndarray, J: np.ndarray, xd: np.ndarray, xdd: np.ndarray, it: int
     ) -> _State:
         """Velocities and accelerations at a converged q (two linear solves)."""
-        cond = _cond2(J)
-        if not math.isfinite(cond) or cond > self.max_cond:
-            raise _NoConvergence(f"singular position (Jacobian condition number {cond:.3g})")
+        det = float(np.linalg.det(J))
+        if not _well_conditioned(J, det, self.max_cond):
+            cond = _cond2(J)
+            if not math.isfinite(cond) or cond > self.max_cond:
+                raise _NoConvergence(f"singular position (Jacobian condition number {cond:.3g})")
         rhs = np.zeros(self.w.n_rows)
         rhs[self.w.drv_index] = xd[self.w.drv_which]
         v = np.linalg.solve(J, rhs)
         rhs[:] = -self.w.drift(q, v)
         rhs[self.w.drv_index] += xdd[self.w.drv_which]
         a = np.linalg.solve(J, rhs)
-        return _State(t, q, v, a, float(np.sign(np.linalg.det(J))), float(np.abs(self.w.weights * F).max()), J, it)
+        return _State(t, q, v, a, float(np.sign(det)), float(np.abs(self.w.weights * F).max()), J, it)
 
     def step(
         self,

@@ -296,6 +296,8 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
         "_NoConvergence",
         "_State",
         "_cond2",
+        "CERTAIN_COND",
+        "_well_conditioned",
         "_Solver",
         "_inputs_fn",
         "_assembly_time",
