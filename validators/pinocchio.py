@@ -608,13 +608,16 @@ class _Solver:
         xdd: np.ndarray,
         guess: np.ndarray,
         on_path: bool = True,
+        move: float | None = None,
     ) -> _State:
         """One continuation step; ``on_path``: held to the predicted path (JUMP_RATIO), which the last bisection
-        level is not (a step that short is taken as Newton lands it, as before the path was checked)."""
+        level is not (a step that short is taken as Newton lands it, as before the path was checked); ``move``:
+        the predictor's scaled move max|guess − prev.q|/scale, if the caller has it."""
         q, F, J, it = self.project(guess, x)
         st = self.state(t, q, F, J, xd, xdd, it)
         sc, dt = self.pm.q_scale, t - prev.t
-        move = float((np.abs(guess - prev.q) / sc).max())
+        if move is None:
+            move = float((np.abs(guess - prev.q) / sc).max())
         correction = float((np.abs(q - guess) / sc).max())
         turned = float((np.abs(st.v - prev.v - dt * prev.a) / sc).max()) * abs(dt)
         if on_path and max(correction, turned) > JUMP_RATIO * move + JUMP_FLOOR:
@@ -656,11 +659,11 @@ class _Solver:
         dt = t - prev.t
         x, xd, xdd = inputs(t)
         guess = prev.q + dt * prev.v + 0.5 * dt * dt * prev.a
-        far = float((np.abs(guess - prev.q) / self.pm.q_scale).max()) > MAX_CRANK_STEP
+        move = float((np.abs(guess - prev.q) / self.pm.q_scale).max())
         try:
-            if far and depth < self.max_bisect:
+            if move > MAX_CRANK_STEP and depth < self.max_bisect:
                 raise _NoConvergence("predicted move too long")
-            return self.step(prev, t, x, xd, xdd, guess, on_path=depth < self.max_bisect)
+            return self.step(prev, t, x, xd, xdd, guess, on_path=depth < self.max_bisect, move=move)
         except _NoConvergence:
             if depth >= self.max_bisect:
                 raise
@@ -796,18 +799,18 @@ def _frame_outputs(solver: _Solver, states: list[_State]) -> np.ndarray:
     link_frames = [pm.body_frame[b] for b in mech.moving_links]
     point_frames = [pm.point_frame[p] for p in mech.tracked_points]
     slider_rows = [pm.slider_rows[s] for s in mech.sliders]
+    velocity, acceleration, oMf = pin.getFrameVelocity, pin.getFrameClassicalAcceleration, d.oMf
     rows = []
     for st in states:
         pin.forwardKinematics(m, d, st.q, st.v, st.a)
         pin.updateFramePlacements(m, d)
         row: list[float] = []
         for f in link_frames:
-            vel, acc = pin.getFrameVelocity(m, d, f, lwa), pin.getFrameClassicalAcceleration(m, d, f, lwa)
-            row += (w._angle(f), vel.angular[2], acc.angular[2])
+            row += (w._angle(f), velocity(m, d, f, lwa).angular[2], acceleration(m, d, f, lwa).angular[2])
         for f in point_frames:
-            xy = d.oMf[f].translation
-            vel, acc = pin.getFrameVelocity(m, d, f, lwa).linear, pin.getFrameClassicalAcceleration(m, d, f, lwa).linear
-            row += (xy[0], xy[1], vel[0], vel[1], acc[0], acc[1])
+            row += oMf[f].translation[:2].tolist()
+            row += velocity(m, d, f, lwa).linear[:2].tolist()
+            row += acceleration(m, d, f, lwa).linear[:2].tolist()
         for r in slider_rows:
             row += w.slider_sva(r)
         rows.append(row)
