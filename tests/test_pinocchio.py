@@ -231,6 +231,49 @@ def test_tree_keeps_sliders_and_closes_every_pin(path: Path) -> None:
         assert len(plan.cuts) == J - (L - 1)  # one cut per independent loop
 
 
+def _matrices_of_every_conditioning(count: int = 400) -> list[np.ndarray]:
+    """U·diag(σ)·Vᵀ with cond₂ = 10^k, k uniform in [0, 17], sizes 2 to 9, columns then scaled as a mechanism's
+    (lengths in mm next to angles), plus matrices that are exactly singular or badly scaled."""
+    rng = np.random.default_rng(36)
+    out = []
+    for k in rng.uniform(0.0, 17.0, count):
+        n = int(rng.integers(2, 10))
+        U, _ = np.linalg.qr(rng.standard_normal((n, n)))
+        V, _ = np.linalg.qr(rng.standard_normal((n, n)))
+        out.append((U * np.logspace(0.0, -k, n)) @ V.T * rng.choice([1.0, 250.0], n))
+    out += [np.zeros((3, 3)), np.array([[1.0, 2.0], [2.0, 4.0]]), np.diag([1.0, 1e-200, 1e150])]
+    return out
+
+
+def test_condition_check_is_numpys() -> None:
+    """The singular-position check gives numpy.linalg.cond's verdict, and its number where it is computed: the
+    determinant bound certifies only matrices whose SVD condition number is below CERTAIN_COND of the limit."""
+    for J in _matrices_of_every_conditioning():
+        cond = np.linalg.cond(J)
+        assert vpin._cond2(J) == cond or (np.isinf(cond) and np.isinf(vpin._cond2(J)))
+        for max_cond in (1e12, 1e6, 1e3):
+            if vpin._well_conditioned(J, float(np.linalg.det(J)), max_cond):
+                assert cond <= vpin.CERTAIN_COND * max_cond * (1 + 1e-9), (cond, max_cond)
+
+
+def test_health_condition_numbers_are_the_single_ones() -> None:
+    """The health's cond, computed for every sample at once, is tolerances.condition_number of each sample's
+    Jacobian (the function the Exudyn engine calls sample by sample), exactly."""
+    from validators.tolerances import condition_number, condition_numbers
+
+    path = next(p for p in MECH_FILES if p.stem == "sixbar_watt2")
+    res, _ = _pin(path)
+    pm = vpin.build_model(_mech(path))
+    solver = vpin._Solver(pm, 1e-10, 50, 8, 1e12)
+    x = evaluate_all(pm.mech, res.t)[0]
+    for k in range(0, len(res), 7):
+        J = solver.w.residual(res.meta["q"][k], x[k], True)[1]
+        assert res.health["cond"][k] == condition_number(J, solver.lengths, pm.mech.scale)
+        # a regular position is certified without an SVD (the check's shortcut is not vacuous)
+        assert vpin._well_conditioned(J, float(np.linalg.det(J)), 1e12)
+    assert len(condition_numbers(np.zeros((0, 3, 3)), np.zeros(3, bool), 1.0)) == 0
+
+
 def test_vloop_imports_without_pinocchio() -> None:
     code = "import sys; sys.modules['pinocchio'] = None; import vloop, validators.pinocchio; print('ok')"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False)

@@ -51,7 +51,7 @@ from vloop.errors import MechanismError, MotionError
 from vloop.mechanism import Body, Mechanism
 from vloop.result import Result
 
-from .tolerances import condition_number
+from .tolerances import condition_numbers
 
 ENGINE = "pinocchio"
 TWO_PI = 2.0 * math.pi
@@ -334,12 +334,17 @@ class _Work:
     """Pinocchio Data and constraint Data for one solve, plus the row evaluations."""
 
     def __init__(self, pm: PinocchioModel) -> None:
-        self.pm = pm
+        import pinocchio as pin
+
+        self.pm, self.model, self.nv, self.n_rows = pm, pm.model, pm.nv, pm.n_rows
         self.data = pm.model.createData()
         self.cdata = [c.createData() for c in pm.cuts]
+        self.cut_pairs = list(zip(pm.cuts, self.cdata, strict=True))
+        self.lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         # residual weights make the merit dimensionless: lengths / mechanism size, angles as they are
         self.weights = np.full(pm.n_rows, 1.0 / pm.mech.scale)
         starts = 2 * len(pm.cuts) + np.cumsum([0, *(row.size for row in pm.rows)], dtype=int)[:-1]
+        self.starts = [int(r) for r in starts]  # each row's first line in F and J
         for r, row in zip(starts, pm.rows, strict=True):
             if row.kind == "angle":
                 self.weights[r] = 1.0
@@ -363,77 +368,72 @@ class _Work:
         s = float(r @ u)
         if not jac:
             return s, None
-        lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        Jp = pin.getFrameJacobian(m, d, row.frame, lwa)
-        Jg = pin.getFrameJacobian(m, d, row.guide_frame, lwa)
+        Jp = pin.getFrameJacobian(m, d, row.frame, self.lwa)
+        Jg = pin.getFrameJacobian(m, d, row.guide_frame, self.lwa)
         u_perp = np.array([-u[1], u[0]])
         # ds/dt = (v_P − v_O)·u + (r·u⊥)·ω_guide
         return s, u @ (Jp[:2] - Jg[:2]) + (r @ u_perp) * Jg[5]
 
     def residual(self, q: np.ndarray, x: np.ndarray, jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        """Residual F(q) (driver inputs x) and, if ``jac``, its Jacobian dF/dq."""
+        """Residual F(q) (driver inputs x) and, if ``jac``, its Jacobian dF/dq.
+
+        The frames are placed by the same forward pass with or without ``jac`` (computeJointJacobians places the
+        joints as forwardKinematics does), so F does not depend on ``jac``.
+        """
         import pinocchio as pin
 
-        pm, m, d = self.pm, self.pm.model, self.data
+        m, d, lwa = self.model, self.data, self.lwa
         if jac:
             pin.computeJointJacobians(m, d, q)  # also places the joints
         else:
             pin.forwardKinematics(m, d, q)
         pin.updateFramePlacements(m, d)
-        n = pm.n_rows
-        F = np.empty(n)
-        J = np.empty((n, pm.nv)) if jac else None
+        F = np.empty(self.n_rows)
+        J = np.empty((self.n_rows, self.nv)) if jac else None
         r = 0
-        for cm, cd in zip(pm.cuts, self.cdata, strict=True):
+        for cm, cd in self.cut_pairs:
             cm.calc(m, d, cd)
             F[r : r + 2] = cd.constraint_position_error[:2]  # z row is identically zero in the plane
             if J is not None:
                 J[r : r + 2] = cm.jacobian(m, d, cd)[:2]
             r += 2
-        lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        for row in pm.rows:
+        for r, row in zip(self.starts, self.pm.rows, strict=True):
             target = 0.0 if row.driver is None else x[row.driver]
             if row.kind == "slider":
                 s, Js = self.slider_s(row, jac)
                 F[r] = s - target
                 if J is not None:
                     J[r] = Js
+            elif row.kind == "angle":
+                F[r] = _wrap(self._angle(row.frame) - target)
+                if J is not None:
+                    J[r] = pin.getFrameJacobian(m, d, row.frame, lwa)[5]
             else:
-                Jf = pin.getFrameJacobian(m, d, row.frame, lwa) if J is not None else None
-                if row.kind == "angle":
-                    F[r] = _wrap(self._angle(row.frame) - target)
-                    if J is not None:
-                        J[r] = Jf[5]
-                else:
-                    F[r : r + 2] = d.oMf[row.frame].translation[:2]
-                    if J is not None:
-                        J[r : r + 2] = Jf[:2]
-            r += row.size
+                F[r : r + 2] = d.oMf[row.frame].translation[:2]
+                if J is not None:
+                    J[r : r + 2] = pin.getFrameJacobian(m, d, row.frame, lwa)[:2]
         return F, J
 
     def drift(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """J̇·v: every row's second time derivative at zero joint acceleration (Pinocchio)."""
         import pinocchio as pin
 
-        pm, m, d = self.pm, self.pm.model, self.data
-        pin.forwardKinematics(m, d, q, v, np.zeros(pm.nv))
+        m, d, lwa = self.model, self.data, self.lwa
+        pin.forwardKinematics(m, d, q, v, np.zeros(self.nv))
         pin.updateFramePlacements(m, d)
-        out = np.empty(pm.n_rows)
+        out = np.empty(self.n_rows)
         r = 0
-        for cm, cd in zip(pm.cuts, self.cdata, strict=True):
+        for cm, cd in self.cut_pairs:
             cm.calc(m, d, cd)
             out[r : r + 2] = cd.constraint_acceleration_error[:2]
             r += 2
-        for row in pm.rows:
+        for r, row in zip(self.starts, self.pm.rows, strict=True):
             if row.kind == "slider":
                 out[r] = self.slider_sva(row)[2]
+            elif row.kind == "angle":
+                out[r] = pin.getFrameClassicalAcceleration(m, d, row.frame, lwa).angular[2]
             else:
-                acc = pin.getFrameClassicalAcceleration(m, d, row.frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-                if row.kind == "angle":
-                    out[r] = acc.angular[2]
-                else:
-                    out[r : r + 2] = acc.linear[:2]
-            r += row.size
+                out[r : r + 2] = pin.getFrameClassicalAcceleration(m, d, row.frame, lwa).linear[:2]
         return out
 
     def slider_sva(self, row: _Row) -> tuple[float, float, float]:
@@ -445,8 +445,7 @@ class _Work:
         """
         import pinocchio as pin
 
-        m, d = self.pm.model, self.data
-        lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        m, d, lwa = self.pm.model, self.data, self.lwa
         Mg = d.oMf[row.guide_frame]
         u = Mg.rotation[:2, :2] @ row.u_local
         up = np.array([-u[1], u[0]])
@@ -493,8 +492,38 @@ class _State:
     a: np.ndarray
     det_sign: float
     residual: float = 0.0
-    cond: float = 0.0
+    jac: np.ndarray | None = None  # the constraint Jacobian at q (the health's condition number, at the end)
     iterations: int = 0
+
+
+def _cond2(J: np.ndarray) -> float:
+    """numpy.linalg.cond(J), the 2-norm condition number by SVD, without its per-call overhead (numpy's own
+    function where the ratio is not finite: a singular or non-finite J, so that its value is numpy's too)."""
+    s = np.linalg.svd(J, compute_uv=False)
+    c = float(s[0]) / float(s[-1]) if s[-1] != 0 else math.inf
+    return c if math.isfinite(c) else float(np.linalg.cond(J))
+
+
+CERTAIN_COND = 1e-3  # of max_cond: below it the bound ‖J‖_F^n/|det J| certifies a position regular without an SVD
+
+
+def _well_conditioned(J: np.ndarray, det: float, max_cond: float) -> bool:
+    """Whether cond₂(J) ≤ max_cond for certain, from J's Frobenius norm and its determinant ``det`` (LU) alone.
+
+    Π σ_i = |det| gives σ_min ≥ |det| / σ_max^(n−1), so cond₂ = σ_max/σ_min ≤ ‖J‖_F^n / |det|; this bound at most
+    CERTAIN_COND·max_cond certifies the position (False: undecided, the SVD decides). LU's det is det(J + E) with
+    ‖E‖ ≲ n·ρ·ε·‖J‖ (ρ: its growth factor); for a J with cond₂ > max_cond to pass, E must move σ_min by
+    σ_max/(CERTAIN_COND·max_cond) = 1e-9·σ_max at the default 1e12, which needs n·ρ ≳ 4e6: beyond partial
+    pivoting's worst-case growth 2^(n−1) up to n = 18 (the corpus's systems have n ≤ 7), and its growth is near 1
+    in practice. Where it passes, numpy.linalg.cond passes too (tests/test_pinocchio.py checks both).
+    """
+    fro = math.sqrt(float((J * J).sum()))
+    if not (math.isfinite(fro) and math.isfinite(det) and math.isfinite(max_cond)) or det == 0:
+        return False
+    try:
+        return fro ** len(J) <= CERTAIN_COND * max_cond * abs(det)
+    except OverflowError:
+        return False
 
 
 class _Solver:
@@ -513,38 +542,39 @@ class _Solver:
 
     def n_steps(self, x0: np.ndarray, x1: np.ndarray) -> int:
         """Continuation steps needed to move the drivers from x0 to x1."""
-        return max(1, math.ceil(float(np.max(np.abs(x1 - x0) / self.max_dx))))
+        return max(1, math.ceil(float((np.abs(x1 - x0) / self.max_dx).max())))
 
     def project(self, q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """Newton onto {F(q; x) = 0} from ``q``; returns (q, F and J at q, iterations).
 
         Stops when the scaled Newton step max|Δq_i / scale_i| ≤ tol (the error after
         such a step is ~tol² by quadratic convergence); Armijo backtracking on
-        ½|W·F|² guards against overshoot. Raises _NoConvergence otherwise.
+        ½|W·F|² guards against overshoot. Raises _NoConvergence otherwise. The line
+        search evaluates J with F, so an accepted point's F and J start the next iteration.
         """
-        w, sc = self.w.weights, self.pm.q_scale
+        w, sc, residual = self.w.weights, self.pm.q_scale, self.w.residual
         q = q.copy()
+        F, J = residual(q, x, True)
         for it in range(1, self.max_iter + 1):
-            F, J = self.w.residual(q, x, True)
             try:
                 dq = np.linalg.solve(J, -F)
             except np.linalg.LinAlgError:
                 raise _NoConvergence("singular constraint Jacobian") from None
-            if not np.all(np.isfinite(dq)):
+            step = float((np.abs(dq) / sc).max())
+            if not math.isfinite(step) and not np.all(np.isfinite(dq)):
                 raise _NoConvergence("singular constraint Jacobian")
-            step = float(np.max(np.abs(dq) / sc))
             if step <= self.tol:
                 q += dq
-                F, J = self.w.residual(q, x, True)
-                res = float(np.max(np.abs(w * F)))
+                F, J = residual(q, x, True)
+                res = float(np.abs(w * F).max())
                 if res > RESIDUAL_TOL:  # a small step is not enough: the equations must hold
                     raise _NoConvergence(f"Newton stalled at scaled residual {res:.3g}")
                 return q, F, J, it
-            phi0 = 0.5 * float(np.sum((w * F) ** 2))
+            phi0 = 0.5 * float(((w * F) ** 2).sum())
             lam = 1.0
             while True:
-                Ft, _ = self.w.residual(q + lam * dq, x, False)
-                if 0.5 * float(np.sum((w * Ft) ** 2)) <= (1.0 - 1e-4 * lam) * phi0:
+                F, J = residual(q + lam * dq, x, True)
+                if 0.5 * float(((w * F) ** 2).sum()) <= (1.0 - 1e-4 * lam) * phi0:
                     break
                 lam *= 0.5
                 if lam < 1e-3:
@@ -556,17 +586,18 @@ class _Solver:
         self, t: float, q: np.ndarray, F: np.ndarray, J: np.ndarray, xd: np.ndarray, xdd: np.ndarray, it: int
     ) -> _State:
         """Velocities and accelerations at a converged q (two linear solves)."""
-        cond = float(np.linalg.cond(J))
-        if not math.isfinite(cond) or cond > self.max_cond:
-            raise _NoConvergence(f"singular position (Jacobian condition number {cond:.3g})")
-        cond = condition_number(J, self.lengths, self.pm.mech.scale)  # the health's: free of the file's units
-        rhs = np.zeros(self.pm.n_rows)
+        det = float(np.linalg.det(J))
+        if not _well_conditioned(J, det, self.max_cond):
+            cond = _cond2(J)
+            if not math.isfinite(cond) or cond > self.max_cond:
+                raise _NoConvergence(f"singular position (Jacobian condition number {cond:.3g})")
+        rhs = np.zeros(self.w.n_rows)
         rhs[self.w.drv_index] = xd[self.w.drv_which]
         v = np.linalg.solve(J, rhs)
         rhs[:] = -self.w.drift(q, v)
         rhs[self.w.drv_index] += xdd[self.w.drv_which]
         a = np.linalg.solve(J, rhs)
-        return _State(t, q, v, a, float(np.sign(np.linalg.det(J))), float(np.max(np.abs(self.w.weights * F))), cond, it)
+        return _State(t, q, v, a, float(np.sign(det)), float(np.abs(self.w.weights * F).max()), J, it)
 
     def step(
         self,
@@ -577,15 +608,18 @@ class _Solver:
         xdd: np.ndarray,
         guess: np.ndarray,
         on_path: bool = True,
+        move: float | None = None,
     ) -> _State:
         """One continuation step; ``on_path``: held to the predicted path (JUMP_RATIO), which the last bisection
-        level is not (a step that short is taken as Newton lands it, as before the path was checked)."""
+        level is not (a step that short is taken as Newton lands it, as before the path was checked); ``move``:
+        the predictor's scaled move max|guess − prev.q|/scale, if the caller has it."""
         q, F, J, it = self.project(guess, x)
         st = self.state(t, q, F, J, xd, xdd, it)
         sc, dt = self.pm.q_scale, t - prev.t
-        move = float(np.max(np.abs(guess - prev.q) / sc))
-        correction = float(np.max(np.abs(q - guess) / sc))
-        turned = float(np.max(np.abs(st.v - prev.v - dt * prev.a) / sc)) * abs(dt)
+        if move is None:
+            move = float((np.abs(guess - prev.q) / sc).max())
+        correction = float((np.abs(q - guess) / sc).max())
+        turned = float((np.abs(st.v - prev.v - dt * prev.a) / sc).max()) * abs(dt)
         if on_path and max(correction, turned) > JUMP_RATIO * move + JUMP_FLOOR:
             raise _NoConvergence("Newton left the predicted path (the other branch of a change point, or a toggle)")
         if st.det_sign != prev.det_sign and not self.smooth(prev, q, guess):
@@ -625,11 +659,11 @@ class _Solver:
         dt = t - prev.t
         x, xd, xdd = inputs(t)
         guess = prev.q + dt * prev.v + 0.5 * dt * dt * prev.a
-        far = float(np.max(np.abs(guess - prev.q) / self.pm.q_scale)) > MAX_CRANK_STEP
+        move = float((np.abs(guess - prev.q) / self.pm.q_scale).max())
         try:
-            if far and depth < self.max_bisect:
+            if move > MAX_CRANK_STEP and depth < self.max_bisect:
                 raise _NoConvergence("predicted move too long")
-            return self.step(prev, t, x, xd, xdd, guess, on_path=depth < self.max_bisect)
+            return self.step(prev, t, x, xd, xdd, guess, on_path=depth < self.max_bisect, move=move)
         except _NoConvergence:
             if depth >= self.max_bisect:
                 raise
@@ -640,11 +674,26 @@ class _Solver:
 # ---------------------------------------------------------------- the engine
 
 
-def _inputs_fn(mech: Mechanism) -> Inputs:
-    """Driver inputs x, ẋ, ẍ at one time (the shared description of the inputs)."""
+def _inputs_fn(mech: Mechanism, times: np.ndarray | None = None) -> Inputs:
+    """Driver inputs x, ẋ, ẍ at one time (the shared description of the inputs).
+
+    ``times`` (the samples) are evaluated in one call up front: evaluate_all works element by element, so a
+    sample's inputs are the numbers a call at that time alone gives. Times between samples (continuation
+    steps, bisections) are evaluated when asked for.
+    """
+    table: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    if times is not None and len(times):
+        try:
+            x, xd, xdd = evaluate_all(mech, np.asarray(times, float))
+            table = {float(tk): (x[k], xd[k], xdd[k]) for k, tk in enumerate(times)}
+        except MechanismError:  # a time outside a profile: the sample says so when the run reaches it
+            pass
 
     @functools.lru_cache(maxsize=16)  # each time is asked for by march and by advance
     def f(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        hit = table.get(t)
+        if hit is not None:
+            return hit
         x, xd, xdd = evaluate_all(mech, np.array([t]))
         return x[0], xd[0], xdd[0]
 
@@ -715,7 +764,7 @@ def solve(
     t = np.asarray(mech.times if times is None else times, float)
     pm = build_model(mech, root, cut_preference)
     solver = _Solver(pm, tol, max_iter, max_bisect, max_cond)
-    inputs = _inputs_fn(mech)
+    inputs = _inputs_fn(mech, t)
     t_a = _assembly_time(mech)
     state = _assemble(solver, t_a, inputs)
 
@@ -740,40 +789,49 @@ def solve(
     return _collect(solver, t, states)
 
 
-def _collect(solver: _Solver, t: np.ndarray, states: list[_State]) -> Result:
-    """Read every output from Pinocchio frames at each solved sample."""
+def _frame_outputs(solver: _Solver, states: list[_State]) -> np.ndarray:
+    """Per solved sample (rows): every link's θ (in (−π, π]), ω, α, every point's x, y, vx, vy, ax, ay and every
+    slider's s, v, a, in that order (the mechanism's), read from Pinocchio's frames at the sample's q, v, a."""
     import pinocchio as pin
 
     pm, w = solver.pm, solver.w
-    m, d = pm.model, w.data
-    mech = pm.mech
-    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    n = len(states)
-    links = {b: np.zeros((3, n)) for b in mech.moving_links}
-    points = {p: np.zeros((6, n)) for p in mech.tracked_points}
-    sliders = {s: np.zeros((3, n)) for s in mech.sliders}
-    for k, st in enumerate(states):
+    m, d, lwa, mech = pm.model, w.data, w.lwa, pm.mech
+    link_frames = [pm.body_frame[b] for b in mech.moving_links]
+    point_frames = [pm.point_frame[p] for p in mech.tracked_points]
+    slider_rows = [pm.slider_rows[s] for s in mech.sliders]
+    velocity, acceleration, oMf = pin.getFrameVelocity, pin.getFrameClassicalAcceleration, d.oMf
+    rows = []
+    for st in states:
         pin.forwardKinematics(m, d, st.q, st.v, st.a)
         pin.updateFramePlacements(m, d)
-        for b, arr in links.items():
-            f = pm.body_frame[b]
-            arr[:, k] = (
-                w._angle(f),
-                pin.getFrameVelocity(m, d, f, lwa).angular[2],
-                pin.getFrameClassicalAcceleration(m, d, f, lwa).angular[2],
-            )
-        for p, arr in points.items():
-            f = pm.point_frame[p]
-            arr[:2, k] = d.oMf[f].translation[:2]
-            arr[2:4, k] = pin.getFrameVelocity(m, d, f, lwa).linear[:2]
-            arr[4:, k] = pin.getFrameClassicalAcceleration(m, d, f, lwa).linear[:2]
-        for s, arr in sliders.items():
-            arr[:, k] = w.slider_sva(pm.slider_rows[s])
+        row: list[float] = []
+        for f in link_frames:
+            row += (w._angle(f), velocity(m, d, f, lwa).angular[2], acceleration(m, d, f, lwa).angular[2])
+        for f in point_frames:
+            row += oMf[f].translation[:2].tolist()
+            row += velocity(m, d, f, lwa).linear[:2].tolist()
+            row += acceleration(m, d, f, lwa).linear[:2].tolist()
+        for r in slider_rows:
+            row += w.slider_sva(r)
+        rows.append(row)
+    width = 3 * len(link_frames) + 6 * len(point_frames) + 3 * len(slider_rows)
+    return np.array(rows, float).reshape(len(states), width)
+
+
+def _collect(solver: _Solver, t: np.ndarray, states: list[_State]) -> Result:
+    """Every output at each solved sample (from Pinocchio's frames), the health and the joint coordinates."""
+    pm, mech = solver.pm, solver.pm.mech
+    n = len(states)
+    cols = iter(_frame_outputs(solver, states).T)
+    links = {b: [next(cols) for _ in range(3)] for b in mech.moving_links}
+    points = {p: tuple(next(cols) for _ in range(6)) for p in mech.tracked_points}
+    sliders = {s: tuple(next(cols) for _ in range(3)) for s in mech.sliders}
     for b, arr in links.items():
         arr[0] = _continuous_angle(arr[0], arr[1], t, pm.bodies[b].theta0)
+    jacobians = np.array([s.jac for s in states], float).reshape(n, pm.nv, pm.nv)
     health = {
         "residual": np.array([s.residual for s in states]),
-        "cond": np.array([s.cond for s in states]),
+        "cond": condition_numbers(jacobians, solver.lengths, mech.scale),  # the health's: free of the file's units
         "iterations": np.array([s.iterations for s in states], float),
     }
     meta = {"root": pm.plan.root, "cuts": [f"{j}:{a}-{b}" for j, a, b in pm.plan.cuts], "nv": pm.nv}
@@ -784,8 +842,8 @@ def _collect(solver: _Solver, t: np.ndarray, states: list[_State]) -> Result:
         ENGINE,
         t,
         links={b: tuple(a) for b, a in links.items()},
-        points={p: tuple(a) for p, a in points.items()},
-        sliders={s: tuple(a) for s, a in sliders.items()},
+        points=points,
+        sliders=sliders,
         health=health,
         meta=meta,
     )

@@ -196,11 +196,19 @@ def condition_number(jacobian: np.ndarray, length_columns: np.ndarray, size: flo
     length it moves a point at that distance) and every row by its largest entry (a row's units cancel).
     ``length_columns``: which columns are lengths (the others angles). ∞ for a singular Jacobian.
     """
-    J = np.array(jacobian, float)
-    J[:, ~np.asarray(length_columns, bool)] /= size
-    J /= np.maximum(np.max(np.abs(J), axis=1, keepdims=True), 1e-300)
-    kappa = float(np.linalg.cond(J))
-    return kappa if np.isfinite(kappa) else float("inf")
+    return float(condition_numbers(np.asarray(jacobian, float)[None], length_columns, size)[0])
+
+
+def condition_numbers(jacobians: np.ndarray, length_columns: np.ndarray, size: float) -> np.ndarray:
+    """:func:`condition_number` of every Jacobian of a stack (k, n, n) at once: the same numbers (numpy's SVD
+    runs matrix by matrix on a stack), without the per-call overhead when an engine has one per sample."""
+    J = np.array(jacobians, float)
+    if len(J) == 0:
+        return np.zeros(0)
+    J[..., ~np.asarray(length_columns, bool)] /= size
+    J /= np.maximum(np.max(np.abs(J), axis=-1, keepdims=True), 1e-300)
+    kappa = np.linalg.cond(J)
+    return np.where(np.isfinite(kappa), kappa, np.inf)
 
 
 def integrator_roundoff(

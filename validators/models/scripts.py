@@ -270,7 +270,7 @@ def run(mech: Mechanism, times: np.ndarray) -> tuple[np.ndarray, dict[str, np.nd
 
 def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
     """The Pinocchio script of ``mech`` (``script``: its file name, ``source``: where the mechanism came from)."""
-    from .. import pinocchio, pinocchio_forces, tolerances
+    from .. import pinocchio, pinocchio_forces
 
     names = [
         "_wrap",
@@ -295,6 +295,9 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
         "JUMP_FLOOR",
         "_NoConvergence",
         "_State",
+        "_cond2",
+        "CERTAIN_COND",
+        "_well_conditioned",
         "_Solver",
         "_inputs_fn",
         "_assembly_time",
@@ -304,8 +307,7 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
     model = "\n\n".join(
         [
             "# ---------------------------------------------------------------- 3. the model and its numerics",
-            "# (validators/pinocchio.py, verbatim; the condition number from validators/tolerances.py)",
-            _segments(tolerances, ["condition_number"]),
+            "# (validators/pinocchio.py, verbatim)",
             _segments(pinocchio, names),
             "# the file's inertias and gravity (validators/pinocchio_forces.py)",
             _segments(pinocchio_forces, ["_add_dynamics"]),
@@ -343,7 +345,7 @@ def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
         [
             "# ---------------------------------------------------------------- 3. the model and its numerics",
             "# (validators/exudyn_model.py and the kinematic engine of validators/exudyn.py, verbatim)",
-            _segments(tolerances, ["condition_number"]),
+            _segments(tolerances, ["condition_number", "condition_numbers"]),
             _segments(exudyn_model),
             "em = sys.modules[__name__]  # the engine's code names the model module 'em'",
             _segments(exudyn, names),
