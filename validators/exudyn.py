@@ -67,7 +67,7 @@ from vloop.mechanism import Mechanism
 from vloop.result import Result
 
 from . import exudyn_model as em
-from .tolerances import condition_number, integrator_roundoff
+from .tolerances import condition_numbers, integrator_roundoff
 
 ENGINES = {"kinematic": "exudyn-kinematic", "dynamic": "exudyn-dynamic"}
 
@@ -229,7 +229,7 @@ class _State:
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
-    cond: float
+    jac: np.ndarray  # the velocity-level constraint Jacobian C_q at q (its condition number goes to health)
     iters: int
 
 
@@ -290,8 +290,8 @@ class _Kinematics:
         return q, False, max_iter
 
     # --- velocities and accelerations
-    def rates(self, q: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """(q̇, q̈, cond(C_q)) at a solved position."""
+    def rates(self, q: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q̇, q̈, C_q) at a solved position."""
         eq = self.eq
         jac, c0 = eq.velocity_jacobian(q, t)
         square = jac.shape[0] == jac.shape[1]
@@ -315,11 +315,11 @@ class _Kinematics:
         for inp, row in zip(self.model.driver_inputs, self.model.driver_rows, strict=True):
             gamma[row] -= inp(t)[2]
         qdd = lin(-gamma)
-        return qd, qdd, condition_number(jac, ~self.rot, self.size)
+        return qd, qdd, jac
 
     def state(self, q: np.ndarray, t: float, iters: int) -> _State:
-        qd, qdd, cond = self.rates(q, t)
-        return _State(t, q, qd, qdd, cond, iters)
+        qd, qdd, jac = self.rates(q, t)
+        return _State(t, q, qd, qdd, jac, iters)
 
     def step(self, s: _State, t: float, jump_tol: float = 0.1) -> _State | None:
         """From state ``s`` to time ``t`` by Taylor predictor + Newton; None if not accepted.
@@ -458,12 +458,16 @@ def _track(
     model = kin.model
     n = kin.n
     Q, QD, QDD = (np.zeros((len(times), n)) for _ in range(3))
-    cond = np.zeros(len(times))
+    jacs: list[np.ndarray] = []
     iters = np.zeros(len(times))
+
+    def kappa() -> np.ndarray:  # the samples' condition numbers in one batch (health, round-off bounds)
+        return condition_numbers(np.asarray(jacs), ~kin.rot, kin.size) if jacs else np.zeros(0)
+
     for k, t in enumerate(times):
         nxt = state if abs(t - state.t) <= 1e-14 * max(1.0, abs(t)) else kin.advance(state, float(t), max_halvings)
         if nxt is None:
-            partial = _result(mech, engine, model, times[:k], Q[:k], QD[:k], QDD[:k], cond[:k], iters[:k])
+            partial = _result(mech, engine, model, times[:k], Q[:k], QD[:k], QDD[:k], kappa(), iters[:k])
             raise MotionError(
                 f"{mech.name}: {engine}: cannot assemble sample {k} at t = {t:.6g} s ({_driver_text(mech, float(t))}): "
                 f"Newton on Exudyn's constraint equations finds no continuation from t = {state.t:.6g} s "
@@ -474,8 +478,9 @@ def _track(
                 partial=partial,
             )
         state = nxt
-        Q[k], QD[k], QDD[k], cond[k], iters[k] = state.q, state.qd, state.qdd, state.cond, state.iters
-    return _result(mech, engine, model, times, Q, QD, QDD, cond, iters)
+        Q[k], QD[k], QDD[k], iters[k] = state.q, state.qd, state.qdd, state.iters
+        jacs.append(state.jac)
+    return _result(mech, engine, model, times, Q, QD, QDD, kappa(), iters)
 
 
 # ---------------------------------------------------------------- dynamic mode
