@@ -365,3 +365,30 @@ def test_acceleration_next_to_a_change_point_is_held_to_its_conditioning(seed, i
     assert 200 < np.max(kappa) < 1000 and np.median(kappa) < 50
     worst = max((e for c in v.checks for e in c.comparison.errors), key=lambda e: e.max_abs / e.tol)
     assert worst.group in ("acceleration", "angular acceleration") and worst.max_abs > 1e-9 * worst.scale
+
+
+def test_vloops_refusal_next_to_a_limit_is_accepted_on_the_independent_engines_conditioning():
+    """seed 5150, index 613: a double-rocker driven into its limit, sample 120 is 1.5e-6 rad of crank short of it.
+    vloop refuses that sample (its loop Jacobian's κ = 2.8e3: velocity bound κ²·ε = 1.7e-9 > rtol = 1e-9) and the
+    others solve it; Pinocchio's own κ there is 3.2e3 and Exudyn's 2.3e4, both above √(rtol/ε) = 2.1e3, so the
+    refusal is vloop's documented one and the mechanism passes, saying so. With the independent engines' κ
+    lowered below that (as if they found the sample well conditioned) the same stop is blamed on vloop."""
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    it, v = _validated(5150, 613, ("analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"))
+    assert it.sidecar["expect"]["stop_sample"] == 121 and v.runs["vloop"].samples == 120
+    assert {e: r.samples for e, r in v.runs.items() if e != "vloop"} == dict.fromkeys(
+        ("analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"), 121
+    )
+    assert v.passed and v.verdict.status == "pass", [c.message for c in v.checks if not c.passed]
+    why = v.expectation["refused"]["vloop"]
+    assert "samples 120-120" in why and "rtol = 1e-09" in why
+    for name in ("pinocchio", "exudyn-kinematic"):
+        assert v.runs[name].result.health["cond"][120] ** 2 * 2.220446049250313e-16 > 1e-9
+
+    for name in ("pinocchio", "exudyn-kinematic"):  # the same stop, but the others find the sample well conditioned
+        v.runs[name].result.health["cond"][120] = 2000.0  # κ²·ε = 8.9e-10 < rtol
+    exp = harness.expectation(v)
+    assert not exp["passed"] and "vloop stopped after 120 samples, expected to stop at sample 121" in exp["message"]
+    v.expectation = exp
+    assert harness.verdict(v).engines["vloop"] == "blamed"

@@ -63,7 +63,8 @@ _DYNAMIC = Tolerance(
     floor=_DYNAMIC_RTOL,
 )
 
-# Exudyn's time integration costs ~35 µs a step (2 cores, generalized-α on a planar model of ≤ 10 bodies), and
+# Exudyn's time integration costs ~20-40 µs a step (generalized-α on a planar model of ≤ 10 bodies; a four-bar's
+# ~19 µs with Eigen's dense LU and the inputs evaluated by Exudyn, validators/exudyn.py), and
 # the step its accuracy asks for makes the corpus's runs 6,000 steps at the median and 280,000 at the most (a
 # tail that was 80 % of a corpus validation's time). The harness compares it on the samples its first
 # DYNAMIC_STEPS steps reach: 70 % of the corpus's runs whole, the others' first part (each comparison says on
