@@ -10,7 +10,6 @@ rule; a value that happens to be acceptable must then give a result whose figure
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -196,13 +195,13 @@ def test_synth_file_keys(tmp_path, capfd, where, data, value):
 
 @pytest.mark.parametrize("out", ["FILE", "FILE/sub", "\x07bell", "a\x00b", "", " ", "x" * 5000])
 @pytest.mark.parametrize("command", ["synth", "export", "assemble", "study", "run", "view", "simulate"])
-def test_every_commands_out_is_checked_before_the_work(tmp_path, capfd, command, out):
+def test_every_commands_out_is_checked_before_the_work(tmp_path, capfd, monkeypatch, command, out):
     """--out naming an existing file, a path through a file, control characters, NUL, empty or a name too long:
     exit 2 and one line, or (control characters are a legal name) the outputs inside that folder."""
     from .conftest import MECHANISMS
 
     (tmp_path / "FILE").write_text("x", encoding="utf-8")
-    os.chdir(tmp_path)
+    monkeypatch.chdir(tmp_path)  # a relative --out lands here, and the next test starts where it started
     spec = tmp_path / "s.toml"
     spec.write_text(LOG_SPEC, encoding="utf-8")
     plain, dims = MECHANISMS / "fourbar_textbook_example.toml", MECHANISMS / "sixbar_watt2_dimensions.toml"
@@ -317,11 +316,11 @@ def textbook():
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(argument=st.sampled_from(["mech", "folder", "at", "fmt"]), value=st.sampled_from(HOSTILE))
-def test_export_arguments(tmp_path, textbook, argument, value):
+def test_export_arguments(tmp_path, monkeypatch, textbook, argument, value):
     """vloop.views.export.export with one hostile argument: a VloopError naming it, or a file in the folder."""
     from vloop.views.export import export
 
-    os.chdir(tmp_path)
+    monkeypatch.chdir(tmp_path)
     kwargs = {"mech": textbook, "folder": str(tmp_path / "out"), "at": 0.0, "fmt": "svg", argument: value}
     try:
         path = export(**kwargs)
