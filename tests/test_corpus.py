@@ -392,3 +392,8 @@ def test_vloops_refusal_next_to_a_limit_is_accepted_on_the_independent_engines_c
     assert not exp["passed"] and "vloop stopped after 120 samples, expected to stop at sample 121" in exp["message"]
     v.expectation = exp
     assert harness.verdict(v).engines["vloop"] == "blamed"
+    for name in ("pinocchio", "exudyn-kinematic"):  # the others' κ restored, but vloop giving another reason
+        v.runs[name].result.health["cond"][120] = 1e4
+    assert harness.expectation(v)["passed"]
+    v.runs["vloop"].message = v.runs["vloop"].message.replace("cond²·ε", "the bound")
+    assert not harness.expectation(v)["passed"]

@@ -329,9 +329,12 @@ def refused_before_limit(item: MechanismValidation, name: str, stop: int) -> str
     Result's meta); next to a limit κ grows without bound, so the last samples before the limit may be refused
     though they assemble. The refusal is accepted when, at every refused sample, each independent kinematic
     engine that solved it reports a condition number of its own constraint Jacobian (unit-free, as vloop's)
-    with κ²·ε above that rtol: their evidence, not vloop's. Any other early stop stays a failure."""
+    with κ²·ε above that rtol: their evidence, not vloop's; vloop's message must give that bound as its reason.
+    Any other early stop stays a failure."""
     run = item.runs.get(name)
     if name != "vloop" or run is None or run.status != "stopped" or run.result is None or run.samples >= stop:
+        return ""
+    if "cond²·ε" not in run.message:  # vloop stopped for another reason than its accuracy bound
         return ""
     rtol = float(run.result.meta.get("rtol", 0.0))
     kappas = []
