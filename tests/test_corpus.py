@@ -397,3 +397,21 @@ def test_vloops_refusal_next_to_a_limit_is_accepted_on_the_independent_engines_c
     assert harness.expectation(v)["passed"]
     v.runs["vloop"].message = v.runs["vloop"].message.replace("cond²·ε", "the bound")
     assert not harness.expectation(v)["passed"]
+
+
+def test_two_references_next_to_a_change_point_may_differ_by_both_their_bounds():
+    """seed 2026, index 5257: a change-point four-bar where the closed form and Pinocchio each agree with vloop
+    within the conditioning bound κ³·ε (B.ay 5.9e-8 and 1.3e-7 against 1.7e-7, on opposite sides of vloop) and so
+    differ from each other by 1.9e-7: by the triangle inequality two references may differ by the sum of their
+    bounds against vloop. With one bound only, every engine agreed with vloop and the night was red (undecided)."""
+    pytest.importorskip("pinocchio")
+    it, v = _validated(2026, 5257, ("analytic", "pinocchio"))
+    assert it.sidecar["change_point"]
+    assert v.passed and v.verdict.status == "pass", [c.message for c in v.checks if not c.passed]
+    by_pair = {(c.engine, c.reference): c.comparison for c in v.checks}
+    pair = by_pair[("pinocchio", "analytic")]
+    worst = max(pair.errors, key=lambda e: e.max_abs / e.tol)
+    single = max(e.tol for e in by_pair[("pinocchio", "vloop")].errors if e.column == worst.column)
+    assert single < worst.max_abs <= worst.tol  # beyond one engine's bound, within the two
+    for ref in ("analytic", "pinocchio"):
+        assert all(e.max_abs <= e.tol for e in by_pair[(ref, "vloop")].errors)

@@ -23,6 +23,7 @@ come from measurements on the catalog (14 files) and the inline mechanisms, exud
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
 import importlib.util
@@ -548,7 +549,7 @@ def test_the_fast_integration_equals_callbacks_and_the_default_solver(name: str,
         ss.linearSolver.solverType = exu.LinearSolverType.EXUdense
         return ss
 
-    monkeypatch.setattr(em, "formula_offsets", lambda model: [])
+    monkeypatch.setattr(em, "formula_offsets", lambda model: contextlib.nullcontext())
     monkeypatch.setattr(vexu, "_dynamic_settings", default_solver)
     slow = vexu.solve(mech, times, mode="dynamic")
     assert fast.meta["step"] == slow.meta["step"] and len(fast) == len(slow) == len(times)
@@ -559,6 +560,28 @@ def test_the_fast_integration_equals_callbacks_and_the_default_solver(name: str,
         peak = max(float(np.max(np.abs(slow[c]))), 1.0)
         allowed = 1e-12 * peak + (np.asarray(bound[group]) if group in bound else 0.0)
         assert np.all(diff <= allowed), (c, float(np.max(diff - allowed)))
+
+
+def test_repeated_time_integrations_do_not_keep_their_systems() -> None:
+    """The Exudyn-evaluated inputs and the system refer to each other; they are taken off the objects after each
+    run, so a worker that integrates mechanism after mechanism stays the same size. Measured: 100 runs of the
+    textbook four-bar (20 samples) grow the process by 0.09 MB, by 7.8 MB with the functions left in place (a
+    worker of a 10,000-mechanism night reached 1.26 GB); allowed: 2 MB."""
+
+    def rss_mb() -> float:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        pytest.skip("no /proc/self/status")
+
+    mech = vloop.load(ROOT / "mechanisms" / "fourbar_textbook_example.toml")
+    times = mech.times[:20]
+    for _ in range(5):  # Exudyn's and numpy's own first allocations
+        vexu.solve(mech, times, mode="dynamic")
+    before = rss_mb()
+    for _ in range(100):
+        vexu.solve(mech, times, mode="dynamic")
+    assert rss_mb() - before < 2.0
 
 
 def test_dynamic_step_follows_the_accuracy_target() -> None:

@@ -728,7 +728,6 @@ def _solve_dynamic(
     model = em.build(mech)
     kin = _Kinematics(model)
     start = _assemble(kin, mech, t_asm, engine, times)
-    mbs = model.mbs
     for inp in model.driver_inputs:
         inp.prefetch(times)
     passed = _kinematic_pass(mech, times, kin, start)  # the step's rate Ω and the conditioning κ
@@ -746,29 +745,42 @@ def _solve_dynamic(
         if inp.driver.profile is not None:  # a formula's input is evaluated by Exudyn (em.formula_offsets)
             inp.prefetch(grid)
         inp.shift = clock
-    formulas = em.formula_offsets(model)  # noqa: F841 -- Exudyn holds them by reference for the run
-    sensors = _start_from(model, start)
-    ss = _dynamic_settings(spectral_radius, newton_tol * mech.scale)
-    records = _Records(model, sensors, clock)
-    for a, b, k, period in segments:
-        ss.timeIntegration.startTime = a - clock
-        ss.timeIntegration.endTime = b - clock
-        ss.timeIntegration.numberOfSteps = k
-        ss.solution.sensors.writePeriod = period
-        try:
-            with _Quiet():
-                mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
-        except Exception as exc:  # Exudyn raises SolverError (or another ExudynError) when Newton fails
-            records.collect()
-            raise _integration_failed(mech, engine, model, times, records, h, exc) from None
-        records.collect()
-
+    with em.formula_offsets(model):
+        sensors = _start_from(model, start)
+        records = _Records(model, sensors, clock)
+        ss = _dynamic_settings(spectral_radius, newton_tol * mech.scale)
+        _integrate(mech, model, times, segments, records, ss, h)
     res = _dynamic_result(mech, engine, model, times, records, complete=True)
     res.meta.update(step=float(h), spectral_radius=spectral_radius, runs=len(segments), accuracy=accuracy)
     if len(res) < requested:
         res.meta["budget"] = {"max_steps": max_steps, "planned_steps": planned, "samples": len(res), "of": requested}
     res.meta["allowance"] = _roundoff(res, passed, mech.scale, h, spectral_radius)
     return res
+
+
+def _integrate(
+    mech: Mechanism,
+    model: em.ExudynModel,
+    times: np.ndarray,
+    segments: list[tuple[float, float, int, float]],
+    records: _Records,
+    ss: Any,
+    h: float,
+) -> None:
+    """Exudyn's time integration over each run (start, end, steps, sensor period), its sensors gathered after each;
+    a MotionError with the samples (of ``times``) recorded before a failure."""
+    for a, b, k, period in segments:
+        ss.timeIntegration.startTime = a - records.clock
+        ss.timeIntegration.endTime = b - records.clock
+        ss.timeIntegration.numberOfSteps = k
+        ss.solution.sensors.writePeriod = period
+        try:
+            with _Quiet():
+                model.mbs.SolveDynamic(ss, updateInitialValues=True, showHints=False, showCausingItems=False)
+        except Exception as exc:  # Exudyn raises SolverError (or another ExudynError) when Newton fails
+            records.collect()
+            raise _integration_failed(mech, ENGINES["dynamic"], model, times, records, h, exc) from None
+        records.collect()
 
 
 def _start_from(model: em.ExudynModel, start: _State) -> list[list[int]]:

@@ -58,9 +58,9 @@ import numpy as np
 '''
 
 
-def _segments(module: ModuleType, names: list[str] | None = None) -> str:
-    """The source of a module's top-level definitions and assignments (all, or those ``names``), in file order;
-    never its docstring or imports."""
+def _segments(module: ModuleType, names: list[str] | None = None, leave: tuple[str, ...] = ()) -> str:
+    """The source of a module's top-level definitions and assignments (all, or those ``names``; never those in
+    ``leave``), in file order; never its docstring or imports."""
     src = inspect.getsource(module)
     tree = ast.parse(src)
     out = []
@@ -69,7 +69,7 @@ def _segments(module: ModuleType, names: list[str] | None = None) -> str:
             isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
         ):
             continue
-        if names is not None and _name(node) not in names:
+        if (names is not None and _name(node) not in names) or _name(node) in leave:
             continue
         seg = ast.get_source_segment(src, node, padded=True) or ""
         deco = "".join(f"@{ast.get_source_segment(src, d)}\n" for d in getattr(node, "decorator_list", []))
@@ -325,6 +325,10 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
     return head + _common(mech) + "\n\n\n" + model + PINOCCHIO_RUN + FOOTER.format(csv=_csv_name(script))
 
 
+# what only the time integration uses (the script solves the kinematics): Exudyn-evaluated formula inputs
+DYNAMIC_ONLY = ("OFFSET_FUNCTIONS", "formula_offsets", "_formula", "_object_index")
+
+
 def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
     """The Exudyn script of ``mech``: validators/exudyn_model.py's construction, validators/exudyn.py's Newton."""
     from .. import exudyn, exudyn_forces, exudyn_model, tolerances
@@ -346,7 +350,7 @@ def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
             "# ---------------------------------------------------------------- 3. the model and its numerics",
             "# (validators/exudyn_model.py and the kinematic engine of validators/exudyn.py, verbatim)",
             _segments(tolerances, ["condition_number", "condition_numbers"]),
-            _segments(exudyn_model),
+            _segments(exudyn_model, leave=DYNAMIC_ONLY),
             "em = sys.modules[__name__]  # the engine's code names the model module 'em'",
             _segments(exudyn, names),
             "# the file's masses, gravity and loads (validators/exudyn_forces.py; its build is build_with_loads here)",
