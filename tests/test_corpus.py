@@ -415,3 +415,19 @@ def test_two_references_next_to_a_change_point_may_differ_by_both_their_bounds()
     assert single < worst.max_abs <= worst.tol  # beyond one engine's bound, within the two
     for ref in ("analytic", "pinocchio"):
         assert all(e.max_abs <= e.tol for e in by_pair[(ref, "vloop")].errors)
+
+
+def test_a_time_integration_that_cannot_cross_a_change_point_is_inconclusive():
+    """seed 2026, index 5955: a parallelogram four-bar; Exudyn's time integration fails before sample 45 (at the
+    change point, the coupler along the ground line) at h = 4.4e-4 s and again at 2.2e-4 s, where vloop, the closed
+    form, Pinocchio and Exudyn's kinematic mode run all 123 samples and agree. Its own step rejections say it
+    cannot resolve the mechanism: inconclusive, with that reason, not blamed (and vloop passes)."""
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    it, v = _validated(2026, 5955, ("analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"))
+    assert it.spec.variant == "parallelogram"
+    assert v.runs["exudyn-dynamic"].status == "stopped" and v.runs["exudyn-dynamic"].samples == 45
+    assert all(v.runs[e].samples == 123 for e in ("vloop", "analytic", "pinocchio", "exudyn-kinematic"))
+    assert v.verdict.status == "pass" and v.verdict.engines["exudyn-dynamic"] == "inconclusive"
+    assert v.verdict.engines["vloop"] == "pass" and not v.verdict.red
+    assert "stops before sample 45 at every step it tried" in v.inconclusive["exudyn-dynamic"]

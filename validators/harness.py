@@ -406,7 +406,7 @@ def _second_looks(item: MechanismValidation, engines: tuple[str, ...], suspects:
     (engines.Engine.second_look): a better run replaces its first and the comparisons are made again; an engine
     that finds by its own evidence that it cannot resolve the mechanism is inconclusive on it. vloop, the engine
     under test, gets no second look. Then the verdict again."""
-    redo = False
+    redo, stuck = False, {}
     for name in sorted(suspects - {"vloop"}):
         run = item.runs.get(name)
         if run is None or run.result is None or item.mechanism is None or run.status not in ("ok", "stopped"):
@@ -422,6 +422,8 @@ def _second_looks(item: MechanismValidation, engines: tuple[str, ...], suspects:
         if look.result is not None:  # a run that stopped and stops again where it did keeps its status
             same_stop = run.status == "stopped" and len(look.result) == run.samples
             run.result, run.status, redo = look.result, "stopped" if same_stop else "ok", True
+            if same_stop:
+                stuck[name] = f"it stops before sample {run.samples} at every step it tried ({look.note})"
         elif look.inconclusive:
             item.inconclusive[name] = look.inconclusive
     if redo:
@@ -429,6 +431,19 @@ def _second_looks(item: MechanismValidation, engines: tuple[str, ...], suspects:
         _checks(item, engines)
         item.expectation = expectation(item)
     item.verdict = verdict(item)
+    # still blamed for a stop it makes at every step, where the others go on (a change point its integrator cannot
+    # cross): its own step rejections say it cannot resolve the mechanism; it does not say the others are wrong
+    further = {
+        n: max((r.samples for e, r in item.runs.items() if e != n and r.status == "ok"), default=0) for n in stuck
+    }
+    stopped_early = {
+        n: why
+        for n, why in stuck.items()
+        if item.verdict.engines.get(n) == "blamed" and further[n] > item.runs[n].samples + 1
+    }
+    if stopped_early:
+        item.inconclusive.update(stopped_early)
+        item.verdict = verdict(item)
 
 
 def _finalize(item: MechanismValidation, engines: tuple[str, ...], keep_results: bool) -> None:
