@@ -329,7 +329,7 @@ def build(mech: Mechanism, masses: dict[str, tuple[float, np.ndarray, float]] | 
             offset0 = 0.0  # the marker measures the geometric s itself
             model.simplified_jacobian |= sl.guide in moving
         inp.offset0 = offset0
-        uf, uf_t = _offset_functions(inp, offset0)
+        uf, uf_t = _offset_functions(inp)
         obj = int(
             mbs.AddObject(
                 CoordinateConstraint(
@@ -407,9 +407,9 @@ def _object_index(obj: int) -> Any:
     return exu.ObjectIndex(obj)
 
 
-def _offset_functions(inp: DriverInput, offset0: float) -> tuple[Callable[..., float], Callable[..., float]]:
+def _offset_functions(inp: DriverInput) -> tuple[Callable[..., float], Callable[..., float]]:
     def uf(mbs: Any, t: float, item: int, off: float) -> float:
-        return inp(t)[0] - offset0
+        return inp(t)[0] - inp.offset0
 
     def uf_t(mbs: Any, t: float, item: int, off: float) -> float:
         return inp(t)[1]

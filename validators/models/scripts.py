@@ -313,16 +313,7 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
             _segments(pinocchio_forces, ["_add_dynamics"]),
         ]
     )
-    head = HEADER.format(
-        title=mech.title or mech.name,
-        what="the Pinocchio model vloop's validators build",
-        fmt="pinocchio",
-        source=source,
-        script=script,
-        needs="Pinocchio (pip install pin)",
-        units=mech.units,
-    )
-    return head + _common(mech) + "\n\n\n" + model + PINOCCHIO_RUN + FOOTER.format(csv=_csv_name(script))
+    return _script(mech, script, source, "pinocchio", "Pinocchio (pip install pin)", model, PINOCCHIO_RUN)
 
 
 # what only the time integration uses (the script solves the kinematics): Exudyn-evaluated formula inputs
@@ -331,7 +322,7 @@ DYNAMIC_ONLY = ("OFFSET_FUNCTIONS", "formula_offsets", "_formula", "_object_inde
 
 def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
     """The Exudyn script of ``mech``: validators/exudyn_model.py's construction, validators/exudyn.py's Newton."""
-    from .. import exudyn, exudyn_forces, exudyn_model, tolerances
+    from .. import exudyn, exudyn_forces, exudyn_model
 
     names = [
         "FD_TURN",
@@ -349,7 +340,6 @@ def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
         [
             "# ---------------------------------------------------------------- 3. the model and its numerics",
             "# (validators/exudyn_model.py and the kinematic engine of validators/exudyn.py, verbatim)",
-            _segments(tolerances, ["condition_number", "condition_numbers"]),
             _segments(exudyn_model, leave=DYNAMIC_ONLY),
             "em = sys.modules[__name__]  # the engine's code names the model module 'em'",
             _segments(exudyn, names),
@@ -358,16 +348,22 @@ def exudyn_script(mech: Mechanism, script: str, source: str) -> str:
             _segments(exudyn_forces, ["build"]).replace("def build(", "def build_with_loads(", 1),
         ]
     )
+    return _script(mech, script, source, "exudyn", "Exudyn (pip install exudyn)", model, EXUDYN_RUN)
+
+
+def _script(mech: Mechanism, script: str, source: str, fmt: str, needs: str, model: str, run: str) -> str:
+    """A whole script: the header, the mechanism as data, the engine's ``model`` code, its ``run`` and the footer."""
+    engine = {"pinocchio": "Pinocchio", "exudyn": "Exudyn"}[fmt]
     head = HEADER.format(
         title=mech.title or mech.name,
-        what="the Exudyn model vloop's validators build",
-        fmt="exudyn",
+        what=f"the {engine} model vloop's validators build",
+        fmt=fmt,
         source=source,
         script=script,
-        needs="Exudyn (pip install exudyn)",
+        needs=needs,
         units=mech.units,
     )
-    return head + _common(mech) + "\n\n\n" + model + EXUDYN_RUN + FOOTER.format(csv=_csv_name(script))
+    return head + _common(mech) + "\n\n\n" + model + run + FOOTER.format(csv=_csv_name(script))
 
 
 def _csv_name(script: str) -> str:
