@@ -417,13 +417,17 @@ def test_two_references_next_to_a_change_point_may_differ_by_both_their_bounds()
         assert all(e.max_abs <= e.tol for e in by_pair[(ref, "vloop")].errors)
 
 
-def test_a_time_integration_that_cannot_cross_a_change_point_is_inconclusive():
-    """seed 2026, index 5955: a parallelogram four-bar; Exudyn's time integration fails before sample 45 (at the
-    change point, the coupler along the ground line) at h = 4.4e-4 s and again at 2.2e-4 s, where vloop, the closed
-    form, Pinocchio and Exudyn's kinematic mode run all 123 samples and agree. Its own step rejections say it
-    cannot resolve the mechanism: inconclusive, with that reason, not blamed (and vloop passes)."""
+def test_a_time_integration_that_cannot_cross_a_change_point_is_inconclusive(monkeypatch: pytest.MonkeyPatch):
+    """seed 2026, index 5955: a parallelogram four-bar; Exudyn's single time integration fails before sample 45 (at
+    the change point, the coupler along the ground line) at h = 4.4e-4 s and again at 2.2e-4 s, where vloop, the
+    closed form, Pinocchio and Exudyn's kinematic mode run all 123 samples and agree. Its own step rejections say it
+    cannot resolve the mechanism: inconclusive, with that reason, not blamed (and vloop passes). The default
+    extrapolated pair (coarser steps) crosses the change point: see the next test."""
     pytest.importorskip("pinocchio")
     pytest.importorskip("exudyn")
+    from validators import exudyn as vexu
+
+    monkeypatch.setattr(vexu, "_richardson_plan", lambda *args: None)  # the single run, at every step tried
     it, v = _validated(2026, 5955, ("analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"))
     assert it.spec.variant == "parallelogram"
     assert v.runs["exudyn-dynamic"].status == "stopped" and v.runs["exudyn-dynamic"].samples == 45
@@ -431,3 +435,19 @@ def test_a_time_integration_that_cannot_cross_a_change_point_is_inconclusive():
     assert v.verdict.status == "pass" and v.verdict.engines["exudyn-dynamic"] == "inconclusive"
     assert v.verdict.engines["vloop"] == "pass" and not v.verdict.red
     assert "stops before sample 45 at every step it tried" in v.inconclusive["exudyn-dynamic"]
+
+
+def test_the_extrapolated_time_integration_crosses_that_change_point():
+    """The same parallelogram with the default exudyn-dynamic: its two coarse runs (h and 2h) cross the change point
+    the single fine run stops at, and the extrapolated rates agree with vloop and the closed form on all 123 samples
+    (worst: coupler.alpha at 0.04 of its allowance, measured), so every engine passes."""
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("exudyn")
+    it, v = _validated(2026, 5955, ("analytic", "pinocchio", "exudyn-kinematic", "exudyn-dynamic"))
+    assert v.runs["exudyn-dynamic"].status == "ok" and v.runs["exudyn-dynamic"].samples == 123
+    assert "richardson" in v.runs["exudyn-dynamic"].result.meta
+    assert v.verdict.status == "pass" and set(v.verdict.engines.values()) == {"pass"}
+    by_pair = {(c.engine, c.reference): c.comparison for c in v.checks}
+    for ref in ("vloop", "analytic"):
+        worst = max(e.max_abs / e.tol for e in by_pair[("exudyn-dynamic", ref)].errors)
+        assert worst < 0.2, (ref, worst)

@@ -170,6 +170,8 @@ def write_table(
 def finite_or_null(df: Any) -> Any:
     """``df`` with its non-finite numbers (nan, ±inf; in list cells too) as nulls: ``df`` itself when it has none
     besides nulls already, else a copy (the caller's table is never changed)."""
+    from pandas.api.types import infer_dtype
+
     fixed: dict[str, Any] = {}
     for col in df.columns:
         kind = df[col].dtype.kind
@@ -177,7 +179,7 @@ def finite_or_null(df: Any) -> Any:
             v = df[col].to_numpy(dtype=float, na_value=np.nan)
             if np.any(np.isinf(v)):
                 fixed[col] = np.where(np.isfinite(v), v, np.nan)
-        elif kind == "O":
+        elif kind == "O" and infer_dtype(df[col], skipna=True) not in _NO_NUMBERS:  # cell by cell: 1 µs a cell
             cells = [_finite_cell(x) for x in df[col]]
             if any(a is not b for a, b in zip(cells, df[col], strict=True)):
                 fixed[col] = cells
@@ -187,6 +189,10 @@ def finite_or_null(df: Any) -> Any:
     for col, values in fixed.items():
         df[col] = values
     return df
+
+
+# object columns (infer_dtype) that cannot hold a non-finite number: text, flags, integers, nothing
+_NO_NUMBERS = frozenset({"string", "bytes", "boolean", "integer", "empty"})
 
 
 def _finite_cell(x: Any) -> Any:
