@@ -478,6 +478,14 @@ CROSS_JUMP = 0.01
 # the velocities even where the two branches' positions are close. The step is then bisected.
 JUMP_RATIO = 0.1
 JUMP_FLOOR = 1e-9
+# How often a failing interval between samples is halved before the run stops there: 2^-12 of it. A motion can
+# start next to a limit it is leaving, where the Taylor predictor holds only over steps much shorter than the time
+# since the limit: seed 2026's c01868, an eight-bar whose slider dyad was at its limit 17 µs before t = 0 (the
+# slider at 542 m/s, κ = 438), needs steps of ~1e-5 s, 2^-12 of its 0.0388 s sample spacing (2^-8 stopped it).
+MAX_BISECT = 12
+NEWTON_TOL = 1e-10  # Newton's stopping rule on the scaled step (lengths / mechanism size, rad)
+MAX_ITER = 50  # Newton iterations per attempt
+MAX_COND = 1e12  # a position whose Jacobian's condition number is above this counts as singular
 
 
 class _NoConvergence(Exception):
@@ -741,10 +749,10 @@ def solve(
     *,
     root: str | None = None,
     cut_preference: Sequence[str] = (),
-    tol: float = 1e-10,
-    max_iter: int = 50,
-    max_bisect: int = 8,
-    max_cond: float = 1e12,
+    tol: float = NEWTON_TOL,
+    max_iter: int = MAX_ITER,
+    max_bisect: int = MAX_BISECT,
+    max_cond: float = MAX_COND,
 ) -> Result:
     """Positions, velocities, accelerations of ``mechanism`` over ``times`` [s] (default: the
     file's [time]) with Pinocchio; the Result has every column of the output contract.

@@ -155,7 +155,7 @@ def run(mech: Mechanism, times: np.ndarray) -> tuple[np.ndarray, dict[str, np.nd
     pm = build_model(mech)
     if mech.masses_table or mech.gravity:
         _add_dynamics(pm, mech)  # the file's inertias and gravity (Pinocchio's dynamics; the kinematics ignore them)
-    solver = _Solver(pm, tol=1e-10, max_iter=50, max_bisect=8, max_cond=1e12)
+    solver = _Solver(pm, NEWTON_TOL, MAX_ITER, MAX_BISECT, MAX_COND)
     inputs = _inputs_fn(mech)
     t_a = _assembly_time(mech)
     state = _assemble(solver, t_a, inputs)
@@ -293,6 +293,10 @@ def pinocchio_script(mech: Mechanism, script: str, source: str) -> str:
         "CROSS_JUMP",
         "JUMP_RATIO",
         "JUMP_FLOOR",
+        "MAX_BISECT",
+        "NEWTON_TOL",
+        "MAX_ITER",
+        "MAX_COND",
         "_NoConvergence",
         "_State",
         "_cond2",
