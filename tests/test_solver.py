@@ -160,3 +160,27 @@ def test_driven_slider_runs_the_eightbar_backwards(tmp_path):
     h = t[1] - t[0]
     fd = (res["l2.theta"][2:] - res["l2.theta"][:-2]) / (2 * h)
     assert np.max(np.abs(fd - res["l2.omega"][1:-1])) < 1e-6 * np.max(np.abs(res["l2.omega"]))
+
+
+def test_a_solved_mechanism_is_compiled_once_and_freed_with_its_system(monkeypatch):
+    """vloop.solve keeps a Mechanism's LoopSystem on the object (a second solve compiles nothing) and lets both go
+    when the mechanism is dropped: the system refers back to the mechanism, and a registry of its own once kept
+    every mechanism ever solved (a validation worker grew by ~45 kB a mechanism). Pickling leaves it out."""
+    import gc
+    import pickle
+    import weakref
+
+    from vloop import compiler
+
+    calls = []
+    compile_system = compiler.compile_system
+    monkeypatch.setattr(compiler, "compile_system", lambda *a, **k: calls.append(a[0].name) or compile_system(*a, **k))
+    mech = vloop.load(MECHANISMS / "slider_crank_offset.toml")  # coordinates as written: compiled by solve
+    first, again = vloop.solve(mech), vloop.solve(mech)
+    assert len(calls) == 1 and np.array_equal(first["l3.alpha"], again["l3.alpha"])
+    copy = pickle.loads(pickle.dumps(mech))
+    assert len(vloop.solve(copy)) == len(first) and len(calls) == 2
+    gone = weakref.ref(mech)
+    del mech, copy, first, again
+    gc.collect()
+    assert gone() is None

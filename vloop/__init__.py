@@ -22,6 +22,7 @@ from .mechanism import Mechanism, dumps, save
 from .mechanism import from_dict as _read_dict
 from .mechanism import load as _read_file
 from .mechanism import loads as _read_text
+from .model import SYSTEMS_KEY
 from .result import Result
 
 __version__ = "0.1.0"
@@ -154,33 +155,27 @@ def solve(mechanism: Mechanism | Any, times: np.ndarray | None = None, **options
     return solve_system(system, times, **options)
 
 
-_SYSTEMS: dict[tuple[int, str | None], tuple[Any, Any]] = {}
-
-
 def _system_of(mechanism: Mechanism, method: str | None) -> Any:
     """The LoopSystem of a Mechanism for ``method``, compiled once per (Mechanism object, method) and kept
     while that object lives (a Mechanism is immutable: solving it again needs no new compile)."""
     from .compiler import compile_system
 
-    key = (id(mechanism), method)
-    hit = _SYSTEMS.get(key)
-    if hit is not None and hit[0]() is mechanism:
-        return hit[1]
-    system = compile_system(mechanism, method)
-    _keep_system(mechanism, method, system)
+    system = _systems(mechanism).get(method)
+    if system is None:
+        system = compile_system(mechanism, method)
+        _keep_system(mechanism, method, system)
     return system
 
 
 def _keep_system(mechanism: Mechanism, method: str | None, system: Any) -> None:
     """Keep ``system`` as the LoopSystem of ``mechanism`` for ``method`` while that object lives."""
-    import weakref
+    _systems(mechanism)[method] = system
 
-    key = (id(mechanism), method)
-    try:
-        ref = weakref.ref(mechanism, lambda _, key=key, systems=_SYSTEMS: systems.pop(key, None))
-    except TypeError:  # not weak-referenceable: no cache
-        return
-    _SYSTEMS[key] = (ref, system)
+
+def _systems(mechanism: Mechanism) -> dict[str | None, Any]:
+    # on the object, like its cached views: the system refers back to the mechanism, and a cycle between the two
+    # goes with them (a registry of its own would keep every mechanism ever solved)
+    return mechanism.__dict__.setdefault(SYSTEMS_KEY, {})
 
 
 def solve_forces(mechanism: Mechanism | Any, result: Result) -> Any:

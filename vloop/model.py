@@ -257,6 +257,9 @@ class Dynamics:
     step: float | None = None
 
 
+SYSTEMS_KEY = "_loop_systems"  # the LoopSystems vloop.solve compiled for a Mechanism, kept on the object
+
+
 @dataclass(frozen=True)
 class Mechanism:
     """A planar linkage as described by its file. Immutable; engines read it."""
@@ -285,6 +288,10 @@ class Mechanism:
     reach: float | None = None
     # forward dynamics (docs/dynamics.md): the [dynamics] section, None without one
     dynamics: Dynamics | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the LoopSystems compiled for it (compiled again where it lands, if solved there)."""
+        return {k: v for k, v in self.__dict__.items() if k != SYSTEMS_KEY}
 
     # ----- derived views (pure functions of the description) -----
     @cached_property
