@@ -100,6 +100,7 @@ MIN_STEPS_TO_SAMPLE = 40
 # accuracy asks of a single run (dynamic_step): measured on the catalog, the extrapolation's error at this h is
 # ~1e-7 of the peak against the single run's 1e-5 at its own step (tests/test_exudyn.py)
 RICHARDSON_FACTOR = 4
+Segment = tuple[float, float, int, float]  # an integration run: start [s], end [s], steps, sensor period [s]
 
 
 # ---------------------------------------------------------------- public API
@@ -665,7 +666,7 @@ def _plan(
     step: float,
     start: _State,
     too_fine: Callable[[float], bool],
-) -> tuple[list[tuple[float, float, int, float]], float, _State]:
+) -> tuple[list[Segment], float, _State]:
     """The integration runs (start, end, steps, sensor period), the step h [s] and the state to start from.
 
     Samples on a common grid from t_asm: one run whose step h = spacing / m (m from ``step``). The
@@ -703,7 +704,7 @@ def _plan(
     return [(t0, float(times[-1]), n_steps, base)], base / m, start
 
 
-def _within(segments: list[tuple[float, float, int, float]], max_steps: int) -> list[tuple[float, float, int, float]]:
+def _within(segments: list[Segment], max_steps: int) -> list[Segment]:
     """The runs cut to about ``max_steps`` steps: whole sample periods (at least one past t = 0), or whole runs."""
     if sum(k for _, _, k, _ in segments) <= max_steps:
         return segments
@@ -771,9 +772,6 @@ def _solve_dynamic(
     return res
 
 
-Segment = tuple[float, float, int, float]  # an integration run: start [s], end [s], steps, sensor period [s]
-
-
 def _run(
     mech: Mechanism, times: np.ndarray, segments: list[Segment], start: _State, ss: Any, h: float
 ) -> tuple[em.ExudynModel, _Records]:
@@ -796,14 +794,14 @@ def _run(
 class _Pair:
     """The runs of a Richardson-extrapolated integration: a fine head, and two coarse runs at h and 2h."""
 
-    head: list[tuple[float, float, int, float]]  # the single run's plan, cut at t_head
-    coarse: tuple[tuple[float, float, int, float], tuple[float, float, int, float]]  # at h, at 2h, from t_asm
-    t_head: float  # samples up to here come from the head, later ones from the extrapolation
-    h_head: float
-    h: float
+    head: list[Segment]  # the single run's plan, cut at t_head
+    coarse: tuple[Segment, Segment]  # at h and at 2h, from the assembly
+    t_head: float  # [s] samples up to here come from the head, later ones from the extrapolation
+    h_head: float  # [s] the head's step
+    h: float  # [s] the finer coarse step
 
 
-def _richardson_plan(segments: list[tuple[float, float, int, float]], step: float, t_asm: float) -> _Pair | None:
+def _richardson_plan(segments: list[Segment], step: float, t_asm: float) -> _Pair | None:
     """The runs of :func:`_extrapolated` in place of a single run ``segments`` (one run on a common sample grid),
     or None where they would not be cheaper (or the samples are irregular).
 
@@ -837,20 +835,19 @@ def _extrapolated(
     positions from the run at h (exact to the Newton tolerance in both). The samples before ``pair.t_head``
     (the coarse runs' start-up) from the fine head run. A MotionError if any run fails."""
     engine = ENGINES["dynamic"]
-    reach = times
-    head_times = reach[reach <= pair.t_head + 1e-9 * max(abs(pair.t_head), 1.0)]
+    head_times = times[times <= pair.t_head + 1e-9 * max(abs(pair.t_head), 1.0)]
     k = len(head_times)
-    model, fine = _run(mech, reach, [pair.coarse[0]], start, ss, pair.h)
-    coarse = _run(mech, reach, [pair.coarse[1]], start, ss, 2 * pair.h)[1]
-    q, qd_h, qdd_h = _at_samples(mech, engine, reach, fine, complete=True)
-    _, qd_2h, qdd_2h = _at_samples(mech, engine, reach, coarse, complete=True)
+    model, fine = _run(mech, times, [pair.coarse[0]], start, ss, pair.h)
+    coarse = _run(mech, times, [pair.coarse[1]], start, ss, 2 * pair.h)[1]
+    q, qd_h, qdd_h = _at_samples(mech, engine, times, fine, complete=True)
+    _, qd_2h, qdd_2h = _at_samples(mech, engine, times, coarse, complete=True)
     qd, qdd = qd_h + (qd_h - qd_2h) / 3.0, qdd_h + (qdd_h - qdd_2h) / 3.0
     if k:  # samples in the coarse runs' start-up: the head run's
         rec = _run(mech, head_times, pair.head, head_start, ss, pair.h_head)[1]
         q[:k], qd[:k], qdd[:k] = _at_samples(mech, engine, head_times, rec, complete=True)
-    res = _result(mech, engine, model, reach, q, qd, qdd)
+    res = _result(mech, engine, model, times, q, qd, qdd)
     steps = (pair.head[0][2] if k else 0) + pair.coarse[0][2] + pair.coarse[1][2]
-    res.meta.update(step=float(pair.h), runs=3)
+    res.meta.update(step=float(pair.h), runs=3 if k else 2)
     res.meta["richardson"] = {"steps": [float(pair.h), 2 * float(pair.h)], "head_step": float(pair.h_head),
                               "head_samples": k, "total_steps": steps}  # fmt: skip
     rho = ss.timeIntegration.generalizedAlpha.spectralRadius
@@ -862,7 +859,7 @@ def _integrate(
     mech: Mechanism,
     model: em.ExudynModel,
     times: np.ndarray,
-    segments: list[tuple[float, float, int, float]],
+    segments: list[Segment],
     records: _Records,
     ss: Any,
     h: float,
