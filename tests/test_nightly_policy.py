@@ -287,6 +287,37 @@ def test_exudyn_refine_says_inconclusive_from_its_own_estimate_or_its_own_failur
     assert res is not None and why == "" and "own error estimate within its allowance" in note
 
 
+def test_a_second_look_at_an_extrapolated_run_estimates_from_single_runs():
+    """An extrapolated first run's error is not of the order Richardson's estimate assumes (next to a change point:
+    seed 2026's c07439): the second look makes its single twin at the same accuracy first and estimates each finer
+    single run from the one before; a twin that fails where the pair went on leaves the engine without a verdict."""
+    import vloop
+    from validators import exudyn as vexu
+    from vloop.errors import MotionError
+
+    mech = vloop.load(MECHANISMS / "fourbar_crank_rocker_open.toml")
+    first = vloop.solve(mech)
+    first.meta.update(step=4e-3, accuracy=1e-5, richardson={"steps": [4e-3, 8e-3]})
+    asked = []
+
+    def single(times, accuracy):
+        asked.append(accuracy)
+        return dataclasses.replace(first, meta={"step": 1e-3 * (accuracy / 1e-5) ** 0.5, "accuracy": accuracy})
+
+    res, why, note = vexu.refine(mech, first, False, single)
+    assert asked == [1e-5, vexu.REFINE_ACCURACIES[0]] and res is not None and why == ""
+    assert note == "integrated again at h = 0.0005 s (own error estimate within its allowance)"
+
+    def failing(times, accuracy):
+        raise MotionError("x: exudyn-dynamic: Newton failed", time=0.5, sample=7, partial=first.head(7))
+
+    res, why, _ = vexu.refine(mech, first, False, failing)
+    assert (
+        res is None
+        and why == "its single run fails before sample 7, where its extrapolated pair went on: Newton failed"
+    )
+
+
 def test_pinocchio_path_check_never_refuses_a_step_it_cannot_shorten():
     """Seed 60606, index 891 (a Stephenson III): the path check refused its first step at every bisection level;
     the last level takes the step as Newton lands it, and the run agrees with the closed form to 1e-9 of peak."""

@@ -593,8 +593,9 @@ def refine(
 ) -> tuple[Result | None, str, str]:
     """Integrate the samples of ``first`` (all the file's if the run ``stopped``) again at finer steps, and estimate
     each run's error from the run before it: generalized-α is second order, so for steps h₁ > h₂ (ρ = h₁/h₂) the
-    finer run's error is |r₁ − r₂|/(ρ² − 1) (Richardson; an upper bound for the extrapolated runs, whose error is
-    of higher order). Exudyn's evidence only, never another engine's answer.
+    finer run's error is |r₁ − r₂|/(ρ² − 1) (Richardson). The runs are single ones: where ``first`` is an
+    extrapolated pair (whose error is of another order next to a change point, not ρ²'s), its single twin at the
+    same accuracy is made first and the estimates start from it. Exudyn's evidence only, never another engine's.
 
     Returns (run, "", note) for the first finer run that is complete and whose estimate is within its allowance
     (the stated tolerance of validators/tolerances.py plus its own round-off bound); (None, why, note) when none is:
@@ -606,10 +607,17 @@ def refine(
 
     times = np.asarray(mech.times if stopped else first.t, float)
     budget = 4 * DYNAMIC_STEPS if stopped else None  # a stopped run: the same stretch of time, at most, at h/2
-    run = solve_at or (lambda t, acc: solve(mech, t, mode="dynamic", accuracy=acc, max_steps=budget))
+    run = solve_at or (lambda t, acc: solve(mech, t, mode="dynamic", accuracy=acc, max_steps=budget, richardson=False))
     stated = tolerance(ENGINES["dynamic"], "vloop")
     prev, why = first, ""
-    steps, accuracies = [float(first.meta.get("step", 0.0))], [float(first.meta.get("accuracy", DEFAULT_ACCURACY))]
+    if "richardson" in first.meta:  # an extrapolation's error is of another order: estimate from single runs only
+        try:
+            prev = run(times, float(first.meta.get("accuracy", DEFAULT_ACCURACY)))
+        except MotionError as exc:
+            k, reason = len(exc.partial), str(exc).split(": ", 2)[-1]
+            why = f"its single run fails before sample {k}, where its extrapolated pair went on: {reason}"
+            return None, why, "integrated again as a single run at the accuracy's step"
+    steps, accuracies = [float(prev.meta.get("step", 0.0))], [float(prev.meta.get("accuracy", DEFAULT_ACCURACY))]
     for acc in REFINE_ACCURACIES:
         try:
             res, failed = run(times, acc), ""
