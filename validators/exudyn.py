@@ -802,11 +802,24 @@ def _run(
 class _Pair:
     """The runs of a Richardson-extrapolated integration: a fine head, and two coarse runs at h and 2h."""
 
-    head: list[Segment]  # the single run's plan, cut at t_head
+    head: Segment  # the single run's plan, cut where the coarse runs' start-up has died out
     coarse: tuple[Segment, Segment]  # at h and at 2h, from the assembly
-    t_head: float  # [s] samples up to here come from the head, later ones from the extrapolation
-    h_head: float  # [s] the head's step
-    h: float  # [s] the finer coarse step
+
+    @property
+    def t_head(self) -> float:
+        """[s] Samples up to here come from the head, later ones from the extrapolation."""
+        return self.head[1]
+
+    @property
+    def h_head(self) -> float:
+        """[s] The head's step."""
+        return (self.head[1] - self.head[0]) / self.head[2]
+
+    @property
+    def h(self) -> float:
+        """[s] The finer coarse run's step."""
+        a, b, k, _ = self.coarse[0]
+        return (b - a) / k
 
 
 def _richardson_plan(segments: list[Segment], step: float, t_asm: float) -> _Pair | None:
@@ -827,11 +840,8 @@ def _richardson_plan(segments: list[Segment], step: float, t_asm: float) -> _Pai
     if head >= periods or head_steps + 3 * m_coarse * periods >= n_single:  # h and 2h cost 1.5 runs at h
         return None
     return _Pair(
-        head=[(t0, t_asm + head * base, head_steps, base)],
+        head=(t0, t_asm + head * base, head_steps, base),
         coarse=((t_asm, t_end, 2 * m_coarse * periods, base), (t_asm, t_end, m_coarse * periods, base)),
-        t_head=t_asm + head * base,
-        h_head=base / per_period,
-        h=base / (2 * m_coarse),
     )
 
 
@@ -851,10 +861,10 @@ def _extrapolated(
     _, qd_2h, qdd_2h = _at_samples(mech, engine, times, coarse, complete=True)
     qd, qdd = qd_h + (qd_h - qd_2h) / 3.0, qdd_h + (qdd_h - qdd_2h) / 3.0
     if k:  # samples in the coarse runs' start-up: the head run's
-        rec = _run(mech, head_times, pair.head, head_start, ss, pair.h_head)[1]
+        rec = _run(mech, head_times, [pair.head], head_start, ss, pair.h_head)[1]
         q[:k], qd[:k], qdd[:k] = _at_samples(mech, engine, head_times, rec, complete=True)
     res = _result(mech, engine, model, times, q, qd, qdd)
-    steps = (pair.head[0][2] if k else 0) + pair.coarse[0][2] + pair.coarse[1][2]
+    steps = (pair.head[2] if k else 0) + pair.coarse[0][2] + pair.coarse[1][2]
     res.meta.update(step=float(pair.h), runs=3 if k else 2)
     res.meta["richardson"] = {"steps": [float(pair.h), 2 * float(pair.h)], "head_step": float(pair.h_head),
                               "head_samples": k, "total_steps": steps}  # fmt: skip
